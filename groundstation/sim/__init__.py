@@ -1,0 +1,1 @@
+"""The built-in simulator: multicopter, targets, wind, camera; it drives ``onboard``'s loop."""

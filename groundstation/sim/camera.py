@@ -1,0 +1,106 @@
+"""The simulated strapdown camera and detection pipeline.
+
+Frames are captured at the camera rate. ``projected`` mode projects the target analytically
+(pinhole) and adds pixel noise; ``rendered`` mode draws a real frame and runs the onboard
+detector on it. Both apply the same capture-to-result delay with jitter and random dropouts,
+and deliver each detection stamped with its capture time when its delay has passed.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+
+from onboard.camera_model import CameraModel
+from onboard.datatypes import Detection
+from onboard.perception import RedBalloonDetector
+
+from ..scenario import CameraSpec
+from .render import FrameRenderer
+
+CAMERA_MODES = ("projected", "rendered")
+
+
+class SimCamera:
+    def __init__(
+        self,
+        spec: CameraSpec,
+        model: CameraModel,
+        mode: str,
+        rng: np.random.Generator,
+        render_rng: np.random.Generator,
+    ) -> None:
+        if mode not in CAMERA_MODES:
+            raise ValueError(f"unknown camera mode {mode!r}; choose one of {CAMERA_MODES}")
+        self.spec = spec
+        self.model = model
+        self.mode = mode
+        self._rng = rng
+        self._pending: list[tuple[float, int, Detection]] = []
+        self._count = 0
+        self.renderer = FrameRenderer(model, render_rng) if mode == "rendered" else None
+        self.detector = RedBalloonDetector() if mode == "rendered" else None
+        self.last_frame: np.ndarray | None = None
+        self.last_truth_px: tuple[float, float] | None = None
+        self.frames = 0
+        self.detections = 0
+
+    def capture(
+        self,
+        t_s: float,
+        R_WC: np.ndarray,
+        camera_pos_enu_m: np.ndarray,
+        target_pos_enu_m: np.ndarray,
+        target_diameter_m: float,
+    ) -> None:
+        """Take a frame at ``t_s`` and schedule its detection (if any) for delivery."""
+        self.frames += 1
+        spec = self.spec
+        p_cam = R_WC.T @ (target_pos_enu_m - camera_pos_enu_m)
+        self.last_truth_px = self.model.project(p_cam)
+        # draw every random number each frame so the stream does not depend on the outcome
+        dropped = self._rng.random() < spec.dropout_probability
+        noise = self._rng.standard_normal(2) * spec.noise_px
+        delay = spec.delay_s + spec.delay_jitter_s * float(self._rng.standard_normal())
+        delay = min(max(delay, 0.5 * spec.delay_s), 2.0 * spec.delay_s + 1e-9)
+        if self.mode == "rendered":
+            frame = self.renderer.render(R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m)
+            self.last_frame = frame
+            det = self.detector.detect(frame, t_s)
+        else:
+            det = self._project(t_s, p_cam, target_diameter_m, noise)
+        if det is None or dropped:
+            return
+        self.detections += 1
+        self._count += 1
+        heapq.heappush(self._pending, (t_s + delay, self._count, det))
+
+    def _project(self, t_s, p_cam, diameter_m, noise) -> Detection | None:
+        m = self.model
+        uv = m.project(p_cam)
+        if uv is None:
+            return None
+        radius = diameter_m / 2.0
+        dist2 = float(p_cam @ p_cam)
+        r_px = m.f_px * radius / math.sqrt(max(dist2 - radius * radius, 1e-12))
+        u, v = uv
+        # visible when at least part of the disc is in the frame
+        if not (-r_px < u < m.width_px + r_px and -r_px < v < m.height_px + r_px):
+            return None
+        u += float(noise[0])
+        v += float(noise[1])
+        return Detection(
+            capture_time_s=t_s,
+            center_px=(u, v),
+            bbox_px=(u - r_px, v - r_px, 2.0 * r_px, 2.0 * r_px),
+            area_px=math.pi * r_px * r_px,
+        )
+
+    def deliver(self, t_s: float) -> list[Detection]:
+        """Detections whose result is ready at ``t_s``, in arrival order."""
+        out = []
+        while self._pending and self._pending[0][0] <= t_s + 1e-12:
+            out.append(heapq.heappop(self._pending)[2])
+        return out

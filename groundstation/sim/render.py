@@ -1,0 +1,116 @@
+"""Renders the simulated camera's frame: sky, ground below the true horizon for the current
+attitude, and the balloon as a shaded disc of its true apparent size (sub-pixel, anti-aliased),
+plus seeded sensor noise."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from onboard.camera_model import CameraModel
+
+SKY_BGR = (225, 190, 150)
+GROUND_BGR = (70, 115, 85)
+BALLOON_DARK_BGR = (25, 25, 150)
+BALLOON_MID_BGR = (40, 40, 205)
+BALLOON_LIGHT_BGR = (120, 120, 250)
+_SHIFT = 4  # cv2 sub-pixel bits
+_SCALE = 1 << _SHIFT
+
+
+class FrameRenderer:
+    def __init__(self, camera: CameraModel, rng: np.random.Generator, noise_level: int = 3) -> None:
+        self.camera = camera
+        w, h = camera.width_px, camera.height_px
+        self._sky = np.empty((h, w, 3), np.uint8)
+        self._sky[:] = SKY_BGR
+        self._corners = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+        self._rng = rng
+        # a few noise frames, picked at random each time: seeded, and cheap per frame
+        self._noise_up = [
+            rng.integers(0, noise_level + 1, (h, w, 3), dtype=np.uint8) for _ in range(3)
+        ]
+        self._noise_down = [
+            rng.integers(0, noise_level + 1, (h, w, 3), dtype=np.uint8) for _ in range(3)
+        ]
+
+    def _ground_polygon(self, R_WC: np.ndarray) -> np.ndarray | None:
+        """Image region whose rays point below the horizon (world z < 0)."""
+        cam = self.camera
+        r = R_WC[2, :]
+
+        def below(pt):
+            return r[0] * (pt[0] - cam.cu_px) / cam.f_px + r[1] * (pt[1] - cam.cv_px) / cam.f_px + r[2]
+
+        out = []
+        pts = self._corners
+        for i in range(4):
+            a, b = pts[i], pts[(i + 1) % 4]
+            ga, gb = below(a), below(b)
+            if ga < 0.0:
+                out.append(a)
+            if (ga < 0.0) != (gb < 0.0):
+                s = ga / (ga - gb)
+                out.append(a + s * (b - a))
+        if len(out) < 3:
+            return None
+        return np.round(np.array(out) * _SCALE).astype(np.int32)
+
+    def render(
+        self,
+        R_WC: np.ndarray,
+        camera_pos_enu_m: np.ndarray,
+        target_pos_enu_m: np.ndarray,
+        target_diameter_m: float,
+        brightness: float = 1.0,
+    ) -> np.ndarray:
+        frame = self._sky.copy()
+        poly = self._ground_polygon(R_WC)
+        if poly is not None:
+            cv2.fillPoly(frame, [poly], GROUND_BGR, cv2.LINE_AA, _SHIFT)
+        self._draw_balloon(frame, R_WC.T @ (target_pos_enu_m - camera_pos_enu_m), target_diameter_m)
+        if brightness != 1.0:
+            frame = cv2.convertScaleAbs(frame, alpha=brightness)
+        k = int(self._rng.integers(0, len(self._noise_up)))
+        cv2.add(frame, self._noise_up[k], dst=frame)
+        cv2.subtract(frame, self._noise_down[(k + 1) % len(self._noise_down)], dst=frame)
+        return frame
+
+    def _draw_balloon(self, frame: np.ndarray, p_cam: np.ndarray, diameter_m: float) -> None:
+        cam = self.camera
+        radius = diameter_m / 2.0
+        dist2 = float(p_cam @ p_cam)
+        z = float(p_cam[2])
+        if z <= 0.02 or dist2 <= radius * radius:
+            return
+        r_px = cam.f_px * radius / math.sqrt(dist2 - radius * radius)
+        u = cam.cu_px + cam.f_px * float(p_cam[0]) / z
+        v = cam.cv_px + cam.f_px * float(p_cam[1]) / z
+        lim = 4.0 * (cam.width_px + cam.height_px)
+        if abs(u) > lim + r_px or abs(v) > lim + r_px or r_px > 1e5:
+            return
+        draw_balloon(frame, u, v, r_px)
+
+
+def draw_balloon(frame: np.ndarray, u: float, v: float, r_px: float) -> None:
+    """A shaded red disc centred at (u, v) px with radius r_px (lit from above-left)."""
+
+    def circle(cu, cv_, rr, colour):
+        cv2.circle(
+            frame,
+            (round(cu * _SCALE), round(cv_ * _SCALE)),
+            max(round(rr * _SCALE), 1),
+            colour,
+            -1,
+            cv2.LINE_AA,
+            _SHIFT,
+        )
+
+    # pixel (i, j) spans [j, j+1): cv2 draws in pixel-centre coordinates, hence the -0.5
+    u0, v0 = u - 0.5, v - 0.5
+    circle(u0, v0, r_px, BALLOON_DARK_BGR)
+    if r_px >= 3.0:
+        circle(u0 - 0.15 * r_px, v0 - 0.15 * r_px, 0.75 * r_px, BALLOON_MID_BGR)
+        circle(u0 - 0.35 * r_px, v0 - 0.35 * r_px, 0.2 * r_px, BALLOON_LIGHT_BGR)

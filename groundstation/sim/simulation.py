@@ -1,0 +1,280 @@
+"""One simulated sortie: the multicopter, target, wind and camera advanced on one clock of
+integer physics steps, with the onboard :class:`~onboard.loop.InterceptionLoop` in the loop.
+
+Each physics step k (time k / physics_rate) does, in order: capture a frame if due, run the
+control tick if due (deliver ready detections and the gyro sample, apply the command), then
+integrate vehicle, target and wind to step k + 1 and check the outcome. The closest approach
+is found in continuous time inside every step (relative motion linear over the step).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from onboard.camera_model import CameraModel
+from onboard.datatypes import ControlTelemetry, GyroSample
+from onboard.gains import Gains
+from onboard.geometry import quat_to_rotmat
+from onboard.loop import InterceptionLoop
+
+from ..scenario import Scenario
+from .camera import SimCamera
+from .targets import Target
+from .vehicle import Multicopter
+from .wind import Wind
+
+
+class Outcome(str, enum.Enum):
+    HIT = "HIT"
+    MISS = "MISS"
+    TIMEOUT = "TIMEOUT"
+    TARGET_LOST = "TARGET_LOST"
+    CRASHED = "CRASHED"
+    DIVERGED = "DIVERGED"
+
+
+PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
+ACQUIRE_TIMEOUT_S = 1.0  # no detection fused by then: TARGET_LOST
+DIVERGED_SPEED_M_S = 60.0
+
+
+@dataclass(frozen=True)
+class SortieResult:
+    outcome: str
+    miss_m: float
+    intercept_time_s: float
+    terminal_speed_m_s: float
+    max_normal_accel_m_s2: float
+    law: str
+    seed: int
+    scenario: str
+    camera: str
+    sim_time_s: float
+    hit_radius_m: float
+    detections_fused: int
+    detections_rejected: int
+    guard_trips: int
+
+    def to_json_dict(self) -> dict:
+        d = asdict(self)
+        for k, v in d.items():
+            if isinstance(v, float):
+                d[k] = round(v, 6) if math.isfinite(v) else None
+        return d
+
+
+@dataclass
+class TickRecord:
+    """Truth and loop output at one control tick (for plots, the dashboard, campaigns)."""
+
+    time_s: float
+    vehicle_pos_m: tuple[float, float, float]
+    vehicle_vel_m_s: tuple[float, float, float]
+    target_pos_m: tuple[float, float, float]
+    range_m: float
+    normal_accel_m_s2: float  # actual, normal to the velocity
+    telemetry: ControlTelemetry = field(repr=False)
+
+
+class Simulation:
+    def __init__(
+        self,
+        scenario: Scenario,
+        law: str = "png",
+        seed: int = 0,
+        camera_mode: str = "projected",
+        gains: Gains | None = None,
+        keep_records: bool = True,
+    ) -> None:
+        self.scenario = scenario
+        self.law = law
+        self.seed = int(seed)
+        sim = scenario.sim
+        self.dt_s = 1.0 / sim.physics_rate_hz
+        self._control_div = round(sim.physics_rate_hz / sim.control_rate_hz)
+        self._camera_div = round(sim.physics_rate_hz / scenario.camera.rate_hz)
+        for name, div, rate in (
+            ("control", self._control_div, sim.control_rate_hz),
+            ("camera", self._camera_div, scenario.camera.rate_hz),
+        ):
+            if abs(div * rate - sim.physics_rate_hz) > 1e-9:
+                raise ValueError(f"{name} rate {rate} Hz must divide {sim.physics_rate_hz} Hz")
+        ss = np.random.SeedSequence(self.seed)
+        cam_rng, wind_rng, gyro_rng, render_rng = (np.random.default_rng(s) for s in ss.spawn(4))
+        self._gyro_rng = gyro_rng
+        c = scenario.camera
+        self.camera_model = CameraModel(
+            c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
+        )
+        self.vehicle = Multicopter(scenario.interceptor)
+        self.target = Target(scenario.target)
+        self.wind = Wind(scenario.wind, wind_rng)
+        self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
+        self.loop = InterceptionLoop(
+            self.camera_model,
+            self.vehicle.params,
+            gains if gains is not None else scenario.gains_obj(),
+            law=law,
+            control_rate_hz=sim.control_rate_hz,
+        )
+        self.hit_radius_m = 0.5 * (scenario.target.diameter_m + scenario.interceptor.size_m)
+        self.step_index = 0
+        self.outcome: Outcome | None = None
+        self.keep_records = keep_records
+        self.records: list[TickRecord] = []
+        self.last_telemetry: ControlTelemetry | None = None
+        self._rel = self._relative()
+        self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
+        self.miss_m = self.initial_range_m
+        self.closest_time_s = 0.0
+        self.closest_speed_m_s = 0.0
+        self.max_normal_accel_m_s2 = 0.0
+        self._fused = self._rejected = 0
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def time_s(self) -> float:
+        return self.step_index * self.dt_s
+
+    @property
+    def done(self) -> bool:
+        return self.outcome is not None
+
+    def _relative(self) -> list[float]:
+        tp, vp = self.target.p, self.vehicle.p
+        return [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
+
+    def R_WC(self) -> np.ndarray:
+        return quat_to_rotmat(self.vehicle.q) @ self.camera_model.R_BC
+
+    # ------------------------------------------------------------------ stepping
+    def step(self) -> None:
+        """Advance one physics step (running the camera and control events due now)."""
+        if self.outcome is not None:
+            return
+        k = self.step_index
+        t = k * self.dt_s
+        veh = self.vehicle
+        if k % self._camera_div == 0:
+            self.camera.capture(
+                t, self.R_WC(), np.array(veh.p), np.array(self.target.p),
+                self.scenario.target.diameter_m,
+            )
+        if k % self._control_div == 0:
+            self._control_tick(t)
+        veh.step(self.dt_s, self.wind.velocity_m_s)
+        self.target.advance(t + self.dt_s, self.dt_s, self.wind.velocity_m_s)
+        self.wind.step(self.dt_s)
+        self.step_index = k + 1
+        self._check_outcome(t)
+
+    def _control_tick(self, t: float) -> None:
+        veh = self.vehicle
+        loop = self.loop
+        for det in self.camera.deliver(t):
+            loop.on_detection(det)
+        noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
+        loop.on_gyro(GyroSample(t, np.array(veh.read_gyro()) + noise))
+        tel = loop.tick(veh.state(t))
+        for r in loop.last_fusion:
+            if r.value in ("accepted", "initialised"):
+                self._fused += 1
+            else:
+                self._rejected += 1
+        veh.command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised)
+        a, v = veh.accel, veh.v
+        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        av = a[0] * v[0] + a[1] * v[1] + a[2] * v[2]
+        aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+        a_n = math.sqrt(max(aa - (av * av / vv if vv > 1e-9 else 0.0), 0.0))
+        if vv > 0.25 and a_n > self.max_normal_accel_m_s2:
+            self.max_normal_accel_m_s2 = a_n
+        self.last_telemetry = tel
+        if self.keep_records:
+            rel = self._rel
+            self.records.append(
+                TickRecord(
+                    t, tuple(veh.p), tuple(v), tuple(self.target.p),
+                    math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2), a_n, tel,
+                )
+            )
+
+    def _check_outcome(self, t0: float) -> None:
+        r0 = self._rel
+        r1 = self._relative()
+        self._rel = r1
+        d = [r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]]
+        dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+        r0d = r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]
+        s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+        c = [r0[i] + s * d[i] for i in range(3)]
+        dist = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+        if dist < self.miss_m:
+            self.miss_m = dist
+            self.closest_time_s = t0 + s * self.dt_s
+            v = self.vehicle.v
+            self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        veh = self.vehicle
+        t1 = self.time_s
+        opening_now = (r1[0] * d[0] + r1[1] * d[1] + r1[2] * d[2]) > 0.0
+        if r0d < 0.0 and opening_now and dist < PASS_RADIUS_M:
+            self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
+        elif not veh.finite() or not all(math.isfinite(c) for c in r1):
+            self.outcome = Outcome.DIVERGED
+        elif math.sqrt(sum(c * c for c in veh.v)) > DIVERGED_SPEED_M_S:
+            self.outcome = Outcome.DIVERGED
+        elif veh.p[2] <= 0.0:
+            self.outcome = Outcome.CRASHED
+        elif self.loop.acquired and self.loop.dkf.lost(t1):
+            self.outcome = Outcome.TARGET_LOST
+        elif not self.loop.acquired and t1 >= ACQUIRE_TIMEOUT_S + self.scenario.camera.delay_s:
+            self.outcome = Outcome.TARGET_LOST
+        elif t1 >= self.scenario.duration_s - 1e-9:
+            self.outcome = Outcome.TIMEOUT
+
+    def step_control_period(self) -> None:
+        """Advance to the next control tick (or the end)."""
+        for _ in range(self._control_div):
+            if self.outcome is not None:
+                return
+            self.step()
+
+    def run(self) -> SortieResult:
+        while self.outcome is None:
+            self.step()
+        return self.result()
+
+    def result(self) -> SortieResult:
+        if self.outcome is None:
+            raise RuntimeError("the sortie has not ended")
+        return SortieResult(
+            outcome=self.outcome.value,
+            miss_m=self.miss_m,
+            intercept_time_s=self.closest_time_s,
+            terminal_speed_m_s=self.closest_speed_m_s,
+            max_normal_accel_m_s2=self.max_normal_accel_m_s2,
+            law=self.law,
+            seed=self.seed,
+            scenario=self.scenario.name,
+            camera=self.camera.mode,
+            sim_time_s=self.time_s,
+            hit_radius_m=self.hit_radius_m,
+            detections_fused=self._fused,
+            detections_rejected=self._rejected,
+            guard_trips=self.loop.guard_trips,
+        )
+
+
+def run_sortie(
+    scenario: Scenario,
+    law: str = "png",
+    seed: int = 0,
+    camera_mode: str = "projected",
+    gains: Gains | None = None,
+) -> SortieResult:
+    """Run one sortie to its outcome."""
+    return Simulation(scenario, law, seed, camera_mode, gains, keep_records=False).run()

@@ -1,0 +1,1 @@
+"""Pure control maths: guidance laws, FOV-holding yaw, geometric attitude loop."""

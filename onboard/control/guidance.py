@@ -1,0 +1,131 @@
+"""Guidance: line of sight from the image, LOS/velocity angles and the guidance laws that
+turn them into a desired acceleration (paper eqs. 5-9, 14, 17; DESIGN.md §3 steps 2-7, §5).
+
+All vectors are world ENU. A law is a function ``(GuidanceInput, Gains) -> GuidanceOutput``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..gains import Gains
+from ..geometry import wrap_pi
+
+
+@dataclass(frozen=True, slots=True)
+class GuidanceInput:
+    """What a guidance law sees at one control tick."""
+
+    dt_s: float
+    los_enu: np.ndarray  # unit LOS n_t (eq. 5)
+    los_elev_rad: float  # q_y (eq. 6)
+    los_azim_rad: float  # q_z (eq. 6), from +y toward +x
+    d_los_elev_rad: float  # q_y(k) - q_y(k-1)
+    d_los_azim_rad: float  # wrapped to (-pi, pi]
+    velocity_enu_m_s: np.ndarray
+    e_norm: tuple[float, float]  # normalised image error e / f
+    R_WC: np.ndarray  # camera -> world
+
+
+@dataclass(frozen=True, slots=True)
+class GuidanceOutput:
+    accel_desired_enu_m_s2: np.ndarray  # a_d, saturated (eq. 17)
+    vel_elev_rad: float  # sigma_y (eq. 7), nan when hovering
+    vel_azim_rad: float  # sigma_z (eq. 7), nan when hovering
+    hovering: bool  # |v| < v_min: flew along the LOS
+
+
+def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndarray:
+    """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5)."""
+    r = R_WC @ np.array([e_norm_x, e_norm_y, 1.0])
+    return r / math.sqrt(float(r @ r))
+
+
+def direction_angles(n: np.ndarray) -> tuple[float, float]:
+    """(elevation, azimuth) of a direction: q_y = atan2(n_z, hypot(n_x, n_y)),
+    q_z = atan2(n_x, n_y) (paper eqs. 6-7 with atan2, DESIGN §3 step 3)."""
+    x, y, z = float(n[0]), float(n[1]), float(n[2])
+    return math.atan2(z, math.hypot(x, y)), math.atan2(x, y)
+
+
+def direction_from_angles(elev_rad: float, azim_rad: float) -> np.ndarray:
+    """n_vd = (cos s_y sin s_z, cos s_y cos s_z, sin s_y) (paper eq. 9)."""
+    ce = math.cos(elev_rad)
+    return np.array([ce * math.sin(azim_rad), ce * math.cos(azim_rad), math.sin(elev_rad)])
+
+
+def saturate_norm(vec: np.ndarray, limit: float) -> np.ndarray:
+    """Scale ``vec`` down to norm ``limit`` if it is longer (keeps its direction)."""
+    n = math.sqrt(float(vec @ vec))
+    if n > limit > 0.0:
+        return vec * (limit / n)
+    return vec
+
+
+def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
+    """|v_d| = |v| + k_a dt, capped at v_max (paper eq. 14)."""
+    return min(speed_m_s + gains.k_a * dt_s, gains.v_max)
+
+
+def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
+    """a_d = (v_d - v) / dt, saturated to a_max (paper eq. 17)."""
+    return saturate_norm((v_d - v) / dt_s, gains.a_max)
+
+
+def normal_component(accel: np.ndarray, velocity: np.ndarray) -> float:
+    """Magnitude of the part of ``accel`` normal to ``velocity`` (m/s^2)."""
+    vv = float(velocity @ velocity)
+    if vv < 1e-12:
+        return math.sqrt(float(accel @ accel))
+    a_t = (float(accel @ velocity) / vv) * velocity
+    a_n = accel - a_t
+    return math.sqrt(float(a_n @ a_n))
+
+
+def _hover_start(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
+    # Below v_min the velocity angles are undefined: accelerate along the LOS (DESIGN §3.4).
+    a_d = saturate_norm(gains.k_a * inp.los_enu, gains.a_max)
+    return GuidanceOutput(a_d, math.nan, math.nan, True)
+
+
+def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
+    """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
+    v = inp.velocity_enu_m_s
+    speed = math.sqrt(float(v @ v))
+    if speed < gains.v_min:
+        return _hover_start(inp, gains)
+    sigma_y, sigma_z = direction_angles(v / speed)
+    sigma_yd = sigma_y + gains.K_y * inp.d_los_elev_rad
+    sigma_zd = sigma_z + gains.K_z * inp.d_los_azim_rad
+    v_d = ramped_speed(speed, gains, inp.dt_s) * direction_from_angles(sigma_yd, sigma_zd)
+    return GuidanceOutput(accel_toward_velocity(v_d, v, gains, inp.dt_s), sigma_y, sigma_z, False)
+
+
+def pursuit_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
+    """PG baseline: desired velocity along the LOS with the same speed ramp (DESIGN §5)."""
+    v = inp.velocity_enu_m_s
+    speed = math.sqrt(float(v @ v))
+    if speed < gains.v_min:
+        return _hover_start(inp, gains)
+    sigma_y, sigma_z = direction_angles(v / speed)
+    v_d = ramped_speed(speed, gains, inp.dt_s) * inp.los_enu
+    return GuidanceOutput(accel_toward_velocity(v_d, v, gains, inp.dt_s), sigma_y, sigma_z, False)
+
+
+GuidanceLaw = Callable[[GuidanceInput, Gains], GuidanceOutput]
+
+GUIDANCE_LAWS: dict[str, GuidanceLaw] = {
+    "png": png_law,
+    "pg": pursuit_law,
+}
+
+
+def los_change(
+    elev_now: float, azim_now: float, elev_prev: float, azim_prev: float
+) -> tuple[float, float]:
+    """(dq_y, dq_z) between two ticks, the azimuth difference wrapped to (-pi, pi]."""
+    return elev_now - elev_prev, wrap_pi(azim_now - azim_prev)

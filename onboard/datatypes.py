@@ -1,0 +1,92 @@
+"""Typed samples, estimates and commands exchanged between the parts of the loop.
+
+Every sample carries the time it was captured (``time_s`` / ``capture_time_s``) on the run's
+one clock: simulated time in the simulator, vehicle time in flight.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+GRAVITY_M_S2 = 9.81
+GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleState:
+    """What the flight controller reports: position, velocity, attitude, body rates."""
+
+    time_s: float
+    position_enu_m: np.ndarray
+    velocity_enu_m_s: np.ndarray
+    attitude_wxyz: np.ndarray  # body (FLU) -> world (ENU)
+    body_rates_flu_rad_s: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class GyroSample:
+    time_s: float
+    rates_flu_rad_s: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    """One detector result. Pixel coordinates: u right, v down, origin top-left."""
+
+    capture_time_s: float
+    center_px: tuple[float, float]
+    bbox_px: tuple[float, float, float, float]  # x, y, width, height
+    area_px: float
+    score: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleParams:
+    """The airframe numbers the attitude loop needs (paper eq. 23)."""
+
+    mass_kg: float = 1.5
+    max_thrust_n: float = 3.0 * 1.5 * GRAVITY_M_S2
+
+    @property
+    def hover_thrust_normalised(self) -> float:
+        return self.mass_kg * GRAVITY_M_S2 / self.max_thrust_n
+
+
+@dataclass(frozen=True, slots=True)
+class RateThrustCommand:
+    """Body rates (FLU, rad/s) and collective thrust normalised to [0, 1] for PX4."""
+
+    time_s: float
+    body_rates_flu_rad_s: np.ndarray
+    thrust_normalised: float
+
+
+class LoopMode(enum.Enum):
+    WAITING = "waiting"  # no target estimate yet: hold position
+    TRACKING = "tracking"  # guidance law active
+    LOST = "lost"  # estimate lost: brake and hold
+
+
+@dataclass(frozen=True, slots=True)
+class ControlTelemetry:
+    """What one control tick computed; the ground station plots and records this."""
+
+    time_s: float
+    mode: LoopMode
+    law: str
+    e_est_px: tuple[float, float] | None
+    e_rate_est_px_s: tuple[float, float] | None
+    los_elev_rad: float
+    los_azim_rad: float
+    vel_elev_rad: float
+    vel_azim_rad: float
+    accel_desired_enu_m_s2: np.ndarray
+    accel_normal_desired_m_s2: float
+    yaw_rate_cmd_rad_s: float
+    command: RateThrustCommand
+    dkf_time_since_detection_s: float
+    dkf_lost: bool
+    guard_tripped: bool

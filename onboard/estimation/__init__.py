@@ -1,0 +1,1 @@
+"""State estimation: the delayed Kalman filter for the target's image position."""

@@ -1,0 +1,90 @@
+"""Every tunable gain of the onboard loop, declared once: default (the paper's flight values),
+unit, allowed range and one-line meaning live in the field metadata of :class:`Gains`.
+
+Names are at most 16 characters so that they can be MAVLink parameters.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+
+class GainError(ValueError):
+    """A gain is unknown, not a number, or outside its allowed range."""
+
+
+def _gain(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any:
+    return field(default=default, metadata={"unit": unit, "min": lo, "max": hi, "meaning": meaning})
+
+
+@dataclass(frozen=True)
+class Gains:
+    k_a: float = _gain(2.0, "m/s^2", 0.0, 10.0, "speed-ramp tangential acceleration (eq. 14)")
+    K_y: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, vertical plane (eq. 8)")
+    K_z: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, horizontal plane (eq. 8)")
+    k_p: float = _gain(0.03, "rad/s/px", 0.0, 0.2, "FOV-holding yaw-rate P gain on e_x (eq. 13)")
+    k_d: float = _gain(0.01, "rad/px", 0.0, 0.1, "FOV-holding yaw-rate D gain on de_x/dt (eq. 13)")
+    k_R: float = _gain(8.0, "1/s", 0.5, 40.0, "attitude-error to body-rate gain (eq. 22)")
+    v_max: float = _gain(12.0, "m/s", 0.5, 30.0, "cap on the desired speed (eq. 14)")
+    a_max: float = _gain(5.0, "m/s^2", 0.5, 30.0, "saturation of the desired acceleration (eq. 17)")
+    omega_max: float = _gain(4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)")
+    v_min: float = _gain(0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)")
+    k_brake: float = _gain(1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)")
+    k_v_ibvs: float = _gain(1.5, "1/s", 0.0, 10.0, "IBVS baseline: image-error to lateral speed")
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise GainError(f"gain {f.name}: expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise GainError(f"gain {f.name}: {value} is not finite")
+            lo, hi = f.metadata["min"], f.metadata["max"]
+            if not lo <= value <= hi:
+                raise GainError(
+                    f"gain {f.name} = {value} is outside its range [{lo}, {hi}] {f.metadata['unit']}"
+                )
+            object.__setattr__(self, f.name, float(value))
+
+    def replace(self, **changes: float) -> Gains:
+        """A validated copy with some gains changed; unknown names raise :class:`GainError`."""
+        unknown = set(changes) - set(GAIN_NAMES)
+        if unknown:
+            raise GainError(f"unknown gain(s): {', '.join(sorted(unknown))}")
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "gains") -> Gains:
+        """Defaults overridden by ``values``; errors name the gain and the source."""
+        try:
+            return cls().replace(**dict(values))
+        except GainError as exc:
+            raise GainError(f"{source}: {exc}") from None
+
+    def to_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class GainSpec:
+    name: str
+    default: float
+    unit: str
+    minimum: float
+    maximum: float
+    meaning: str
+
+
+GAIN_SPECS: tuple[GainSpec, ...] = tuple(
+    GainSpec(
+        f.name, f.default, f.metadata["unit"], f.metadata["min"], f.metadata["max"],
+        f.metadata["meaning"],
+    )
+    for f in dataclasses.fields(Gains)
+)
+GAIN_NAMES: tuple[str, ...] = tuple(s.name for s in GAIN_SPECS)
+assert all(len(n) <= 16 for n in GAIN_NAMES)

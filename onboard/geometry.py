@@ -1,0 +1,131 @@
+"""Rotations and frame helpers (world ENU, body FLU, camera OpenCV).
+
+Quaternions are (w, x, y, z) and rotate body vectors into the world frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+E_Z = np.array([0.0, 0.0, 1.0])
+
+# Camera (x right, y down, z optical axis) -> body (x forward, y left, z up), camera looking
+# straight ahead: columns are the camera axes expressed in the body frame.
+R_BC_FORWARD = np.array(
+    [
+        [0.0, 0.0, 1.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, -1.0, 0.0],
+    ]
+)
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Wrap an angle to (-pi, pi]."""
+    a = math.fmod(angle_rad + math.pi, 2.0 * math.pi)
+    if a <= 0.0:
+        a += 2.0 * math.pi
+    return a - math.pi
+
+
+def hat(v: np.ndarray) -> np.ndarray:
+    """Skew-symmetric matrix [v]x such that hat(v) @ w == cross(v, w)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def vex(m: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`hat` for a skew-symmetric matrix."""
+    return np.array([m[2, 1], m[0, 2], m[1, 0]])
+
+
+def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(c) for c in q_wxyz)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    return np.array(
+        [
+            [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
+            [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
+            [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+        ]
+    )
+
+
+def rotmat_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    qa = np.array(q)
+    qa /= np.linalg.norm(qa)
+    return -qa if qa[0] < 0.0 else qa
+
+
+def rot_x(angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def attitude_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0.0):
+    """Body(FLU)->world(ENU) rotation from Z-Y-X angles.
+
+    yaw is the heading of body x measured from world +x toward +y (90 deg faces +y / north);
+    positive pitch raises the nose (FLU: a negative rotation about body y).
+    """
+    return rot_z(yaw_rad) @ rot_y(-pitch_rad) @ rot_x(roll_rad)
+
+
+def rodrigues(axis_unit: np.ndarray, angle_rad: float) -> np.ndarray:
+    """R = I + sin(phi) [r]x + (1 - cos(phi)) [r]x^2 (paper eq. 19)."""
+    K = hat(axis_unit)
+    return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
+
+
+def rotation_between(a_unit: np.ndarray, b_unit: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking unit vector a onto unit vector b (the paper's R_tilt, eq. 19).
+
+    Axis a x b, angle acos(a . b). For antiparallel vectors any perpendicular axis is used.
+    """
+    c = float(np.clip(a_unit @ b_unit, -1.0, 1.0))
+    axis = np.cross(a_unit, b_unit)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-9:
+        if c > 0.0:
+            return np.eye(3)
+        perp = np.cross(a_unit, [1.0, 0.0, 0.0])
+        if np.linalg.norm(perp) < 1e-6:
+            perp = np.cross(a_unit, [0.0, 1.0, 0.0])
+        return rodrigues(perp / np.linalg.norm(perp), math.pi)
+    return rodrigues(axis / s, math.atan2(s, c))
+
+
+def camera_mount_rotation(pitch_up_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
+    """R_BC for a strapdown camera pitched up by ``pitch_up_deg`` and rolled about its optical
+    axis by ``roll_deg`` (90 deg = portrait, as in the paper's outdoor flights)."""
+    return (
+        rot_y(-math.radians(pitch_up_deg)) @ R_BC_FORWARD @ rot_z(math.radians(roll_deg))
+    )

@@ -1,0 +1,165 @@
+"""The closed interception loop: DKF -> guidance -> FOV hold -> attitude loop, one tick at a
+time (DESIGN.md §3). The simulator drives this object and so does the MAVLink runtime; it owns
+no clock, socket or camera, only the time stamps it is handed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .camera_model import CameraModel
+from .control.attitude import attitude_command
+from .control.fov_hold import yaw_rate_command
+from .control.guidance import (
+    GUIDANCE_LAWS,
+    GuidanceInput,
+    direction_angles,
+    line_of_sight,
+    los_change,
+    normal_component,
+    saturate_norm,
+)
+from .datatypes import (
+    ControlTelemetry,
+    Detection,
+    GyroSample,
+    LoopMode,
+    RateThrustCommand,
+    VehicleParams,
+    VehicleState,
+)
+from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult
+from .gains import Gains
+from .geometry import quat_to_rotmat
+
+_NAN2 = (math.nan, math.nan)
+
+
+class InterceptionLoop:
+    """Call :meth:`on_gyro` and :meth:`on_detection` as samples arrive, and :meth:`tick` at
+    the control rate; each tick returns the command and what was computed for it."""
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        vehicle: VehicleParams,
+        gains: Gains | None = None,
+        law: str = "png",
+        control_rate_hz: float = 100.0,
+        dkf_config: DkfConfig | None = None,
+    ) -> None:
+        if law not in GUIDANCE_LAWS:
+            raise ValueError(f"unknown guidance law {law!r}; choose one of {sorted(GUIDANCE_LAWS)}")
+        if not control_rate_hz > 0.0:
+            raise ValueError("control_rate_hz must be positive")
+        self.camera = camera
+        self.vehicle = vehicle
+        self.law_name = law
+        self._law = GUIDANCE_LAWS[law]
+        self.gains = gains or Gains()
+        self._pending_gains: Gains | None = None
+        self.nominal_dt_s = 1.0 / control_rate_hz
+        self.dkf = DelayedKalmanFilter(camera, dkf_config)
+        self._gyro_sum = np.zeros(3)
+        self._gyro_n = 0
+        self._detections: list[Detection] = []
+        self._prev_time_s: float | None = None
+        self._prev_R_WC: np.ndarray | None = None
+        self.last_fusion: list[FusionResult] = []
+        self.guard_trips = 0
+        self.acquired = False
+
+    # ------------------------------------------------------------------ inputs
+    def set_gains(self, gains: Gains) -> None:
+        """Use ``gains`` from the next tick on (they are validated on construction)."""
+        self._pending_gains = gains
+
+    def on_gyro(self, sample: GyroSample) -> None:
+        self._gyro_sum += sample.rates_flu_rad_s
+        self._gyro_n += 1
+
+    def on_detection(self, detection: Detection) -> None:
+        self._detections.append(detection)
+
+    # ------------------------------------------------------------------ the tick
+    def tick(self, state: VehicleState) -> ControlTelemetry:
+        t = state.time_s
+        if self._pending_gains is not None:
+            self.gains, self._pending_gains = self._pending_gains, None
+        gains = self.gains
+        dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
+        if not dt > 0.0:
+            dt = self.nominal_dt_s
+
+        gyro = self._gyro_sum / self._gyro_n if self._gyro_n else state.body_rates_flu_rad_s
+        self._gyro_sum = np.zeros(3)
+        self._gyro_n = 0
+        self.dkf.predict(t, gyro)
+        self.last_fusion = []
+        if self._detections:
+            for det in sorted(self._detections, key=lambda d: d.capture_time_s):
+                self.last_fusion.append(self.dkf.fuse(det))
+            self._detections.clear()
+
+        R_WB = quat_to_rotmat(state.attitude_wxyz)
+        R_WC = R_WB @ self.camera.R_BC
+        v = state.velocity_enu_m_s
+        est = self.dkf.estimate()
+        e_est = e_rate = None
+        q_y = q_z = s_y = s_z = math.nan
+        yaw_rate = 0.0
+        if est is None or est.lost:
+            mode = LoopMode.LOST if self.acquired else LoopMode.WAITING
+            a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
+        else:
+            mode = LoopMode.TRACKING
+            self.acquired = True
+            e_est, e_rate = est.e_px, est.e_rate_px_s
+            f = self.camera.f_px
+            n_t = line_of_sight(e_est[0] / f, e_est[1] / f, R_WC)
+            q_y, q_z = direction_angles(n_t)
+            dq_y = dq_z = 0.0
+            prev = None if self._prev_time_s is None else self.dkf.e_px_at(self._prev_time_s)
+            if prev is not None and self._prev_R_WC is not None:
+                # previous LOS from the replay-corrected buffered estimate: a fused detection
+                # moves both ends of the difference, so Delta q carries no correction jump
+                n_prev = line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
+                dq_y, dq_z = los_change(q_y, q_z, *direction_angles(n_prev))
+            out = self._law(
+                GuidanceInput(dt, n_t, q_y, q_z, dq_y, dq_z, v, (e_est[0] / f, e_est[1] / f), R_WC),
+                gains,
+            )
+            a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad
+            e_lat_px = self.camera.upright(*e_est)[0]
+            e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
+            yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
+
+        omega, thrust = attitude_command(a_d, R_WB, yaw_rate, gains, self.vehicle)
+        guard = not (np.all(np.isfinite(omega)) and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
+        if guard:
+            # never hand a non-finite or out-of-range command on: level hover instead
+            self.guard_trips += 1
+            omega = np.zeros(3)
+            thrust = self.vehicle.hover_thrust_normalised
+        self._prev_time_s = t
+        self._prev_R_WC = R_WC
+        return ControlTelemetry(
+            time_s=t,
+            mode=mode,
+            law=self.law_name,
+            e_est_px=e_est,
+            e_rate_est_px_s=e_rate,
+            los_elev_rad=q_y,
+            los_azim_rad=q_z,
+            vel_elev_rad=s_y,
+            vel_azim_rad=s_z,
+            accel_desired_enu_m_s2=a_d,
+            accel_normal_desired_m_s2=normal_component(a_d, v),
+            yaw_rate_cmd_rad_s=yaw_rate,
+            command=RateThrustCommand(t, omega, float(thrust)),
+            dkf_time_since_detection_s=(math.inf if est is None else est.time_since_detection_s),
+            dkf_lost=est is None or est.lost,
+            guard_tripped=guard,
+        )
