@@ -34,7 +34,6 @@ class Gains:
     omega_max: float = _gain(4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)")
     v_min: float = _gain(0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)")
     k_brake: float = _gain(1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)")
-    k_v_ibvs: float = _gain(1.5, "1/s", 0.0, 10.0, "IBVS baseline: image-error to lateral speed")
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

@@ -105,21 +105,28 @@ def rodrigues(axis_unit: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for 3-vectors (np.cross is ~20x slower on tiny arrays)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def rotation_between(a_unit: np.ndarray, b_unit: np.ndarray) -> np.ndarray:
     """Smallest rotation taking unit vector a onto unit vector b (the paper's R_tilt, eq. 19).
 
     Axis a x b, angle acos(a . b). For antiparallel vectors any perpendicular axis is used.
     """
-    c = float(np.clip(a_unit @ b_unit, -1.0, 1.0))
-    axis = np.cross(a_unit, b_unit)
-    s = float(np.linalg.norm(axis))
+    c = min(max(float(a_unit @ b_unit), -1.0), 1.0)
+    axis = cross3(a_unit, b_unit)
+    s = math.sqrt(float(axis @ axis))
     if s < 1e-9:
         if c > 0.0:
             return np.eye(3)
-        perp = np.cross(a_unit, [1.0, 0.0, 0.0])
-        if np.linalg.norm(perp) < 1e-6:
-            perp = np.cross(a_unit, [0.0, 1.0, 0.0])
-        return rodrigues(perp / np.linalg.norm(perp), math.pi)
+        perp = cross3(a_unit, np.array([1.0, 0.0, 0.0]))
+        if float(perp @ perp) < 1e-12:
+            perp = cross3(a_unit, np.array([0.0, 1.0, 0.0]))
+        return rodrigues(perp / math.sqrt(float(perp @ perp)), math.pi)
     return rodrigues(axis / s, math.atan2(s, c))
 
 

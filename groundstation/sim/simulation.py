@@ -223,9 +223,9 @@ class Simulation:
         opening_now = (r1[0] * d[0] + r1[1] * d[1] + r1[2] * d[2]) > 0.0
         if r0d < 0.0 and opening_now and dist < PASS_RADIUS_M:
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif not veh.finite() or not all(math.isfinite(c) for c in r1):
+        elif not (veh.finite() and math.isfinite(r1[0] + r1[1] + r1[2])):
             self.outcome = Outcome.DIVERGED
-        elif math.sqrt(sum(c * c for c in veh.v)) > DIVERGED_SPEED_M_S:
+        elif veh.v[0] ** 2 + veh.v[1] ** 2 + veh.v[2] ** 2 > DIVERGED_SPEED_M_S**2:
             self.outcome = Outcome.DIVERGED
         elif veh.p[2] <= 0.0:
             self.outcome = Outcome.CRASHED

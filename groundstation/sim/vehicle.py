@@ -109,4 +109,8 @@ class Multicopter:
         )
 
     def finite(self) -> bool:
-        return all(math.isfinite(c) for c in (*self.p, *self.v, *self.q, *self.w))
+        # a NaN or inf anywhere makes the sum non-finite
+        p, v, q, w = self.p, self.v, self.q, self.w
+        return math.isfinite(
+            p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + q[0] + q[1] + q[2] + q[3] + w[0] + w[1] + w[2]
+        )

@@ -1,0 +1,89 @@
+"""``groundstation`` command line: run sorties, list scenarios, benchmark."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+from onboard.control.guidance import GUIDANCE_LAWS
+from onboard.gains import GainError
+
+from .scenario import ScenarioError, load_scenario, shipped_scenarios
+from .sim.camera import CAMERA_MODES
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # usage errors: exit 2 without a traceback
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="groundstation", description="Peregrine ground station")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("sortie", help="run one simulated sortie to its outcome")
+    s.add_argument("scenario", help="scenario TOML file, or the name of a shipped scenario")
+    s.add_argument("--law", default="png", choices=sorted(GUIDANCE_LAWS))
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+
+    sub.add_parser("scenarios", help="list the shipped scenarios")
+
+    b = sub.add_parser("bench", help="print speed and memory figures (see README)")
+    b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
+    b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
+    b.add_argument("--json", action="store_true")
+    return p
+
+
+def _cmd_sortie(args: argparse.Namespace) -> int:
+    from .sim.simulation import Simulation
+
+    scenario = load_scenario(args.scenario)
+    sim = Simulation(scenario, args.law, args.seed, args.camera, keep_records=False)
+    result = sim.run()
+    if args.json:
+        print(json.dumps(result.to_json_dict(), sort_keys=True))
+    else:
+        r = result
+        print(
+            f"{r.scenario}: {r.outcome}  miss {r.miss_m:.3f} m (hit radius {r.hit_radius_m:.2f} m)"
+            f" at t = {r.intercept_time_s:.2f} s\n"
+            f"  terminal speed {r.terminal_speed_m_s:.2f} m/s, max normal acceleration "
+            f"{r.max_normal_accel_m_s2:.2f} m/s^2\n"
+            f"  law {r.law}, seed {r.seed}, camera {r.camera}, detections fused "
+            f"{r.detections_fused}, rejected {r.detections_rejected}"
+        )
+    return 0
+
+
+def _cmd_scenarios(_: argparse.Namespace) -> int:
+    for path in shipped_scenarios():
+        s = load_scenario(path)
+        print(f"{path.stem:26s} {s.target.motion:9s} {s.description}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _build_parser().parse_args(argv)
+    try:
+        if args.command == "sortie":
+            return _cmd_sortie(args)
+        if args.command == "scenarios":
+            return _cmd_scenarios(args)
+        if args.command == "bench":
+            from .bench import run_bench
+
+            return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)
+    except (ScenarioError, GainError) as exc:
+        print(f"groundstation: error: {exc}", file=sys.stderr)
+        return 2
+    return 2  # pragma: no cover
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

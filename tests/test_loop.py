@@ -1,0 +1,82 @@
+"""The closed loop object: gain changes, hold modes, the output guard."""
+
+import math
+
+import numpy as np
+from numpy.testing import assert_allclose
+
+from onboard.camera_model import CameraModel
+from onboard.datatypes import Detection, GyroSample, LoopMode, VehicleParams, VehicleState
+from onboard.gains import Gains
+from onboard.geometry import attitude_from_yaw_pitch_roll, rotmat_to_quat
+from onboard.loop import InterceptionLoop
+
+Q_NORTH = rotmat_to_quat(attitude_from_yaw_pitch_roll(math.pi / 2))
+
+
+def _state(t, vel=(0.0, 3.0, 0.0)):
+    return VehicleState(t, np.array([0.0, 0.0, 10.0]), np.array(vel), Q_NORTH, np.zeros(3))
+
+
+def _loop(**kw):
+    return InterceptionLoop(CameraModel(), VehicleParams(), **kw)
+
+
+def test_waits_and_brakes_until_first_detection():
+    loop = _loop()
+    tel = loop.tick(_state(0.0))
+    assert tel.mode is LoopMode.WAITING and tel.dkf_lost
+    assert_allclose(tel.accel_desired_enu_m_s2, [0.0, -3.0, 0.0])  # -k_brake v
+    assert tel.command.body_rates_flu_rad_s[1] < 0  # nose up to brake
+
+
+def test_tracks_after_detection_and_yaws_toward_target():
+    loop = _loop()
+    loop.tick(_state(0.0))
+    loop.on_detection(Detection(0.0, (420.0, 240.0), (410, 230, 20, 20), 314.0))
+    loop.on_gyro(GyroSample(0.01, np.zeros(3)))
+    tel = loop.tick(_state(0.01))
+    assert tel.mode is LoopMode.TRACKING
+    assert loop.last_fusion[0].value == "initialised"
+    assert_allclose(tel.yaw_rate_cmd_rad_s, -0.03 * 100.0, atol=1e-9)
+    assert tel.los_azim_rad > 0.0
+
+
+def test_gain_change_applies_at_next_tick():
+    loop = _loop()
+    loop.tick(_state(0.0))
+    loop.on_detection(Detection(0.0, (370.0, 240.0), (360, 230, 20, 20), 314.0))
+    y1 = loop.tick(_state(0.01)).yaw_rate_cmd_rad_s
+    loop.set_gains(Gains(k_p=0.06))
+    assert loop.gains.k_p == 0.03  # not before the tick
+    y2 = loop.tick(_state(0.02)).yaw_rate_cmd_rad_s
+    assert loop.gains.k_p == 0.06
+    assert y2 < 1.8 * y1 < 0  # roughly doubled toward clockwise
+
+
+def test_lost_target_brakes_and_holds():
+    loop = _loop()
+    loop.tick(_state(0.0))
+    loop.on_detection(Detection(0.0, (320.0, 240.0), (310, 230, 20, 20), 314.0))
+    loop.tick(_state(0.01))
+    tel = None
+    for k in range(2, 70):
+        tel = loop.tick(_state(k * 0.01))
+    assert tel.mode is LoopMode.LOST
+    assert_allclose(tel.accel_desired_enu_m_s2, [0.0, -3.0, 0.0])
+    assert tel.yaw_rate_cmd_rad_s == 0.0
+
+
+def test_guard_never_passes_nan():
+    loop = _loop()
+    tel = loop.tick(_state(0.0, vel=(math.nan, 0.0, 0.0)))
+    assert tel.guard_tripped and loop.guard_trips == 1
+    assert np.all(np.isfinite(tel.command.body_rates_flu_rad_s))
+    assert_allclose(tel.command.thrust_normalised, VehicleParams().hover_thrust_normalised)
+
+
+def test_unknown_law_refused():
+    import pytest
+
+    with pytest.raises(ValueError, match="unknown guidance law 'zzz'"):
+        _loop(law="zzz")

@@ -1,0 +1,90 @@
+"""Scenario files: strict loading, clear errors, exit status 2 without a traceback."""
+
+import subprocess
+import sys
+
+import pytest
+
+from groundstation.scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+
+GOOD = """
+name = "cv-top-to-bottom"
+duration_s = 30
+[interceptor]
+position_m = [0.0, 0.0, 10.0]
+velocity_m_s = [0.0, 0.0, 0.0]
+yaw_deg = 90.0
+[target]
+motion = "cv"
+position_m = [0.0, 25.0, 1.0]
+velocity_m_s = [0.0, 0.0, 1.0]
+acceleration_m_s2 = [0.0, 0.0, 0.0]
+amplitude_m = [2.0, 0.0, 0.0]
+period_s = 14.0
+diameter_m = 0.3
+[camera]
+[wind]
+mean_m_s = [0.0, 0.0, 0.0]
+gust_m_s = 0.0
+"""
+
+
+def test_issue_example_parses():
+    s = parse_scenario(GOOD, "ex.toml")
+    assert s.name == "cv-top-to-bottom" and s.duration_s == 30.0
+    assert s.target.velocity_m_s == (0.0, 0.0, 1.0)
+    assert s.camera.width_px == 640 and s.camera.hfov_deg == 90.0  # DESIGN §6 defaults
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (("yaw_deg = 90.0", "yaw_deg = 90.0\nyaw_rate = 1"), "unknown key 'interceptor.yaw_rate'"),
+        (('motion = "cv"\n', ""), "missing required key 'target.motion'"),
+        (("duration_s = 30", "duration_s = \"30\""), "key 'duration_s': expected a number"),
+        (("position_m = [0.0, 25.0, 1.0]", "position_m = [0.0, 25.0]"), "key 'target.position_m'"),
+        (("gust_m_s = 0.0", "gust_m_s = true"), "key 'wind.gust_m_s': expected a number"),
+        (('motion = "cv"', 'motion = "teleport"'), "key 'target.motion': must be one of"),
+        (("[camera]", "[camera]\nrate_hz = 7"), "key 'camera.rate_hz': 7.0 Hz must divide"),
+        (("name =", "nam ="), "unknown key 'nam'"),
+        (("[wind]", "[gains]\nK_y = 50\n[wind]"), "gain K_y = 50.0 is outside its range"),
+        (("[camera]", "[camera\n"), "not valid TOML"),
+    ],
+)
+def test_errors_name_the_key_and_the_file(edit, message):
+    text = GOOD.replace(*edit)
+    assert text != GOOD
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "bad.toml")
+    assert str(exc.value).startswith("bad.toml: ")
+    assert message in str(exc.value)
+
+
+def test_cli_bad_file_exits_2_without_traceback(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(GOOD.replace("[target]", "[target]\nspeed = 3"))
+    r = subprocess.run(
+        [sys.executable, "-m", "groundstation", "sortie", str(bad), "--json"],
+        capture_output=True, text=True,
+    )
+    assert r.returncode == 2
+    assert "unknown key 'target.speed'" in r.stderr and str(bad) in r.stderr
+    assert "Traceback" not in r.stderr and r.stdout == ""
+    missing = subprocess.run(
+        [sys.executable, "-m", "groundstation", "sortie", str(tmp_path / "nope.toml")],
+        capture_output=True, text=True,
+    )
+    assert missing.returncode == 2 and "cannot read scenario file" in missing.stderr
+
+
+def test_every_shipped_scenario_loads_and_names_match_files():
+    paths = shipped_scenarios()
+    assert len(paths) >= 12
+    for p in paths:
+        s = load_scenario(p)
+        assert s.name == p.stem
+        assert s.description
+
+
+def test_shipped_name_lookup():
+    assert load_scenario("cv-top-to-bottom").target.motion == "cv"
