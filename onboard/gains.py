@@ -44,9 +44,8 @@ class Gains:
                 raise GainError(f"gain {f.name}: {value} is not finite")
             lo, hi = f.metadata["min"], f.metadata["max"]
             if not lo <= value <= hi:
-                raise GainError(
-                    f"gain {f.name} = {value} is outside its range [{lo}, {hi}] {f.metadata['unit']}"
-                )
+                unit = f.metadata["unit"]
+                raise GainError(f"gain {f.name} = {value} is outside its range [{lo}, {hi}] {unit}")
             object.__setattr__(self, f.name, float(value))
 
     def replace(self, **changes: float) -> Gains:
@@ -80,7 +79,11 @@ class GainSpec:
 
 GAIN_SPECS: tuple[GainSpec, ...] = tuple(
     GainSpec(
-        f.name, f.default, f.metadata["unit"], f.metadata["min"], f.metadata["max"],
+        f.name,
+        f.default,
+        f.metadata["unit"],
+        f.metadata["min"],
+        f.metadata["max"],
         f.metadata["meaning"],
     )
     for f in dataclasses.fields(Gains)

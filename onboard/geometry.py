@@ -133,6 +133,4 @@ def rotation_between(a_unit: np.ndarray, b_unit: np.ndarray) -> np.ndarray:
 def camera_mount_rotation(pitch_up_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
     """R_BC for a strapdown camera pitched up by ``pitch_up_deg`` and rolled about its optical
     axis by ``roll_deg`` (90 deg = portrait, as in the paper's outdoor flights)."""
-    return (
-        rot_y(-math.radians(pitch_up_deg)) @ R_BC_FORWARD @ rot_z(math.radians(roll_deg))
-    )
+    return rot_y(-math.radians(pitch_up_deg)) @ R_BC_FORWARD @ rot_z(math.radians(roll_deg))

@@ -46,14 +46,17 @@ def test_onboard_gains_cli(tmp_path):
     good.write_text("k_p = 0.05\nK_y = 4\n")
     out = subprocess.run(
         [sys.executable, "-m", "onboard", "gains", "--check", str(good)],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout
     assert "k_p" in out and "0.05" in out
     bad = tmp_path / "bad.toml"
     bad.write_text("k_p = 5\n")
     r = subprocess.run(
         [sys.executable, "-m", "onboard", "gains", "--check", str(bad)],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     )
     assert r.returncode == 2
     assert "gain k_p = 5 is outside its range" in r.stderr and "Traceback" not in r.stderr

@@ -41,7 +41,7 @@ def test_issue_example_parses():
     [
         (("yaw_deg = 90.0", "yaw_deg = 90.0\nyaw_rate = 1"), "unknown key 'interceptor.yaw_rate'"),
         (('motion = "cv"\n', ""), "missing required key 'target.motion'"),
-        (("duration_s = 30", "duration_s = \"30\""), "key 'duration_s': expected a number"),
+        (("duration_s = 30", 'duration_s = "30"'), "key 'duration_s': expected a number"),
         (("position_m = [0.0, 25.0, 1.0]", "position_m = [0.0, 25.0]"), "key 'target.position_m'"),
         (("gust_m_s = 0.0", "gust_m_s = true"), "key 'wind.gust_m_s': expected a number"),
         (('motion = "cv"', 'motion = "teleport"'), "key 'target.motion': must be one of"),
@@ -65,14 +65,16 @@ def test_cli_bad_file_exits_2_without_traceback(tmp_path):
     bad.write_text(GOOD.replace("[target]", "[target]\nspeed = 3"))
     r = subprocess.run(
         [sys.executable, "-m", "groundstation", "sortie", str(bad), "--json"],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     )
     assert r.returncode == 2
     assert "unknown key 'target.speed'" in r.stderr and str(bad) in r.stderr
     assert "Traceback" not in r.stderr and r.stdout == ""
     missing = subprocess.run(
         [sys.executable, "-m", "groundstation", "sortie", str(tmp_path / "nope.toml")],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     )
     assert missing.returncode == 2 and "cannot read scenario file" in missing.stderr
 

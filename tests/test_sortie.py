@@ -72,7 +72,9 @@ def test_unseen_target_is_lost():
 def _cli_json(*args):
     out = subprocess.run(
         [sys.executable, "-m", "groundstation", "sortie", *args, "--json"],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout
     return out
 
@@ -83,8 +85,16 @@ def test_same_scenario_and_seed_give_identical_json(camera):
     a, b = _cli_json(*args), _cli_json(*args)
     assert a == b
     d = json.loads(a)
-    for key in ("outcome", "miss_m", "intercept_time_s", "terminal_speed_m_s",
-                "max_normal_accel_m_s2", "law", "seed", "scenario"):
+    for key in (
+        "outcome",
+        "miss_m",
+        "intercept_time_s",
+        "terminal_speed_m_s",
+        "max_normal_accel_m_s2",
+        "law",
+        "seed",
+        "scenario",
+    ):
         assert key in d
     assert d["seed"] == 7 and d["law"] == "png" and d["scenario"] == "sm-tailgate"
     other = json.loads(_cli_json("sm-tailgate", "--seed", "8", "--camera", camera))
@@ -94,6 +104,8 @@ def test_same_scenario_and_seed_give_identical_json(camera):
 def test_human_summary():
     out = subprocess.run(
         [sys.executable, "-m", "groundstation", "sortie", "static-ahead-20m"],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout
     assert "HIT" in out and "miss" in out and "terminal speed" in out

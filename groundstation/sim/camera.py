@@ -66,7 +66,9 @@ class SimCamera:
         delay = spec.delay_s + spec.delay_jitter_s * float(self._rng.standard_normal())
         delay = min(max(delay, 0.5 * spec.delay_s), 2.0 * spec.delay_s + 1e-9)
         if self.mode == "rendered":
-            frame = self.renderer.render(R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m)
+            frame = self.renderer.render(
+                R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m
+            )
             self.last_frame = frame
             det = self.detector.detect(frame, t_s)
         else:

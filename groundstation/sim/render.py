@@ -42,7 +42,9 @@ class FrameRenderer:
         r = R_WC[2, :]
 
         def below(pt):
-            return r[0] * (pt[0] - cam.cu_px) / cam.f_px + r[1] * (pt[1] - cam.cv_px) / cam.f_px + r[2]
+            return (
+                r[0] * (pt[0] - cam.cu_px) / cam.f_px + r[1] * (pt[1] - cam.cv_px) / cam.f_px + r[2]
+            )
 
         out = []
         pts = self._corners

@@ -113,6 +113,7 @@ class Simulation:
         self.vehicle = Multicopter(scenario.interceptor)
         self.target = Target(scenario.target)
         self.wind = Wind(scenario.wind, wind_rng)
+        self.target.settle_in_wind(scenario.wind.mean_m_s)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
             self.camera_model,
@@ -127,7 +128,8 @@ class Simulation:
         self.keep_records = keep_records
         self.records: list[TickRecord] = []
         self.last_telemetry: ControlTelemetry | None = None
-        self._rel = self._relative()
+        tp, vp = self.target.p, self.vehicle.p
+        self._rel = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
         self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
         self.miss_m = self.initial_range_m
         self.closest_time_s = 0.0
@@ -144,10 +146,6 @@ class Simulation:
     def done(self) -> bool:
         return self.outcome is not None
 
-    def _relative(self) -> list[float]:
-        tp, vp = self.target.p, self.vehicle.p
-        return [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
-
     def R_WC(self) -> np.ndarray:
         return quat_to_rotmat(self.vehicle.q) @ self.camera_model.R_BC
 
@@ -161,16 +159,22 @@ class Simulation:
         veh = self.vehicle
         if k % self._camera_div == 0:
             self.camera.capture(
-                t, self.R_WC(), np.array(veh.p), np.array(self.target.p),
+                t,
+                self.R_WC(),
+                np.array(veh.p),
+                np.array(self.target.p),
                 self.scenario.target.diameter_m,
             )
         if k % self._control_div == 0:
             self._control_tick(t)
-        veh.step(self.dt_s, self.wind.velocity_m_s)
-        self.target.advance(t + self.dt_s, self.dt_s, self.wind.velocity_m_s)
+            if self._check_loop_outcome(t):
+                return
+        wind = self.wind.velocity_m_s
+        veh.step(self.dt_s, wind)
+        self.target.advance(t + self.dt_s, self.dt_s, wind)
         self.wind.step(self.dt_s)
         self.step_index = k + 1
-        self._check_outcome(t)
+        self._check_physics_outcome(t)
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -198,43 +202,54 @@ class Simulation:
             rel = self._rel
             self.records.append(
                 TickRecord(
-                    t, tuple(veh.p), tuple(v), tuple(self.target.p),
-                    math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2), a_n, tel,
+                    t,
+                    tuple(veh.p),
+                    tuple(v),
+                    tuple(self.target.p),
+                    math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2),
+                    a_n,
+                    tel,
                 )
             )
 
-    def _check_outcome(self, t0: float) -> None:
+    def _check_loop_outcome(self, t: float) -> bool:
+        """Outcomes that can only change at a control tick: target lost, never acquired,
+        out of time."""
+        loop = self.loop
+        never_seen = t >= ACQUIRE_TIMEOUT_S + self.scenario.camera.delay_s
+        if (loop.acquired and loop.dkf.lost(t)) or (not loop.acquired and never_seen):
+            self.outcome = Outcome.TARGET_LOST
+        elif t >= self.scenario.duration_s - 1e-9:
+            self.outcome = Outcome.TIMEOUT
+        return self.outcome is not None
+
+    def _check_physics_outcome(self, t0: float) -> None:
         r0 = self._rel
-        r1 = self._relative()
+        tp, vp = self.target.p, self.vehicle.p
+        r1 = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
         self._rel = r1
-        d = [r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]]
-        dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-        r0d = r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]
+        d0, d1, d2 = r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        r0d = r0[0] * d0 + r0[1] * d1 + r0[2] * d2
         s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
-        c = [r0[i] + s * d[i] for i in range(3)]
-        dist = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+        c0, c1, c2 = r0[0] + s * d0, r0[1] + s * d1, r0[2] + s * d2
+        dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        veh = self.vehicle
+        v = veh.v
         if dist < self.miss_m:
             self.miss_m = dist
             self.closest_time_s = t0 + s * self.dt_s
-            v = self.vehicle.v
             self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-        veh = self.vehicle
-        t1 = self.time_s
-        opening_now = (r1[0] * d[0] + r1[1] * d[1] + r1[2] * d[2]) > 0.0
+        opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
         if r0d < 0.0 and opening_now and dist < PASS_RADIUS_M:
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif not (veh.finite() and math.isfinite(r1[0] + r1[1] + r1[2])):
+        elif (
+            not (veh.finite() and math.isfinite(r1[0] + r1[1] + r1[2]))
+            or v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > DIVERGED_SPEED_M_S**2
+        ):
             self.outcome = Outcome.DIVERGED
-        elif veh.v[0] ** 2 + veh.v[1] ** 2 + veh.v[2] ** 2 > DIVERGED_SPEED_M_S**2:
-            self.outcome = Outcome.DIVERGED
-        elif veh.p[2] <= 0.0:
+        elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED
-        elif self.loop.acquired and self.loop.dkf.lost(t1):
-            self.outcome = Outcome.TARGET_LOST
-        elif not self.loop.acquired and t1 >= ACQUIRE_TIMEOUT_S + self.scenario.camera.delay_s:
-            self.outcome = Outcome.TARGET_LOST
-        elif t1 >= self.scenario.duration_s - 1e-9:
-            self.outcome = Outcome.TIMEOUT
 
     def step_control_period(self) -> None:
         """Advance to the next control tick (or the end)."""

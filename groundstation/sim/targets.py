@@ -9,8 +9,9 @@ and ``advance(t_s, dt_s, wind)`` that moves it to time ``t_s``.
   clockwise seen from above), plus a drift velocity_m_s
 - escape: starts with velocity_m_s and accelerates with acceleration_m_s2 up to max_speed_m_s
 - takeoff: rests at position_m until start_s, then climbs at the constant velocity_m_s
-- tethered: a balloon on a rope anchored tether_length_m below its rest position, pulled up
-  by its net lift and pushed by the wind's drag; it leans and swings with gusts
+- tethered: a balloon on a rope anchored tether_length_m below position_m (its rest position
+  in still air), pulled up by its net lift and pushed by the wind's drag; it starts leaning at
+  rest in the mean wind and swings with the gusts
 """
 
 from __future__ import annotations
@@ -26,19 +27,37 @@ class Target:
     def __init__(self, spec: TargetSpec) -> None:
         self.spec = spec
         self.p = list(spec.position_m)
-        self.v = [0.0, 0.0, 0.0] if spec.motion in ("static", "takeoff") else list(spec.velocity_m_s)
+        self.v = (
+            [0.0, 0.0, 0.0] if spec.motion in ("static", "takeoff") else list(spec.velocity_m_s)
+        )
         self.radius_m = spec.diameter_m / 2.0
         s = spec
         if s.motion == "circle":
             self._center = (s.position_m[0] - s.radius_m, s.position_m[1], s.position_m[2])
             self._omega = 2.0 * math.pi / s.period_s
-            self.v = [v + d for v, d in zip(s.velocity_m_s, (0.0, s.radius_m * self._omega, 0.0))]
+            self.v = [
+                v + d
+                for v, d in zip(s.velocity_m_s, (0.0, s.radius_m * self._omega, 0.0), strict=True)
+            ]
         if s.motion == "sinusoid":
             w = 2.0 * math.pi / s.period_s
-            self.v = [v + a * w for v, a in zip(s.velocity_m_s, s.amplitude_m)]
+            self.v = [v + a * w for v, a in zip(s.velocity_m_s, s.amplitude_m, strict=True)]
         if s.motion == "tethered":
             self._anchor = (s.position_m[0], s.position_m[1], s.position_m[2] - s.tether_length_m)
             self._drag_k = 0.5 * AIR_DENSITY_KG_M3 * s.drag_coefficient * math.pi * self.radius_m**2
+
+    def settle_in_wind(self, wind: tuple[float, float, float]) -> None:
+        """Tethered: start leaning at rest in the mean wind (rope along lift + drag), as a
+        balloon would be when the sortie begins; other motions are unaffected."""
+        if self.spec.motion != "tethered":
+            return
+        speed = math.sqrt(sum(c * c for c in wind))
+        f = [self._drag_k * speed * c for c in wind]
+        f[2] += self.spec.net_lift_n
+        n = math.sqrt(sum(c * c for c in f))
+        length = self.spec.tether_length_m
+        self.p = [self._anchor[i] + length * f[i] / n for i in range(3)]
+        self.v = [0.0, 0.0, 0.0]
 
     def advance(self, t: float, dt: float, wind: tuple[float, float, float]) -> None:
         s = self.spec

@@ -48,7 +48,11 @@ class Multicopter:
         at = 1.0 - math.exp(-dt / s.thrust_time_constant_s)
         w = self.w
         cw = self.cmd_w
-        w0, w1, w2 = w[0] + (cw[0] - w[0]) * aw, w[1] + (cw[1] - w[1]) * aw, w[2] + (cw[2] - w[2]) * aw
+        w0, w1, w2 = (
+            w[0] + (cw[0] - w[0]) * aw,
+            w[1] + (cw[1] - w[1]) * aw,
+            w[2] + (cw[2] - w[2]) * aw,
+        )
         self.w = [w0, w1, w2]
         rs = self._rate_sum
         rs[0] += w0

@@ -19,7 +19,9 @@ class Wind:
         self.velocity_m_s = tuple(spec.mean_m_s)
         if spec.gust_m_s > 0.0:
             # start in the stationary distribution, not at zero
-            self._gust = [s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3))]
+            self._gust = [
+                s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3), strict=True)
+            ]
             self._update_total()
 
     def _update_total(self) -> None:
@@ -33,5 +35,7 @@ class Wind:
         a = math.exp(-dt / tau)
         b = math.sqrt(1.0 - a * a)
         n = self._rng.standard_normal(3)
-        self._gust = [a * g + b * s * float(k) for g, s, k in zip(self._gust, self._sigma, n)]
+        self._gust = [
+            a * g + b * s * float(k) for g, s, k in zip(self._gust, self._sigma, n, strict=True)
+        ]
         self._update_total()

@@ -100,9 +100,7 @@ class RedBalloonDetector:
 
     def _edge_circle_centre(self, cnt: np.ndarray, w: int, h: int) -> tuple[float, float] | None:
         pts = cnt.reshape(-1, 2).astype(np.float64)
-        inner = pts[
-            (pts[:, 0] > 1) & (pts[:, 0] < w - 2) & (pts[:, 1] > 1) & (pts[:, 1] < h - 2)
-        ]
+        inner = pts[(pts[:, 0] > 1) & (pts[:, 0] < w - 2) & (pts[:, 1] > 1) & (pts[:, 1] < h - 2)]
         if len(inner) < max(8, self.config.min_edge_arc_fraction * len(pts)):
             return None
         # algebraic (Kasa) circle fit: x^2 + y^2 + D x + E y + F = 0, on pixel-centre coordinates
