@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.gains import GainError
 
+from .campaigns.definitions import CampaignError
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
 from .sim.camera import CAMERA_MODES
 
@@ -33,10 +34,21 @@ def _build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
 
+    c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
+    c.add_argument("name", help="static | moving | wind | outdoor")
+    c.add_argument("--n", type=int, default=None, help="targets / seeds / tries (see README)")
+    c.add_argument("--laws", default="png,pg,ibvs", help="comma-separated guidance laws")
+    c.add_argument("--camera", default="projected", choices=CAMERA_MODES)
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
+    c.add_argument("--out", default=None, help="output folder (default logs/campaigns/...)")
+    c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
+
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
     b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     b.add_argument("--json", action="store_true")
+    b.add_argument("--campaigns", action="store_true", help="campaign throughput instead")
     return p
 
 
@@ -75,11 +87,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_sortie(args)
         if args.command == "scenarios":
             return _cmd_scenarios(args)
-        if args.command == "bench":
-            from .bench import run_bench
+        if args.command == "campaign":
+            from .campaigns.driver import main_campaign
 
+            return main_campaign(args)
+        if args.command == "bench":
+            from .bench import run_bench, run_campaign_bench
+
+            if args.campaigns:
+                return run_campaign_bench(as_json=args.json)
             return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)
-    except (ScenarioError, GainError) as exc:
+    except (ScenarioError, GainError, CampaignError) as exc:
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2
     return 2  # pragma: no cover

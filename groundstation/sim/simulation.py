@@ -134,6 +134,8 @@ class Simulation:
         self.miss_m = self.initial_range_m
         self.closest_time_s = 0.0
         self.closest_speed_m_s = 0.0
+        self.closest_rel_m = tuple(self._rel)  # target minus vehicle at closest approach
+        self.closest_vel_m_s = tuple(self.vehicle.v)
         self.max_normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
 
@@ -240,6 +242,8 @@ class Simulation:
             self.miss_m = dist
             self.closest_time_s = t0 + s * self.dt_s
             self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+            self.closest_rel_m = (c0, c1, c2)
+            self.closest_vel_m_s = (v[0], v[1], v[2])
         opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
         if r0d < 0.0 and opening_now and dist < PASS_RADIUS_M:
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS

@@ -1,0 +1,485 @@
+"""Campaign output: ``results.json`` (every sortie and the aggregates), ``report.md`` (the
+tables, the paper's numbers beside ours) and PNG plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .definitions import WIND_SPEEDS_M_S
+from .runner import SortieOutcome
+
+LAW_COLOURS = {"png": "tab:red", "pg": "tab:blue", "ibvs": "tab:green"}
+LAW_NAMES = {"png": "PNG (proposed)", "pg": "PG", "ibvs": "IBVS"}
+
+
+def _fmt(x: Any, digits: int = 3) -> str:
+    if x is None:
+        return "—"
+    if isinstance(x, float) and not math.isfinite(x):
+        return "—"
+    return f"{x:.{digits}f}"
+
+
+def _laws_of(outcomes: list[SortieOutcome]) -> list[str]:
+    seen: list[str] = []
+    for o in outcomes:
+        if o.labels["law"] not in seen:
+            seen.append(o.labels["law"])
+    return seen
+
+
+def _first(outcomes, **labels) -> SortieOutcome | None:
+    for o in outcomes:
+        if all(o.labels.get(k) == v for k, v in labels.items()):
+            return o
+    return None
+
+
+def _savefig(fig, out: Path, name: str, plots: list[str]) -> None:
+    fig.tight_layout()
+    fig.savefig(out / name, dpi=110)
+    plt.close(fig)
+    plots.append(name)
+
+
+# ------------------------------------------------------------------------------- plots
+def _plot_trajectories_3d(ax, outs: list[SortieOutcome], label_key: str = "law") -> None:
+    for o in outs:
+        tr = o.trace
+        if not tr:
+            continue
+        v = np.array(tr["vehicle_pos_m"])
+        tg = np.array(tr["target_pos_m"])
+        law = o.labels["law"]
+        ax.plot(
+            v[:, 0],
+            v[:, 1],
+            v[:, 2],
+            color=LAW_COLOURS.get(law, "k"),
+            lw=1.0,
+            label=LAW_NAMES.get(law, law) if label_key else None,
+        )
+        ax.plot(tg[:, 0], tg[:, 1], tg[:, 2], color="k", lw=0.8, ls="--")
+        ax.scatter(*tg[-1], color="k", s=8)
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_zlabel("z up (m)")
+
+
+def _boxplot(ax, data: list[list[float]], labels: list[str], colours: list[str]) -> None:
+    bp = ax.boxplot(data, patch_artist=True, showfliers=True)
+    ax.set_xticks(range(1, len(labels) + 1), labels)
+    for patch, c in zip(bp["boxes"], colours, strict=True):
+        patch.set_facecolor(c)
+        patch.set_alpha(0.5)
+
+
+def _static_plots(outcomes, out: Path) -> list[str]:
+    plots: list[str] = []
+    laws = _laws_of(outcomes)
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    _plot_trajectories_3d(ax, [o for o in outcomes if o.labels["law"] == laws[0]], label_key="")
+    ax.set_title(f"Static targets: {LAW_NAMES.get(laws[0], laws[0])} trajectories")
+    _savefig(fig, out, "trajectories_3d.png", plots)
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    data = [[o.result["miss_m"] for o in outcomes if o.labels["law"] == law] for law in laws]
+    _boxplot(
+        ax,
+        data,
+        [LAW_NAMES.get(law, law) for law in laws],
+        [LAW_COLOURS.get(law, "grey") for law in laws],
+    )
+    ax.set_ylabel("miss distance (m)")
+    ax.set_yscale("log")
+    ax.set_title("Static targets: miss distance (paper Fig. 5b)")
+    _savefig(fig, out, "miss_boxplot.png", plots)
+
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    pts = np.array(
+        [
+            o.trace["initial_px"]
+            for o in outcomes
+            if o.labels["law"] == laws[0] and o.trace and o.trace["initial_px"]
+        ]
+    )
+    if len(pts):
+        ax.scatter(pts[:, 0], pts[:, 1], s=14, color="tab:red")
+    ax.set_xlim(0, 640)
+    ax.set_ylim(480, 0)
+    ax.set_aspect("equal")
+    ax.axhline(240, color="grey", lw=0.5)
+    ax.axvline(320, color="grey", lw=0.5)
+    ax.set_xlabel("u (px)")
+    ax.set_ylabel("v (px)")
+    ax.set_title("Initial target positions in the image (paper Fig. 5c)")
+    _savefig(fig, out, "targets_image_plane.png", plots)
+
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    for law in laws:
+        xs, ys = [], []
+        for o in outcomes:
+            if o.labels["law"] != law or not o.trace:
+                continue
+            rel = np.array(o.trace["closest_rel_m"])
+            vel = np.array(o.trace["closest_vel_m_s"])
+            n = vel / (np.linalg.norm(vel) or 1.0)
+            right = np.cross(n, [0.0, 0.0, 1.0])
+            right = right / (np.linalg.norm(right) or 1.0)
+            up = np.cross(right, n)
+            xs.append(float(rel @ right))
+            ys.append(float(rel @ up))
+        ax.scatter(xs, ys, s=14, label=LAW_NAMES.get(law, law), color=LAW_COLOURS.get(law))
+    ax.add_patch(plt.Circle((0, 0), 0.15, fill=False, color="k", lw=0.8))
+    ax.set_aspect("equal")
+    ax.set_xlabel("right of flight path (m)")
+    ax.set_ylabel("above flight path (m)")
+    ax.legend()
+    ax.set_title("Miss at closest approach (paper Fig. 5d); circle: target")
+    _savefig(fig, out, "miss_scatter.png", plots)
+    return plots
+
+
+def _moving_plots(outcomes, out: Path) -> list[str]:
+    plots: list[str] = []
+    laws = _laws_of(outcomes)
+    scenarios = list(dict.fromkeys(o.labels["scenario"] for o in outcomes))
+    fig = plt.figure(figsize=(5 * len(scenarios), 4.5))
+    for i, sc in enumerate(scenarios):
+        ax = fig.add_subplot(1, len(scenarios), i + 1, projection="3d")
+        _plot_trajectories_3d(
+            ax, [o for law in laws if (o := _first(outcomes, scenario=sc, law=law, **{"try": 0}))]
+        )
+        ax.set_title(sc)
+        if i == 0:
+            ax.legend(fontsize=7)
+    _savefig(fig, out, "trajectories_3d.png", plots)
+
+    fig, axes = plt.subplots(2, len(scenarios), figsize=(5 * len(scenarios), 6), squeeze=False)
+    for i, sc in enumerate(scenarios):
+        for law in laws:
+            o = _first(outcomes, scenario=sc, law=law, **{"try": 0})
+            if not o or not o.trace:
+                continue
+            c = LAW_COLOURS.get(law)
+            axes[0][i].plot(
+                o.trace["t_s"],
+                o.trace["normal_accel_m_s2"],
+                color=c,
+                label=LAW_NAMES.get(law, law),
+                lw=1,
+            )
+            axes[1][i].plot(o.trace["t_s"], o.trace["normal_vel_m_s"], color=c, lw=1)
+        axes[0][i].set_title(sc)
+        axes[0][i].set_ylabel("normal acceleration (m/s²)")
+        axes[1][i].set_ylabel("velocity normal to LOS (m/s)")
+        axes[1][i].set_xlabel("time (s)")
+    axes[0][0].legend(fontsize=8)
+    _savefig(fig, out, "normal_accel_velocity.png", plots)
+
+    fig, axes = plt.subplots(2, len(scenarios), figsize=(5 * len(scenarios), 6), squeeze=False)
+    for i, sc in enumerate(scenarios):
+        for j, comp in enumerate(("e_x / f", "e_y / f")):
+            data = []
+            for law in laws:
+                vals = []
+                for o in outcomes:
+                    if o.labels["scenario"] == sc and o.labels["law"] == law and o.trace:
+                        vals += [e[j] for e in o.trace["e_norm_upright"] if e is not None]
+                data.append(vals or [math.nan])
+            _boxplot(
+                axes[j][i],
+                data,
+                [LAW_NAMES.get(law, law) for law in laws],
+                [LAW_COLOURS.get(law, "grey") for law in laws],
+            )
+            axes[j][i].set_ylabel(f"normalised {comp}")
+        axes[0][i].set_title(sc)
+    _savefig(fig, out, "image_error_boxplot.png", plots)
+
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(5 * len(scenarios), 4), squeeze=False)
+    for i, sc in enumerate(scenarios):
+        data = [
+            [
+                o.result["miss_m"]
+                for o in outcomes
+                if o.labels["scenario"] == sc and o.labels["law"] == law
+            ]
+            for law in laws
+        ]
+        _boxplot(
+            axes[0][i],
+            data,
+            [LAW_NAMES.get(law, law) for law in laws],
+            [LAW_COLOURS.get(law, "grey") for law in laws],
+        )
+        axes[0][i].set_yscale("log")
+        axes[0][i].set_ylabel("miss (m)")
+        axes[0][i].set_title(sc)
+    _savefig(fig, out, "miss_boxplot.png", plots)
+    return plots
+
+
+def _wind_plots(outcomes, summary, out: Path) -> list[str]:
+    plots: list[str] = []
+    laws = _laws_of(outcomes)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    width = 0.8 / len(laws)
+    for k, law in enumerate(laws):
+        rates = [summary["cells"][str(w)][law]["success_rate"] * 100 for w in WIND_SPEEDS_M_S]
+        ax.bar(
+            np.arange(len(WIND_SPEEDS_M_S)) + k * width,
+            rates,
+            width,
+            color=LAW_COLOURS.get(law),
+            label=LAW_NAMES.get(law, law),
+        )
+    paper = [100 * summary["paper"][str(w)]["success"] for w in WIND_SPEEDS_M_S]
+    ax.plot(
+        np.arange(len(WIND_SPEEDS_M_S)) + 0.4 - width / 2,
+        paper,
+        "k*",
+        ms=10,
+        label="paper (proposed)",
+    )
+    ax.set_xticks(
+        np.arange(len(WIND_SPEEDS_M_S)) + 0.4 - width / 2, [f"{w} m/s" for w in WIND_SPEEDS_M_S]
+    )
+    ax.set_ylabel("success rate (%)")
+    ax.set_ylim(0, 105)
+    ax.legend(fontsize=8)
+    ax.set_title("Tethered balloon in wind (paper Table 2)")
+    _savefig(fig, out, "success_rate.png", plots)
+
+    law = "png" if "png" in laws else laws[0]
+    fig, axes = plt.subplots(1, 2, figsize=(9, 4))
+    for j, comp in enumerate(("u", "v")):
+        data = []
+        for w in WIND_SPEEDS_M_S:
+            vals = []
+            for o in outcomes:
+                if o.labels["wind_m_s"] == w and o.labels["law"] == law and o.trace:
+                    vals += [e[j] for e in o.trace["e_norm_upright"] if e is not None]
+            data.append(vals or [math.nan])
+        _boxplot(axes[j], data, [f"{w} m/s" for w in WIND_SPEEDS_M_S], ["tab:red"] * 4)
+        axes[j].set_ylabel(f"normalised {comp}")
+    fig.suptitle(f"Image-plane error by wind speed, {LAW_NAMES.get(law, law)} (paper Fig. 18)")
+    _savefig(fig, out, "image_error_boxplot.png", plots)
+    return plots
+
+
+def _outdoor_plots(outcomes, out: Path) -> list[str]:
+    plots: list[str] = []
+    laws = _laws_of(outcomes)
+    scenarios = list(dict.fromkeys(o.labels["scenario"] for o in outcomes))
+    fig = plt.figure(figsize=(10, 8))
+    for i, sc in enumerate(scenarios):
+        ax = fig.add_subplot(2, 2, i + 1, projection="3d")
+        _plot_trajectories_3d(
+            ax, [o for law in laws if (o := _first(outcomes, scenario=sc, law=law, **{"try": 0}))]
+        )
+        ax.set_title(sc)
+        if i == 0:
+            ax.legend(fontsize=7)
+    _savefig(fig, out, "trajectories_3d.png", plots)
+    fig, axes = plt.subplots(2, len(scenarios), figsize=(4.5 * len(scenarios), 6), squeeze=False)
+    for i, sc in enumerate(scenarios):
+        for law in laws:
+            o = _first(outcomes, scenario=sc, law=law, **{"try": 0})
+            if not o or not o.trace:
+                continue
+            speed = np.linalg.norm(np.array(o.trace["vehicle_vel_m_s"]), axis=1)
+            axes[0][i].plot(
+                o.trace["t_s"],
+                speed,
+                color=LAW_COLOURS.get(law),
+                lw=1,
+                label=LAW_NAMES.get(law, law),
+            )
+            axes[1][i].plot(
+                o.trace["t_s"], o.trace["normal_accel_m_s2"], color=LAW_COLOURS.get(law), lw=1
+            )
+        axes[0][i].set_title(sc)
+        axes[0][i].set_ylabel("speed (m/s)")
+        axes[1][i].set_ylabel("normal acceleration (m/s²)")
+        axes[1][i].set_xlabel("time (s)")
+    axes[0][0].legend(fontsize=8)
+    _savefig(fig, out, "speed_normal_accel.png", plots)
+    return plots
+
+
+# ------------------------------------------------------------------------------- tables
+def _md_static(summary, outcomes) -> str:
+    lines = [
+        "| law | CEP (median) | mean | 90th pct | max | HIT rate | paper CEP |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for law, s in summary["laws"].items():
+        lines.append(
+            f"| {LAW_NAMES.get(law, law)} | {_fmt(s['cep_m'])} m | {_fmt(s['mean_m'])} m | "
+            f"{_fmt(s['p90_m'])} m | {_fmt(s['max_m'])} m | {100 * s['success_rate']:.0f} % | "
+            f"{_fmt(s['paper_cep_m'])} |"
+        )
+    lines.append(f"\nPaper: {summary['paper_note']}.\n\nEvery miss (m):\n")
+    laws = _laws_of(outcomes)
+    lines.append("| target | position (m) | " + " | ".join(laws) + " |")
+    lines.append("|---|---|" + "---|" * len(laws))
+    targets = sorted({o.labels["target"] for o in outcomes})
+    for t in targets:
+        row = [o for o in outcomes if o.labels["target"] == t]
+        pos = row[0].trace["target_pos_m"][0] if row[0].trace else None
+        pos_s = "—" if pos is None else "(" + ", ".join(f"{c:.1f}" for c in pos) + ")"
+        misses = {o.labels["law"]: o.result for o in row}
+        cells = [
+            f"{misses[law]['miss_m']:.3f}"
+            + ("" if misses[law]["outcome"] == "HIT" else f" {misses[law]['outcome']}")
+            for law in laws
+        ]
+        lines.append(f"| {t} | {pos_s} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _md_moving(summary) -> str:
+    cells = summary["cells"]
+    laws = list(next(iter(cells.values())).keys())
+    head = "| miss, mean ± std (paper) | " + " | ".join(LAW_NAMES.get(x, x) for x in laws) + " |"
+    lines = [head, "|---|" + "---|" * len(laws)]
+    for sc, by_law in cells.items():
+        row = []
+        best = min(by_law, key=lambda law: by_law[law]["mean_m"])
+        for law in laws:
+            c = by_law[law]
+            txt = f"{c['mean_m']:.3f} ± {c['std_m']:.3f} m ({_fmt(c['paper_m'], 2)})"
+            row.append(f"**{txt}**" if law == best else txt)
+        lines.append(f"| {sc} | " + " | ".join(row) + " |")
+    lines += [
+        "",
+        "| scenario, law | HIT rate | outcomes | mean of max normal accel | "
+        "median (IQR) e_x/f | median (IQR) e_y/f |",
+        "|---|---|---|---|---|---|",
+    ]
+    for sc, by_law in cells.items():
+        for law, c in by_law.items():
+            (mx, ix), (my, iy) = c["e_x_median_iqr"], c["e_y_median_iqr"]
+            lines.append(
+                f"| {sc}, {law} | {100 * c['success_rate']:.0f} % | {', '.join(c['outcomes'])} | "
+                f"{c['max_normal_accel_mean_m_s2']:.2f} m/s² | {mx:.3f} ({ix:.3f}) | "
+                f"{my:.3f} ({iy:.3f}) |"
+            )
+    return "\n".join(lines)
+
+
+def _md_wind(summary) -> str:
+    cells = summary["cells"]
+    laws = list(next(iter(cells.values())).keys())
+    lines = [
+        "| wind | "
+        + " | ".join(f"{LAW_NAMES.get(x, x)} HIT rate" for x in laws)
+        + " | paper (proposed) |",
+        "|---|" + "---|" * (len(laws) + 1),
+    ]
+    for w, by_law in cells.items():
+        rates = [f"{100 * by_law[x]['success_rate']:.0f} % ({by_law[x]['tries']})" for x in laws]
+        paper = summary["paper"][w]["success"] * 100
+        lines.append(f"| {w} m/s | " + " | ".join(rates) + f" | {paper:.0f} % (5) |")
+    law = "png" if "png" in laws else laws[0]
+    lines += [
+        "",
+        f"Image plane, {LAW_NAMES.get(law, law)}: normalised (u, v), ours | paper",
+        "",
+        "| wind | median (u, v) | IQR (u, v) | paper median | paper IQR |",
+        "|---|---|---|---|---|",
+    ]
+    for w, by_law in cells.items():
+        c, p = by_law[law], summary["paper"][w]
+        lines.append(
+            f"| {w} m/s | ({c['median_uv'][0]:.3f}, {c['median_uv'][1]:.3f}) | "
+            f"({c['iqr_uv'][0]:.3f}, {c['iqr_uv'][1]:.3f}) | "
+            f"({p['median_uv'][0]:.3f}, {p['median_uv'][1]:.3f}) | "
+            f"({p['iqr_uv'][0]:.3f}, {p['iqr_uv'][1]:.3f}) |"
+        )
+    return "\n".join(lines)
+
+
+def _md_outdoor(summary) -> str:
+    lines = [
+        "| scenario | law | HIT rate | miss mean | terminal speed | time | paper |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for sc, by_law in summary["cells"].items():
+        for law, c in by_law.items():
+            lines.append(
+                f"| {sc} | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
+                f"{c['mean_m']:.3f} m | {c['terminal_speed_mean_m_s']:.2f} m/s | "
+                f"{c['intercept_time_mean_s']:.2f} s | {c['paper'] or ''} |"
+            )
+    return "\n".join(lines)
+
+
+def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOutcome]) -> str:
+    if name == "static":
+        return _md_static(summary, outcomes)
+    if name == "moving":
+        return _md_moving(summary)
+    if name == "wind":
+        return _md_wind(summary)
+    return _md_outdoor(summary)
+
+
+def write_report(
+    out: Path,
+    name: str,
+    meta: dict[str, Any],
+    summary: dict[str, Any],
+    outcomes: list[SortieOutcome],
+) -> list[str]:
+    """Write results.json, report.md and the plots into ``out``; return the file names."""
+    out.mkdir(parents=True, exist_ok=True)
+    results = {
+        "meta": meta,
+        "summary": summary,
+        "sorties": [{"labels": o.labels, **o.result} for o in outcomes],
+        "traces": [o.trace for o in outcomes],
+    }
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    plots = {
+        "static": lambda: _static_plots(outcomes, out),
+        "moving": lambda: _moving_plots(outcomes, out),
+        "wind": lambda: _wind_plots(outcomes, summary, out),
+        "outdoor": lambda: _outdoor_plots(outcomes, out),
+    }[name]()
+    md = [
+        f"# Campaign `{name}`",
+        "",
+        f"Command: `{meta['command']}`  ",
+        f"{meta['sorties']} sorties, camera {meta['camera']}, laws {', '.join(meta['laws'])}, "
+        f"seed {meta['seed']}, n = {meta['n']} {meta['what_n_counts']}. "
+        "Regenerate with the command above; the tables come from `results.json`.",
+        "",
+        tables_markdown(name, summary, outcomes),
+        "",
+        "## Plots",
+        "",
+        *[f"![{p}]({p})" for p in plots],
+        "",
+    ]
+    (out / "report.md").write_text("\n".join(md))
+    return ["results.json", "report.md", *plots]
+
+
+def _json_default(x: Any) -> Any:
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, tuple):
+        return list(x)
+    raise TypeError(f"not JSON serialisable: {type(x)}")

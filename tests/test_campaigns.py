@@ -1,0 +1,149 @@
+"""Campaigns: aggregation, determinism across workers, end to end, errors, the paper's claims
+at small n."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+from numpy.testing import assert_allclose
+
+from groundstation.campaigns import CampaignError, LocalPoolRunner, build_jobs
+from groundstation.campaigns.aggregate import median_iqr, miss_stats, success_rate
+from groundstation.campaigns.definitions import parse_laws, static_targets
+from groundstation.campaigns.driver import run_campaign
+
+
+def test_cep_and_spread_of_known_misses():
+    s = miss_stats([0.4, 0.1, 0.3, 0.2])
+    assert_allclose(s["cep_m"], 0.25)  # median of 0.1, 0.2, 0.3, 0.4
+    assert_allclose(s["mean_m"], 0.25)
+    assert_allclose(s["p90_m"], 0.37)  # linear interpolation: 0.3 + 0.7 * 0.1
+    assert_allclose(s["std_m"], 0.129099, atol=1e-6)
+    assert s["n"] == 4 and s["max_m"] == 0.4 and s["min_m"] == 0.1
+    assert miss_stats([0.05])["cep_m"] == 0.05
+    assert success_rate(["HIT", "MISS", "HIT", "TIMEOUT"]) == 0.5
+    assert_allclose(median_iqr([1, 2, 3, 4, 5]), (3.0, 2.0))
+    with pytest.raises(ValueError):
+        miss_stats([])
+    with pytest.raises(ValueError):
+        miss_stats([0.1, float("nan")])
+
+
+def test_static_targets_are_seeded_and_inside_the_view():
+    a, b = static_targets(20, seed=3), static_targets(20, seed=3)
+    assert a == b and a != static_targets(20, seed=4)
+    for x, y, z in a:
+        r = (x * x + y * y + (z - 10) ** 2) ** 0.5
+        assert 15 <= r <= 35 and z >= 1.0 and y > 0
+
+
+def test_results_identical_whatever_the_worker_count():
+    jobs = build_jobs("static", n=3, laws=("png", "pg"), seed=5)
+    one = LocalPoolRunner(1).run(jobs)
+    two = LocalPoolRunner(2).run(jobs)
+    assert [o.result for o in one] == [o.result for o in two]
+    assert [o.trace for o in one] == [o.trace for o in two]
+    assert [o.labels for o in one] == [o.labels for o in two]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["campaign", "nope"], "unknown campaign 'nope'; choose one of static, moving"),
+        (["campaign", "static", "--laws", "png,zz"], "unknown law(s) zz"),
+        (["campaign", "static", "--laws", ""], "--laws needs at least one law"),
+        (["campaign", "static", "--n", "0"], "--n must be at least 1"),
+    ],
+)
+def test_bad_campaign_or_law_is_a_clear_error(args, message, tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "groundstation", *args, "--out", str(tmp_path / "x")],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2
+    assert message in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "x").exists()  # nothing written
+
+
+def test_parse_laws():
+    assert parse_laws("png, ibvs") == ("png", "ibvs")
+    with pytest.raises(CampaignError, match="twice"):
+        parse_laws("png,png")
+
+
+def test_moving_campaign_end_to_end(tmp_path):
+    out = tmp_path / "moving"
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "groundstation",
+            "campaign",
+            "moving",
+            "--n",
+            "1",
+            "--laws",
+            "png,pg",
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    d = json.loads(r.stdout)
+    cells = d["summary"]["cells"]
+    assert set(cells) == {"cv-top-to-bottom", "ca-flanking", "sm-tailgate"}
+    for scenario, by_law in cells.items():
+        # the paper's claim, at n = 1: the proposed law misses least in every scenario
+        assert by_law["png"]["mean_m"] < by_law["pg"]["mean_m"], scenario
+        assert by_law["png"]["mean_m"] <= 0.10, scenario
+        assert by_law["png"]["paper_m"] is not None
+    for name in (
+        "results.json",
+        "report.md",
+        "trajectories_3d.png",
+        "normal_accel_velocity.png",
+        "image_error_boxplot.png",
+        "miss_boxplot.png",
+    ):
+        assert (out / name).stat().st_size > 1000, name
+    results = json.loads((out / "results.json").read_text())
+    assert len(results["sorties"]) == 6 and results["meta"]["workers"] == 2
+    report = (out / "report.md").read_text()
+    assert "(0.71)" in report and "cv-top-to-bottom" in report  # the paper's PG number beside ours
+
+
+def test_static_campaign_png_centimetre_cep_beats_ibvs(tmp_path):
+    res = run_campaign(
+        "static", n=12, laws=("png", "ibvs"), seed=0, workers=2, out=tmp_path / "s", progress=False
+    )
+    laws = res["summary"]["laws"]
+    assert laws["png"]["cep_m"] <= 0.10  # paper: 0.089 m
+    assert laws["png"]["cep_m"] < laws["ibvs"]["cep_m"]
+    assert laws["png"]["success_rate"] == 1.0
+    for name in ("miss_scatter.png", "targets_image_plane.png", "miss_boxplot.png"):
+        assert (tmp_path / "s" / name).exists()
+
+
+def test_wind_campaign_png_always_hits_in_still_air(tmp_path):
+    res = run_campaign(
+        "wind", n=4, laws=("png",), seed=0, workers=2, out=tmp_path / "w", progress=False
+    )
+    cells = res["summary"]["cells"]
+    assert cells["0"]["png"]["success_rate"] == 1.0
+    assert set(cells) == {"0", "2", "4", "6"}
+    assert all(0.0 <= c["png"]["success_rate"] <= 1.0 for c in cells.values())
+    assert (tmp_path / "w" / "success_rate.png").exists()
+
+
+def test_outdoor_campaign_reports_speed(tmp_path):
+    res = run_campaign("outdoor", n=1, laws=("png",), workers=1, out=tmp_path / "o", progress=False)
+    for scenario, by_law in res["summary"]["cells"].items():
+        assert by_law["png"]["success_rate"] == 1.0, scenario
+        assert 4.0 <= by_law["png"]["terminal_speed_mean_m_s"] <= 8.0, scenario
