@@ -34,6 +34,24 @@ def _build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
 
+    sv = sub.add_parser("serve", help="start the operator's web app (simulator mode)")
+    sv.add_argument(
+        "--sim",
+        action="store_true",
+        default=True,
+        help="simulator mode (the default; a live MAVLink vehicle comes later)",
+    )
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    sv.add_argument("--port", type=int, default=8000)
+    sv.add_argument(
+        "--no-auth",
+        action="store_true",
+        help="no access token (refused unless the host is a loopback address)",
+    )
+    sv.add_argument(
+        "--data-dir", default=None, help="where named gain sets are kept (default ~/.peregrine)"
+    )
+
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument("name", help="static | moving | wind | outdoor")
     c.add_argument("--n", type=int, default=None, help="targets / seeds / tries (see README)")
@@ -49,6 +67,11 @@ def _build_parser() -> argparse.ArgumentParser:
     b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     b.add_argument("--json", action="store_true")
     b.add_argument("--campaigns", action="store_true", help="campaign throughput instead")
+    b.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="dashboard with 5 browser tabs instead (needs chromium)",
+    )
     return p
 
 
@@ -73,6 +96,23 @@ def _cmd_sortie(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .app.server import GroundStation
+
+    try:
+        gs = GroundStation(
+            args.host, args.port, args.no_auth, Path(args.data_dir) if args.data_dir else None
+        )
+    except ValueError as exc:
+        print(f"groundstation: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"Peregrine ground station (simulator mode): open {gs.url()}", flush=True)
+    gs.run_forever()
+    return 0
+
+
 def _cmd_scenarios(_: argparse.Namespace) -> int:
     for path in shipped_scenarios():
         s = load_scenario(path)
@@ -87,13 +127,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_sortie(args)
         if args.command == "scenarios":
             return _cmd_scenarios(args)
+        if args.command == "serve":
+            return _cmd_serve(args)
         if args.command == "campaign":
             from .campaigns.driver import main_campaign
 
             return main_campaign(args)
         if args.command == "bench":
-            from .bench import run_bench, run_campaign_bench
+            from .bench import run_bench, run_campaign_bench, run_dashboard_bench
 
+            if args.dashboard:
+                return run_dashboard_bench(as_json=args.json)
             if args.campaigns:
                 return run_campaign_bench(as_json=args.json)
             return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)

@@ -71,6 +71,11 @@ class InterceptionLoop:
         self.guard_trips = 0
         self.acquired = False
 
+    @property
+    def last_tick_time_s(self) -> float | None:
+        """Time of the last tick, or None before the first."""
+        return self._prev_time_s
+
     # ------------------------------------------------------------------ inputs
     def set_gains(self, gains: Gains) -> None:
         """Use ``gains`` from the next tick on (they are validated on construction)."""

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from onboard.camera_model import CameraModel
-from onboard.datatypes import ControlTelemetry, GyroSample
+from onboard.datatypes import ControlTelemetry, Detection, GyroSample
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
@@ -128,6 +128,7 @@ class Simulation:
         self.keep_records = keep_records
         self.records: list[TickRecord] = []
         self.last_telemetry: ControlTelemetry | None = None
+        self.last_detection: Detection | None = None  # latest delivered (delayed) detection
         tp, vp = self.target.p, self.vehicle.p
         self._rel = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
         self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
@@ -183,6 +184,7 @@ class Simulation:
         loop = self.loop
         for det in self.camera.deliver(t):
             loop.on_detection(det)
+            self.last_detection = det
         noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
         loop.on_gyro(GyroSample(t, np.array(veh.read_gyro()) + noise))
         tel = loop.tick(veh.state(t))

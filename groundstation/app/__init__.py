@@ -1,0 +1,1 @@
+"""The operator's web app: FastAPI + viser in one process (``groundstation serve``)."""

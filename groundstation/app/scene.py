@@ -1,0 +1,164 @@
+"""The 3D view (viser): ground grid, the interceptor with body axes and camera frustum, the
+target at its true size, both trails, the line of sight, and the closest-approach point when
+the sortie ends. Handles are created once and mutated inside ``server.atomic()``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import viser
+
+from onboard.geometry import quat_to_rotmat, rotmat_to_quat
+
+from ..sim.simulation import Simulation
+
+VEHICLE_RGB = (230, 60, 40)
+TARGET_RGB = (220, 20, 20)
+TRAIL_VEHICLE_RGB = (30, 110, 230)
+TRAIL_TARGET_RGB = (40, 40, 40)
+LOS_RGB = (250, 170, 0)
+
+
+class SceneView:
+    def __init__(self, server: viser.ViserServer) -> None:
+        self.server = server
+        server.scene.set_up_direction("+z")
+        # Shadows and image-based lighting cost every viewer a lot of GPU time per render,
+        # which software GL (a laptop without GPU, a headless browser) cannot afford.
+        server.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        server.scene.configure_environment_map(hdri=None)
+        server.scene.add_grid(
+            "/ground",
+            width=60.0,
+            height=60.0,
+            cell_size=5.0,
+            section_size=10.0,
+            position=(0.0, 15.0, 0.0),
+        )
+        # the engagement happens 0-35 m north of the origin, 0-20 m up
+        server.initial_camera.position = (-11.0, 1.0, 12.0)
+        server.initial_camera.look_at = (0.0, 14.0, 5.0)
+        self._follow = server.gui.add_checkbox("Follow vehicle", initial_value=False)
+        self._vehicle = None
+        self._target = None
+        self._frustum = None
+        self._diameter = None
+        self._trail_time_s = -1.0
+        self._closest_shown = False
+        self._handles: list = []  # every node a sortie added, children before parents
+
+    def clear(self) -> None:
+        """Remove everything a sortie added (the grid stays)."""
+        for handle in self._handles:
+            handle.remove()
+        self._handles = []
+        self._vehicle = self._target = self._frustum = None
+        self._trail_time_s = -1.0
+
+    def reset(self, sim: Simulation) -> None:
+        self.clear()
+        self._closest_shown = False
+        s = self.server.scene
+        cam = sim.camera_model
+        self._vehicle = s.add_frame("/vehicle", axes_length=1.2, axes_radius=0.05)
+        self._frustum = s.add_camera_frustum(
+            "/vehicle/camera",
+            fov=math.radians(cam.vfov_deg),
+            aspect=cam.width_px / cam.height_px,
+            scale=0.9,
+            color=(20, 20, 20),
+            wxyz=tuple(rotmat_to_quat(cam.R_BC)),
+            cast_shadow=False,
+        )
+        self._diameter = sim.scenario.target.diameter_m
+        self._target = s.add_icosphere(
+            "/target",
+            radius=self._diameter / 2.0,
+            color=TARGET_RGB,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+        labels = [
+            s.add_label("/vehicle/label", "interceptor", position=(0.0, 0.0, 0.8)),
+            s.add_label("/target/label", "target", position=(0.0, 0.0, -0.6)),
+        ]
+        # lines are created once and then only their points change: re-adding a node would
+        # rebuild its geometry in every viewer
+        vp, tp = np.array(sim.vehicle.p, np.float32), np.array(sim.target.p, np.float32)
+        self._los = s.add_line_segments(
+            "/los", np.array([[vp, tp]]), colors=LOS_RGB, thickness=2.0, thickness_units="screen"
+        )
+        self._trails = {
+            name: s.add_line_segments(
+                name, np.array([[p, p]]), colors=rgb, thickness=3.0, thickness_units="screen"
+            )
+            for name, p, rgb in (
+                ("/trail_vehicle", vp, TRAIL_VEHICLE_RGB),
+                ("/trail_target", tp, TRAIL_TARGET_RGB),
+            )
+        }
+        self._trail_rgb = {"/trail_vehicle": TRAIL_VEHICLE_RGB, "/trail_target": TRAIL_TARGET_RGB}
+        self._handles = [
+            *labels,
+            self._frustum,
+            self._vehicle,
+            self._target,
+            self._los,
+            *self._trails.values(),
+        ]
+        self.update(sim, [], [])
+
+    @staticmethod
+    def _segments(points: list[list[float]]) -> np.ndarray | None:
+        if len(points) < 2:
+            return None
+        p = np.asarray(points, dtype=np.float32)
+        return np.stack([p[:-1], p[1:]], axis=1)
+
+    def update(self, sim: Simulation, trail_vehicle, trail_target) -> None:
+        if self._vehicle is None:
+            return
+        s = self.server.scene
+        vp = np.array(sim.vehicle.p)
+        tp = np.array(sim.target.p)
+        trails_due = sim.done or sim.time_s - self._trail_time_s >= 0.5 or sim.time_s < 0.05
+        with self.server.atomic():
+            self._vehicle.position = vp
+            self._vehicle.wxyz = np.array(sim.vehicle.q)
+            self._target.position = tp
+            self._los.points = np.array([[vp, tp]], dtype=np.float32)
+            if trails_due:
+                self._trail_time_s = sim.time_s
+                for name, pts, end in (
+                    ("/trail_vehicle", trail_vehicle, vp),
+                    ("/trail_target", trail_target, tp),
+                ):
+                    seg = self._segments([*pts, list(end)])
+                    if seg is not None:
+                        handle = self._trails[name]
+                        handle.points = seg
+                        handle.colors = np.broadcast_to(
+                            np.array(self._trail_rgb[name], np.uint8), seg.shape
+                        ).copy()
+            if sim.done and not self._closest_shown:
+                self._closest_shown = True
+                rel = np.array(sim.closest_rel_m)
+                label = s.add_label(
+                    "/closest/label", f"{sim.outcome.value} miss {sim.miss_m:.3f} m"
+                )
+                marker = s.add_icosphere(
+                    "/closest",
+                    radius=0.08,
+                    color=(0, 200, 0),
+                    position=tuple(tp - rel),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+                self._handles = [label, marker, *self._handles]
+        if self._follow.value:
+            R = quat_to_rotmat(sim.vehicle.q)
+            eye = vp - 4.0 * R[:, 0] + np.array([0.0, 0.0, 1.5])
+            for client in self.server.get_clients().values():
+                client.camera.position = eye
+                client.camera.look_at = vp + 3.0 * R[:, 0]

@@ -1,0 +1,426 @@
+"""``groundstation serve``: FastAPI serves the dashboard page, the REST API (OpenAPI at /docs),
+the telemetry websocket and viser's client, and proxies viser's websocket, so the operator
+reaches everything through one address and one token check. viser listens on loopback only."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import io
+import json
+import socket
+import threading
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import uvicorn
+import viser
+import websockets.asyncio.client
+from fastapi import Body, FastAPI, HTTPException, WebSocket
+from fastapi.responses import FileResponse, HTMLResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+
+from onboard.control.guidance import GUIDANCE_LAWS
+from onboard.gains import GAIN_SPECS, GainError
+
+from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+from ..sim.camera import CAMERA_MODES
+from .auth import TokenAuthMiddleware, is_loopback, new_token
+from .gainsets import GainSetError, GainSetStore, default_data_dir
+from .scene import SceneView
+from .session import SPEEDS, SessionError, SimSession, SortieConfig, with_wind
+
+VISER_INDEX = Path(viser.__file__).parent / "client" / "build" / "index.html"
+
+
+def web_dir() -> Path:
+    """The dashboard's static files: inside the installed package, or web/ of a checkout."""
+    try:
+        return Path(str(resources.files("groundstation.web")))
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parents[2] / "web"
+
+
+class TelemetryHub:
+    """Fans telemetry out to websocket subscribers; a slow one loses old frames, not new.
+
+    A subscriber may send ``{"frames": false}`` (a hidden browser tab does) to stop receiving
+    camera frames, the bulk of the traffic, and ``{"frames": true}`` to resume."""
+
+    def __init__(self) -> None:
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.queues: dict[asyncio.Queue, bool] = {}  # queue -> wants camera frames
+        self.last: str | None = None
+        self.sent: dict[int, int] = {}  # messages sent, per connected subscriber
+
+    def publish_from_thread(self, snapshot: dict[str, Any]) -> None:
+        full = json.dumps(snapshot, separators=(",", ":"))
+        lean = full
+        if "frame_jpeg_b64" in snapshot:
+            lean = json.dumps(
+                {k: v for k, v in snapshot.items() if k != "frame_jpeg_b64"}, separators=(",", ":")
+            )
+        self.last = lean
+        if self.loop is not None and self.queues:
+            self.loop.call_soon_threadsafe(self._broadcast, full, lean)
+
+    def _broadcast(self, full: str, lean: str) -> None:
+        for q, frames in list(self.queues.items()):
+            if q.full():
+                with contextlib.suppress(asyncio.QueueEmpty):
+                    q.get_nowait()
+            q.put_nowait(full if frames else lean)
+
+
+class StartRequest(BaseModel):
+    scenario: str | None = Field(None, description="name of a shipped scenario")
+    toml: str | None = Field(None, description="scenario file text (instead of a name)")
+    law: str = "png"
+    seed: int = 0
+    camera: str = "projected"
+    speed: str = "1"
+    wind_mean_m_s: list[float] | None = Field(None, min_length=3, max_length=3)
+    gust_m_s: float | None = Field(None, ge=0.0)
+
+
+def _scenario_from(req: StartRequest):
+    if (req.scenario is None) == (req.toml is None):
+        raise HTTPException(422, "give exactly one of 'scenario' (a name) or 'toml' (file text)")
+    try:
+        if req.toml is not None:
+            scenario = parse_scenario(req.toml, source="uploaded scenario")
+        else:
+            names = {p.stem for p in shipped_scenarios()}
+            if req.scenario not in names:
+                raise HTTPException(422, f"unknown scenario {req.scenario!r}")
+            scenario = load_scenario(req.scenario)
+        if req.wind_mean_m_s is not None or req.gust_m_s is not None:
+            scenario = with_wind(
+                scenario,
+                tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
+                scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
+            )
+    except ScenarioError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return scenario
+
+
+def create_app(
+    session: SimSession,
+    hub: TelemetryHub,
+    token: str | None,
+    viser_port: int,
+    gainsets: GainSetStore,
+) -> FastAPI:
+    @contextlib.asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        hub.loop = asyncio.get_running_loop()
+        yield
+
+    app = FastAPI(
+        title="Peregrine ground station",
+        version="0.1.0",
+        lifespan=lifespan,
+        description="Simulator control, gains and telemetry for the Peregrine interceptor.",
+    )
+
+    # ------------------------------------------------------------------ pages
+    @app.get("/", include_in_schema=False)
+    async def index() -> HTMLResponse:
+        return HTMLResponse((web_dir() / "index.html").read_text(encoding="utf-8"))
+
+    app.mount("/static", StaticFiles(directory=web_dir()), name="static")
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    async def favicon() -> Response:
+        return Response(status_code=204)
+
+    @app.get("/viser/", include_in_schema=False)
+    async def viser_page() -> FileResponse:
+        return FileResponse(VISER_INDEX, media_type="text/html")
+
+    @app.websocket("/viser")
+    async def viser_proxy(ws: WebSocket) -> None:
+        protos = list(ws.scope.get("subprotocols", []))
+        try:
+            upstream = await websockets.asyncio.client.connect(
+                f"ws://127.0.0.1:{viser_port}",
+                subprotocols=protos or None,
+                max_size=50 * 1024 * 1024,
+                compression=None,
+                open_timeout=5,
+            )
+        except (OSError, websockets.exceptions.WebSocketException):
+            await ws.close(code=1011)
+            return
+        await ws.accept(subprotocol=upstream.subprotocol)
+
+        async def down() -> None:
+            async for msg in upstream:
+                if isinstance(msg, bytes):
+                    await ws.send_bytes(msg)
+                else:
+                    await ws.send_text(msg)
+
+        async def up() -> None:
+            while True:
+                m = await ws.receive()
+                if m["type"] == "websocket.disconnect":
+                    return
+                if m.get("bytes") is not None:
+                    await upstream.send(m["bytes"])
+                elif m.get("text") is not None:
+                    await upstream.send(m["text"])
+
+        tasks = [asyncio.create_task(down()), asyncio.create_task(up())]
+        try:
+            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for t in tasks:
+                t.cancel()
+            await upstream.close()
+            with contextlib.suppress(Exception):
+                await ws.close()
+
+    # ------------------------------------------------------------------ telemetry
+    @app.websocket("/ws/telemetry")
+    async def telemetry(ws: WebSocket) -> None:
+        await ws.accept()
+        q: asyncio.Queue = asyncio.Queue(maxsize=4)
+        hub.queues[q] = True
+        key = id(q)
+        hub.sent[key] = 0
+
+        async def listen() -> None:
+            while True:
+                try:
+                    msg = json.loads(await ws.receive_text())
+                except (ValueError, TypeError):
+                    continue  # garbage from a client changes nothing
+                if isinstance(msg, dict) and isinstance(msg.get("frames"), bool):
+                    hub.queues[q] = msg["frames"]
+
+        async def pump() -> None:
+            if hub.last is not None:
+                await ws.send_text(hub.last)
+            while True:
+                await ws.send_text(await q.get())
+                hub.sent[key] += 1
+
+        tasks = [asyncio.create_task(listen()), asyncio.create_task(pump())]
+        try:
+            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for t in tasks:
+                t.cancel()
+            hub.queues.pop(q, None)
+            hub.sent.pop(key, None)
+
+    # ------------------------------------------------------------------ API
+    @app.get("/api/scenarios", tags=["scenarios"])
+    async def list_scenarios() -> list[dict[str, str]]:
+        out = []
+        for p in shipped_scenarios():
+            s = load_scenario(p)
+            out.append({"name": s.name, "motion": s.target.motion, "description": s.description})
+        return out
+
+    @app.get("/api/scenarios/{name}", tags=["scenarios"])
+    async def get_scenario(name: str) -> dict[str, str]:
+        names = {p.stem: p for p in shipped_scenarios()}
+        if name not in names:
+            raise HTTPException(404, f"unknown scenario {name!r}")
+        return {"name": name, "toml": names[name].read_text(encoding="utf-8")}
+
+    @app.post("/api/scenarios/validate", tags=["scenarios"])
+    async def validate_scenario(toml: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
+        try:
+            s = parse_scenario(toml, source="uploaded scenario")
+        except ScenarioError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return {"ok": True, "name": s.name, "motion": s.target.motion}
+
+    @app.get("/api/gains", tags=["gains"])
+    async def get_gains() -> dict[str, Any]:
+        st = session.status()
+        return {
+            "values": session.gains.to_dict(),
+            "specs": [
+                {
+                    "name": s.name,
+                    "default": s.default,
+                    "unit": s.unit,
+                    "min": s.minimum,
+                    "max": s.maximum,
+                    "meaning": s.meaning,
+                }
+                for s in GAIN_SPECS
+            ],
+            "applied_time_s": st["gains_applied_time_s"],
+            "pending": st["gains_pending"],
+        }
+
+    @app.put("/api/gains", tags=["gains"])
+    async def put_gains(changes: Annotated[dict[str, Any], Body()]) -> dict[str, Any]:
+        try:
+            new = session.gains.replace(**changes)
+        except (GainError, TypeError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        session.set_gains(new)
+        return await get_gains()
+
+    @app.post("/api/gains/reset", tags=["gains"])
+    async def reset_gains() -> dict[str, Any]:
+        session.set_gains(session.config.scenario.gains_obj())
+        return await get_gains()
+
+    @app.get("/api/gainsets", tags=["gains"])
+    async def list_gainsets() -> list[str]:
+        return gainsets.names()
+
+    @app.put("/api/gainsets/{name}", tags=["gains"])
+    async def save_gainset(name: str) -> dict[str, Any]:
+        try:
+            gainsets.save(name, session.gains)
+        except GainSetError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return {"saved": name, "names": gainsets.names()}
+
+    @app.post("/api/gainsets/{name}/load", tags=["gains"])
+    async def load_gainset(name: str) -> dict[str, Any]:
+        try:
+            gains = gainsets.load(name)
+        except (GainSetError, GainError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        session.set_gains(gains)
+        return await get_gains()
+
+    def _cmd(fn, *args):
+        try:
+            fn(*args)
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return session.status()
+
+    @app.post("/api/sortie/start", tags=["sortie"])
+    async def start(req: StartRequest) -> dict[str, Any]:
+        if req.law not in GUIDANCE_LAWS:
+            raise HTTPException(
+                422, f"unknown law {req.law!r}; choose one of {', '.join(sorted(GUIDANCE_LAWS))}"
+            )
+        if req.camera not in CAMERA_MODES:
+            raise HTTPException(422, f"camera must be one of {', '.join(CAMERA_MODES)}")
+        if req.speed not in SPEEDS:
+            raise HTTPException(422, f"speed must be one of {', '.join(SPEEDS)}")
+        scenario = _scenario_from(req)
+        return _cmd(session.start, SortieConfig(scenario, req.law, req.seed, req.camera, req.speed))
+
+    @app.post("/api/sortie/pause", tags=["sortie"])
+    async def pause() -> dict[str, Any]:
+        return _cmd(session.pause)
+
+    @app.post("/api/sortie/resume", tags=["sortie"])
+    async def resume() -> dict[str, Any]:
+        return _cmd(session.resume)
+
+    @app.post("/api/sortie/step", tags=["sortie"])
+    async def step() -> dict[str, Any]:
+        return _cmd(session.step)
+
+    @app.post("/api/sortie/reset", tags=["sortie"])
+    async def reset() -> dict[str, Any]:
+        return _cmd(session.reset)
+
+    @app.put("/api/sortie/speed", tags=["sortie"])
+    async def speed(speed: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
+        return _cmd(session.set_speed, speed)
+
+    @app.get("/api/status", tags=["sortie"])
+    async def status() -> dict[str, Any]:
+        return session.status()
+
+    return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
+
+
+def free_loopback_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class GroundStation:
+    """Everything ``serve`` starts, with a clean stop (frees both ports)."""
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        port: int = 8000,
+        no_auth: bool = False,
+        data_dir: Path | None = None,
+    ) -> None:
+        if no_auth and not is_loopback(host):
+            raise ValueError(f"--no-auth is refused on a non-loopback address ({host})")
+        self.host = host
+        self.token = None if no_auth else new_token()
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: one URL is ours
+            self.viser = viser.ViserServer(
+                host="127.0.0.1", port=free_loopback_port(), verbose=False
+            )
+        self.viser_port = self.viser.get_port()
+        self.hub = TelemetryHub()
+        self.scene = SceneView(self.viser)
+        self.session = SimSession(on_snapshot=self.hub.publish_from_thread, scene=self.scene)
+        self.gainsets = GainSetStore((data_dir or default_data_dir()) / "gainsets")
+        self.app = create_app(self.session, self.hub, self.token, self.viser_port, self.gainsets)
+        self.server = uvicorn.Server(
+            uvicorn.Config(
+                self.app,
+                host=host,
+                port=port,
+                log_level="warning",
+                ws="websockets-sansio",
+                lifespan="on",
+            )
+        )
+        self._thread: threading.Thread | None = None
+
+    @property
+    def port(self) -> int:
+        for srv in getattr(self.server, "servers", []):
+            for sock in srv.sockets:
+                return sock.getsockname()[1]
+        return self.server.config.port
+
+    def url(self) -> str:
+        shown = "127.0.0.1" if self.host in ("0.0.0.0", "::") else self.host
+        base = f"http://{shown}:{self.port}/"
+        return base if self.token is None else f"{base}?token={self.token}"
+
+    def start_in_thread(self, timeout_s: float = 10.0) -> None:
+        self._thread = threading.Thread(target=self.server.run, daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + timeout_s
+        while not self.server.started:
+            if time.monotonic() > deadline or not self._thread.is_alive():
+                raise RuntimeError("the ground station did not start")
+            time.sleep(0.02)
+
+    def run_forever(self) -> None:
+        try:
+            self.server.run()
+        finally:
+            self.close()
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+        self.close()
+
+    def close(self) -> None:
+        self.session.close()
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.viser.stop()

@@ -1,0 +1,377 @@
+"""A simulated sortie run for the operator: paced against the wall clock (1x, 2x, 5x or as
+fast as possible) in a thread of its own, steered by commands (start, pause, resume, step,
+reset, speed, gains) and observed through telemetry snapshots published at a fixed rate.
+
+Commands are queued and carried out by the simulation thread between control ticks, so a gain
+edit takes effect at the next control tick of the running sortie.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import math
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from onboard.gains import Gains
+
+from ..scenario import Scenario, WindSpec, load_scenario, with_changes
+from ..sim.simulation import Simulation
+
+SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
+PUBLISH_HZ = 25.0
+SCENE_EVERY = 5  # update the 3D scene with every 5th snapshot (5 Hz): every scene change
+# costs each viewer a WebGL render, which software GL on a laptop without GPU cannot afford
+FRAME_EVERY = 3  # publish a camera frame with every 3rd snapshot (rendered mode)
+TRAIL_EVERY_S = 0.1
+
+
+@dataclass(frozen=True)
+class SortieConfig:
+    scenario: Scenario
+    law: str = "png"
+    seed: int = 0
+    camera: str = "projected"
+    speed: str = "1"
+
+
+class SessionError(ValueError):
+    """A command that cannot be carried out in the session's present state."""
+
+
+class SimSession:
+    def __init__(
+        self,
+        on_snapshot: Callable[[dict[str, Any]], None] | None = None,
+        scene: Any | None = None,
+        publish_hz: float = PUBLISH_HZ,
+    ) -> None:
+        self._on_snapshot = on_snapshot
+        self.scene = scene
+        self.publish_period_s = 1.0 / publish_hz
+        self._commands: queue.Queue = queue.Queue()
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self.config = SortieConfig(load_scenario("cv-top-to-bottom"))
+        self.gains = self.config.scenario.gains_obj()
+        self.sim: Simulation | None = None
+        self.state = "idle"  # idle | running | paused | finished
+        self.speed = 1.0
+        self._anchor_wall = 0.0
+        self._anchor_sim = 0.0
+        self._tick_walls: deque[float] = deque()
+        self._publish_count = 0
+        self._trail_vehicle: list[list[float]] = []
+        self._trail_target: list[list[float]] = []
+        self._last_trail_t = -1.0
+        self.gains_applied_time_s: float | None = None
+        self._gains_pending: Gains | None = None
+        self.run_wall_s = 0.0  # wall time spent running (for the real-time ratio)
+        self.run_sim_s = 0.0
+        self.scene_errors = 0
+        self.last_scene_error: str | None = None
+        self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ commands
+    def submit(self, fn: Callable[[], Any], timeout_s: float = 5.0) -> Any:
+        """Run ``fn`` on the simulation thread between ticks and return its result."""
+        done = threading.Event()
+        box: dict[str, Any] = {}
+
+        def call():
+            try:
+                box["value"] = fn()
+            except Exception as exc:
+                box["error"] = exc
+            finally:
+                done.set()
+
+        self._commands.put(call)
+        if not done.wait(timeout_s):
+            raise TimeoutError("the simulation thread did not answer")
+        if "error" in box:
+            raise box["error"]
+        return box.get("value")
+
+    def start(self, config: SortieConfig) -> None:
+        if config.speed not in SPEEDS:
+            raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
+
+        def go():
+            gains = config.scenario.gains_obj()
+            self.sim = Simulation(
+                config.scenario, config.law, config.seed, config.camera, gains, keep_records=False
+            )
+            self.config = config
+            self.gains = gains
+            self._gains_pending = None
+            self.gains_applied_time_s = None
+            self.speed = SPEEDS[config.speed]
+            self._trail_vehicle, self._trail_target = [], []
+            self._last_trail_t = -1.0
+            self._tick_walls.clear()
+            self.run_wall_s = self.run_sim_s = 0.0
+            self._set_running()
+            if self.scene is not None:
+                self.scene.reset(self.sim)
+
+        self.submit(go)
+
+    def _set_running(self) -> None:
+        self.state = "running"
+        self._anchor_wall = time.perf_counter()
+        self._anchor_sim = self.sim.time_s if self.sim else 0.0
+
+    def pause(self) -> None:
+        def go():
+            if self.state != "running":
+                raise SessionError(f"cannot pause: the sortie is {self.state}")
+            self.state = "paused"
+
+        self.submit(go)
+
+    def resume(self) -> None:
+        def go():
+            if self.state != "paused":
+                raise SessionError(f"cannot resume: the sortie is {self.state}")
+            self._set_running()
+
+        self.submit(go)
+
+    def step(self) -> None:
+        """Advance one control period (from paused)."""
+
+        def go():
+            if self.state != "paused" or self.sim is None:
+                raise SessionError("single-step needs a paused sortie")
+            self._advance_one()
+            if self.sim.done:
+                self.state = "finished"
+            self._publish(force=True)
+
+        self.submit(go)
+
+    def reset(self) -> None:
+        def go():
+            self.sim = None
+            self.state = "idle"
+            self._trail_vehicle, self._trail_target = [], []
+            if self.scene is not None:
+                self.scene.clear()
+            self._publish(force=True)
+
+        self.submit(go)
+
+    def set_speed(self, speed: str) -> None:
+        if speed not in SPEEDS:
+            raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
+
+        def go():
+            self.speed = SPEEDS[speed]
+            self.config = dataclasses.replace(self.config, speed=speed)
+            if self.state == "running":
+                self._set_running()
+
+        self.submit(go)
+
+    def set_gains(self, gains: Gains) -> Gains:
+        """Use ``gains`` (already validated) from the running sortie's next control tick."""
+
+        def go():
+            self.gains = gains
+            if self.sim is not None and not self.sim.done:
+                self.sim.loop.set_gains(gains)
+                self._gains_pending = gains
+            return gains
+
+        return self.submit(go)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+    # ------------------------------------------------------------------ the thread
+    def _advance_one(self) -> None:
+        sim = self.sim
+        sim.step_control_period()
+        self._tick_walls.append(time.perf_counter())
+        if self._gains_pending is not None and sim.loop.gains is self._gains_pending:
+            self.gains_applied_time_s = sim.loop.last_tick_time_s
+            self._gains_pending = None
+        if sim.time_s - self._last_trail_t >= TRAIL_EVERY_S:
+            self._last_trail_t = sim.time_s
+            self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
+            self._trail_target.append([round(c, 3) for c in sim.target.p])
+
+    def _run(self) -> None:
+        next_publish = 0.0
+        last_wall = time.perf_counter()
+        was_running = False
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            if was_running:  # charge the whole last iteration (stepping, publishing, sleeping)
+                self.run_wall_s += now - last_wall
+            last_wall = now
+            try:
+                while True:
+                    self._commands.get_nowait()()
+            except queue.Empty:
+                pass
+            now = time.perf_counter()
+            if self.state == "running" and self.sim is not None:
+                sim = self.sim
+                t_before = sim.time_s
+                if math.isinf(self.speed):
+                    deadline = now + 0.02
+                    while not sim.done and time.perf_counter() < deadline:
+                        self._advance_one()
+                else:
+                    target = self._anchor_sim + (now - self._anchor_wall) * self.speed
+                    n = 0
+                    while not sim.done and sim.time_s < target and n < 100:
+                        self._advance_one()
+                        n += 1
+                self.run_sim_s += sim.time_s - t_before
+                if sim.done:
+                    self.state = "finished"
+                    next_publish = 0.0
+            was_running = self.state == "running"
+            now2 = time.perf_counter()
+            if now2 >= next_publish:
+                self._publish()
+                next_publish = now2 + self.publish_period_s
+            self._stop.wait(0.002 if was_running else 0.01)
+
+    def _publish(self, force: bool = False) -> None:
+        snap = self.snapshot()
+        scene_due = force or self._publish_count % SCENE_EVERY == 0 or self.state != "running"
+        if self.scene is not None and self.sim is not None and scene_due:
+            try:
+                self.scene.update(self.sim, self._trail_vehicle, self._trail_target)
+            except Exception as exc:  # a viewer problem must never stop the sortie
+                self.scene_errors += 1
+                self.last_scene_error = f"{type(exc).__name__}: {exc}"
+        if self._on_snapshot is not None:
+            self._on_snapshot(snap)
+
+    # ------------------------------------------------------------------ observations
+    def loop_rate_hz(self) -> float:
+        """Control ticks run per wall-clock second, over the last second."""
+        now = time.perf_counter()
+        w = self._tick_walls
+        while w and w[0] < now - 1.0:
+            w.popleft()
+        if not w or self.state != "running":
+            return 0.0
+        return len(w) / min(1.0, max(now - self._anchor_wall, 1e-3))
+
+    def status(self) -> dict[str, Any]:
+        sim = self.sim
+        out: dict[str, Any] = {
+            "state": self.state,
+            "scenario": self.config.scenario.name,
+            "law": self.config.law,
+            "seed": self.config.seed,
+            "camera": self.config.camera,
+            "speed": self.config.speed,
+            "time_s": 0.0 if sim is None else round(sim.time_s, 4),
+            "outcome": None,
+            "miss_m": None,
+            "loop_rate_hz": round(self.loop_rate_hz(), 1),
+            "gains_applied_time_s": self.gains_applied_time_s,
+            "gains_pending": self._gains_pending is not None,
+            "real_time_ratio": (self.run_sim_s / self.run_wall_s) if self.run_wall_s > 0 else None,
+            "scene_errors": self.scene_errors,
+        }
+        if sim is not None:
+            dkf = sim.loop.dkf
+            est = dkf.estimate()
+            out["dkf"] = {
+                "acquired": sim.loop.acquired,
+                "lost": dkf.lost(sim.time_s),
+                "time_since_detection_s": None
+                if est is None
+                else round(est.time_since_detection_s, 3),
+            }
+            if sim.done:
+                out["outcome"] = sim.outcome.value
+                out["miss_m"] = round(sim.miss_m, 4)
+                out["intercept_time_s"] = round(sim.closest_time_s, 3)
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        self._publish_count += 1
+        snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
+        sim = self.sim
+        if sim is None:
+            return snap
+        cam = sim.camera_model
+        veh, tgt = sim.vehicle, sim.target
+        rel = np.array(tgt.p) - np.array(veh.p)
+        rng = float(np.linalg.norm(rel))
+        v = np.array(veh.v)
+        speed = float(np.linalg.norm(v))
+        los = rel / rng if rng > 0 else rel
+        v_n = float(np.linalg.norm(v - (v @ los) * los))
+        tel = sim.last_telemetry
+        det = sim.last_detection
+        snap.update(
+            {
+                "t": round(sim.time_s, 4),
+                "vehicle": {"p": veh.p, "v": veh.v, "q": veh.q},
+                "target": {"p": tgt.p, "diameter_m": sim.scenario.target.diameter_m},
+                "range_m": rng,
+                "speed_m_s": speed,
+                "normal_vel_m_s": v_n,
+                "normal_accel_m_s2": None,
+                "image": {
+                    "w": cam.width_px,
+                    "h": cam.height_px,
+                    "f": cam.f_px,
+                    "vfov_deg": cam.vfov_deg,
+                },
+                "e_est_px": None,
+                "e_raw_px": None,
+                "raw_capture_t": None,
+                "mode": None,
+                "k_a": self.gains.k_a,
+            }
+        )
+        if tel is not None:
+            snap["mode"] = tel.mode.value
+            snap["e_est_px"] = tel.e_est_px
+            a = veh.accel
+            av = sum(x * y for x, y in zip(a, veh.v, strict=True))
+            aa = sum(x * x for x in a)
+            snap["normal_accel_m_s2"] = math.sqrt(
+                max(aa - (av * av / (speed * speed) if speed > 0.5 else 0.0), 0.0)
+            )
+        if det is not None:
+            snap["e_raw_px"] = cam.error_px(*det.center_px)
+            snap["raw_capture_t"] = det.capture_time_s
+        frame = sim.camera.last_frame
+        if frame is not None and self._publish_count % FRAME_EVERY == 0:
+            ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 70])
+            if ok:
+                snap["frame_jpeg_b64"] = base64.b64encode(jpg.tobytes()).decode("ascii")
+        return snap
+
+
+def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):
+    """The scenario with its wind replaced (validated)."""
+    return with_changes(
+        scenario,
+        wind=WindSpec(
+            tuple(float(c) for c in mean_m_s), float(gust_m_s), scenario.wind.gust_time_constant_s
+        ),
+    )

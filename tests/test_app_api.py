@@ -1,0 +1,234 @@
+"""The ground station's web app through FastAPI's TestClient: auth, gains, scenarios, the
+sortie lifecycle, gain sets, telemetry, and a clean stop."""
+
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from groundstation.app.gainsets import GainSetStore
+from groundstation.app.server import GroundStation
+from onboard.gains import Gains
+
+
+@pytest.fixture
+def gs(tmp_path):
+    station = GroundStation(port=0, data_dir=tmp_path)
+    yield station
+    station.close()
+
+
+@pytest.fixture
+def client(gs):
+    with TestClient(gs.app, base_url="http://127.0.0.1") as c:
+        c.headers["Authorization"] = f"Bearer {gs.token}"
+        yield c
+
+
+def _wait(client, pred, timeout_s=20.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        st = client.get("/api/status").json()
+        if pred(st):
+            return st
+        time.sleep(0.05)
+    raise AssertionError(f"timed out; last status {st}")
+
+
+# ----------------------------------------------------------------------------- auth
+def test_everything_refused_without_the_token(gs):
+    with TestClient(gs.app, base_url="http://127.0.0.1") as anon:
+        for path in (
+            "/",
+            "/api/status",
+            "/api/gains",
+            "/docs",
+            "/openapi.json",
+            "/viser/",
+            "/static/app.js",
+        ):
+            assert anon.get(path).status_code == 401, path
+        assert (
+            anon.post("/api/sortie/start", json={"scenario": "cv-top-to-bottom"}).status_code == 401
+        )
+        assert anon.get("/api/status", headers={"Authorization": "Bearer wrong"}).status_code == 401
+        for path in ("/ws/telemetry", "/viser"):
+            with pytest.raises(WebSocketDisconnect) as exc, anon.websocket_connect(path):
+                pass
+            assert exc.value.code == 1008
+        assert gs.session.state == "idle"  # nothing was started
+
+
+def test_token_in_url_sets_a_cookie_that_opens_everything(gs):
+    with TestClient(gs.app, base_url="http://127.0.0.1") as c:
+        r = c.get(f"/?token={gs.token}")
+        assert r.status_code == 200 and "Peregrine" in r.text
+        assert "HttpOnly" in r.headers["set-cookie"]
+        assert c.get("/api/status").status_code == 200  # the cookie now rides along
+        assert c.get("/docs").status_code == 200
+        assert c.get("/viser/").status_code == 200
+        # TestClient does not send its cookie jar on websockets (browsers do: see the
+        # browser test); send the cookie the server set, as a browser would
+        cookie = {"cookie": f"peregrine_token={c.cookies.get('peregrine_token')}"}
+        with c.websocket_connect("/ws/telemetry", headers=cookie) as ws:
+            assert ws.receive_json()["type"] == "telemetry"
+
+
+def test_no_auth_refused_off_loopback(tmp_path):
+    with pytest.raises(ValueError, match="--no-auth is refused"):
+        GroundStation(host="0.0.0.0", port=0, no_auth=True, data_dir=tmp_path)
+    r = subprocess.run(
+        [sys.executable, "-m", "groundstation", "serve", "--host", "0.0.0.0", "--no-auth"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2 and "--no-auth is refused" in r.stderr
+
+
+def test_no_auth_on_loopback_serves_without_token(tmp_path):
+    station = GroundStation(port=0, no_auth=True, data_dir=tmp_path)
+    try:
+        with TestClient(station.app) as c:
+            assert c.get("/api/status").status_code == 200
+        assert "token" not in station.url()
+    finally:
+        station.close()
+
+
+# ----------------------------------------------------------------------------- gains
+def test_gain_validation_keeps_the_running_value(client, gs):
+    specs = client.get("/api/gains").json()["specs"]
+    assert {s["name"] for s in specs} >= {"k_a", "K_y", "k_p"}
+    for bad, needle in (
+        ({"k_p": 5}, "gain k_p = 5 is outside its range"),
+        ({"k_p": "abc"}, "gain k_p: expected a number"),
+        ({"zzz": 1}, "unknown gain(s): zzz"),
+        ({"K_y": None}, "gain K_y"),
+    ):
+        r = client.put("/api/gains", json=bad)
+        assert r.status_code == 422 and needle in r.json()["detail"], r.text
+    assert client.get("/api/gains").json()["values"]["k_p"] == 0.03
+    r = client.put("/api/gains", json={"k_p": 0.05, "K_y": 4})
+    assert r.status_code == 200 and r.json()["values"]["k_p"] == 0.05
+    assert client.post("/api/gains/reset").json()["values"]["k_p"] == 0.03
+
+
+def test_gain_edit_applies_at_next_control_tick(client, gs):
+    client.post("/api/sortie/start", json={"scenario": "sm-tailgate", "speed": "1"})
+    client.post("/api/sortie/pause")
+    st = client.get("/api/status").json()
+    t_paused = st["time_s"]
+    client.put("/api/gains", json={"k_p": 0.06})
+    st = client.get("/api/status").json()
+    assert st["gains_pending"] and gs.session.sim.loop.gains.k_p == 0.03
+    st = client.post("/api/sortie/step").json()
+    assert not st["gains_pending"]
+    assert gs.session.sim.loop.gains.k_p == 0.06
+    assert st["gains_applied_time_s"] == pytest.approx(t_paused, abs=1e-9)
+
+
+def test_gain_sets_saved_loaded_and_survive_restart(client, gs, tmp_path):
+    client.put("/api/gains", json={"k_a": 1.5})
+    assert client.put("/api/gainsets/soft-start").json()["names"] == ["soft-start"]
+    client.post("/api/gains/reset")
+    r = client.post("/api/gainsets/soft-start/load")
+    assert r.json()["values"]["k_a"] == 1.5
+    assert GainSetStore(tmp_path / "gainsets").load("soft-start") == Gains(k_a=1.5)
+    assert client.put("/api/gainsets/..%2Fescape").status_code in (404, 422)
+    assert client.put("/api/gainsets/bad name!").status_code == 422
+    assert client.post("/api/gainsets/nope/load").status_code == 422
+    (tmp_path / "gainsets" / "broken.toml").write_text("k_a = 99\n")
+    r = client.post("/api/gainsets/broken/load")
+    assert r.status_code == 422 and "k_a" in r.json()["detail"]
+
+
+# ----------------------------------------------------------------------------- scenarios
+def test_scenario_list_and_upload_errors(client):
+    names = {s["name"] for s in client.get("/api/scenarios").json()}
+    assert {"cv-top-to-bottom", "static-ahead-20m"} <= names
+    toml = client.get("/api/scenarios/cv-top-to-bottom").json()["toml"]
+    assert client.post("/api/scenarios/validate", json={"toml": toml}).json()["ok"]
+    bad = toml.replace("[target]", "[target]\nsped = 2")
+    r = client.post("/api/scenarios/validate", json={"toml": bad})
+    assert r.status_code == 422 and "unknown key 'target.sped'" in r.json()["detail"]
+    r = client.post("/api/sortie/start", json={"toml": "name = "})
+    assert r.status_code == 422 and "not valid TOML" in r.json()["detail"]
+    assert client.post("/api/sortie/start", json={"scenario": "nope"}).status_code == 422
+    assert (
+        client.post(
+            "/api/sortie/start", json={"scenario": "cv-top-to-bottom", "law": "x"}
+        ).status_code
+        == 422
+    )
+    assert client.get("/api/scenarios/nope").status_code == 404
+    assert client.get("/api/status").json()["state"] == "idle"
+
+
+def test_uploaded_scenario_flies(client):
+    toml = client.get("/api/scenarios/static-ahead-20m").json()["toml"]
+    toml = toml.replace("position_m = [0.0, 20.0, 10.0]", "position_m = [1.0, 15.0, 9.0]")
+    r = client.post("/api/sortie/start", json={"toml": toml, "speed": "max"})
+    assert r.status_code == 200
+    st = _wait(client, lambda s: s["state"] == "finished")
+    assert st["outcome"] == "HIT" and st["miss_m"] <= 0.1
+
+
+# ----------------------------------------------------------------------------- lifecycle
+def test_sortie_lifecycle(client):
+    assert client.post("/api/sortie/pause").status_code == 409  # nothing running
+    assert client.post("/api/sortie/step").status_code == 409
+    r = client.post(
+        "/api/sortie/start",
+        json={
+            "scenario": "cv-top-to-bottom",
+            "speed": "1",
+            "seed": 3,
+            "camera": "projected",
+            "wind_mean_m_s": [0.5, 0, 0],
+            "gust_m_s": 0.1,
+        },
+    )
+    assert r.status_code == 200 and r.json()["state"] == "running"
+    st = client.post("/api/sortie/pause").json()
+    assert st["state"] == "paused"
+    t0 = st["time_s"]
+    st = client.post("/api/sortie/step").json()
+    assert st["time_s"] == pytest.approx(t0 + 0.01, abs=1e-9)  # one control period
+    assert client.post("/api/sortie/resume").json()["state"] == "running"
+    assert client.put("/api/sortie/speed", json={"speed": "9"}).status_code == 409
+    client.put("/api/sortie/speed", json={"speed": "max"})
+    st = _wait(client, lambda s: s["state"] == "finished")
+    assert st["outcome"] == "HIT" and st["seed"] == 3 and st["dkf"]["acquired"]
+    st = client.post("/api/sortie/reset").json()
+    assert st["state"] == "idle" and st["outcome"] is None
+    # a second sortie rebuilds the 3D scene from scratch without a viewer error
+    client.post("/api/sortie/start", json={"scenario": "static-ahead-20m", "speed": "max"})
+    st = _wait(client, lambda s: s["state"] == "finished")
+    assert st["outcome"] == "HIT" and st["scene_errors"] == 0
+
+
+def test_telemetry_stream(client):
+    client.post("/api/sortie/start", json={"scenario": "cv-top-to-bottom", "speed": "1"})
+    with client.websocket_connect("/ws/telemetry") as ws:
+        snaps = [ws.receive_json() for _ in range(6)]
+    last = snaps[-1]
+    assert last["status"]["state"] == "running"
+    for key in ("t", "vehicle", "target", "range_m", "speed_m_s", "normal_vel_m_s", "image"):
+        assert key in last
+    assert snaps[-1]["t"] > snaps[1]["t"]
+
+
+def test_stopping_the_server_frees_its_ports(tmp_path):
+    station = GroundStation(port=0, data_dir=tmp_path)
+    station.start_in_thread()
+    port, viser_port = station.port, station.viser_port
+    assert port != 0
+    station.stop()
+    for p in (port, viser_port):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", p))  # raises if still held
