@@ -35,6 +35,8 @@ class Multicopter:
         self._rate_sum = [0.0, 0.0, 0.0]  # body rates summed since the last gyro read
         self._rate_n = 0
         self._max_rate = math.radians(spec.max_rate_deg_s)
+        self._lag_dt = -1.0
+        self._aw = self._at = 0.0
 
     def command(self, body_rates_flu_rad_s: np.ndarray, thrust_normalised: float) -> None:
         lim = self._max_rate
@@ -44,8 +46,11 @@ class Multicopter:
 
     def step(self, dt: float, wind: tuple[float, float, float]) -> None:
         s = self.spec
-        aw = 1.0 - math.exp(-dt / s.rate_time_constant_s)
-        at = 1.0 - math.exp(-dt / s.thrust_time_constant_s)
+        if dt != self._lag_dt:  # first-order lag factors, computed once per step size
+            self._lag_dt = dt
+            self._aw = 1.0 - math.exp(-dt / s.rate_time_constant_s)
+            self._at = 1.0 - math.exp(-dt / s.thrust_time_constant_s)
+        aw, at = self._aw, self._at
         w = self.w
         cw = self.cmd_w
         w0, w1, w2 = (

@@ -87,6 +87,7 @@ class DelayedKalmanFilter:
         self._R = np.eye(2) * self.config.meas_noise_px**2
         self._gate2 = self.config.gate_sigma**2
         self._max_abs_px = 4.0 * camera.f_px
+        self._fq_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._buf: deque[_Entry] = deque()
         self._meas: list[tuple[float, np.ndarray]] = []  # (capture time, z) in capture order
         self._initialised = False
@@ -94,11 +95,12 @@ class DelayedKalmanFilter:
         self.counts: dict[FusionResult, int] = {r: 0 for r in FusionResult}
 
     # ----------------------------------------------------------------- propagation
-    def _propagate(self, x: np.ndarray, P: np.ndarray, omega_cam: np.ndarray, dt: float):
-        if dt <= 0.0:
-            return x, P
-        f = self.camera.f_px
-        fx, fy = rotational_flow(x[0] / f, x[1] / f, omega_cam)
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """F and Q for a step of dt seconds (cached: nearly every step is one control period)."""
+        key = round(dt, 9)
+        cached = self._fq_cache.get(key)
+        if cached is not None:
+            return cached
         F = np.array(
             [[1.0, 0.0, dt, 0.0], [0.0, 1.0, 0.0, dt], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
         )
@@ -107,6 +109,16 @@ class DelayedKalmanFilter:
         Q = np.array(
             [[q11, 0.0, q12, 0.0], [0.0, q11, 0.0, q12], [q12, 0.0, q22, 0.0], [0.0, q12, 0.0, q22]]
         )
+        if len(self._fq_cache) < 64:  # replays create odd partial steps; keep it bounded
+            self._fq_cache[key] = (F, Q)
+        return F, Q
+
+    def _propagate(self, x: np.ndarray, P: np.ndarray, omega_cam: np.ndarray, dt: float):
+        if dt <= 0.0:
+            return x, P
+        f = self.camera.f_px
+        fx, fy = rotational_flow(x[0] / f, x[1] / f, omega_cam)
+        F, Q = self._transition(dt)
         return kf_predict(x, P, F, Q, np.array([fx * f * dt, fy * f * dt]), _B)
 
     def predict(self, time_s: float, gyro_rates_flu_rad_s: np.ndarray) -> None:
