@@ -123,15 +123,21 @@ def _summarize_static(outcomes):
 
 
 # ------------------------------------------------------------------------- moving
-def _build_moving(n, laws, camera, seed):
+def _build_grid(cells, n, laws, camera, seed):
+    """Jobs for every (label, scenario name) cell x law x n seeds; the seed of try k is the
+    same for every cell and law, so laws are compared on the same noise."""
     jobs = []
-    for name in MOVING_SCENARIOS:
+    for key, value, name in cells:
         sc = load_scenario(name)
         for law in laws:
             for k in range(n):
-                labels = (("scenario", name), ("law", law), ("try", k))
+                labels = ((key, value), ("law", law), ("try", k))
                 jobs.append(SortieJob(len(jobs), sc, law, seed * 1000 + k, camera, labels))
     return jobs
+
+
+def _build_moving(n, laws, camera, seed):
+    return _build_grid([("scenario", s, s) for s in MOVING_SCENARIOS], n, laws, camera, seed)
 
 
 def _e_samples(outs):
@@ -165,14 +171,8 @@ def _summarize_moving(outcomes):
 
 # ------------------------------------------------------------------------- wind
 def _build_wind(n, laws, camera, seed):
-    jobs = []
-    for w in WIND_SPEEDS_M_S:
-        sc = load_scenario(f"indoor-tethered-wind-{w}")
-        for law in laws:
-            for k in range(n):
-                labels = (("wind_m_s", w), ("law", law), ("try", k))
-                jobs.append(SortieJob(len(jobs), sc, law, seed * 1000 + k, camera, labels))
-    return jobs
+    cells = [("wind_m_s", w, f"indoor-tethered-wind-{w}") for w in WIND_SPEEDS_M_S]
+    return _build_grid(cells, n, laws, camera, seed)
 
 
 def _summarize_wind(outcomes):
@@ -192,14 +192,7 @@ def _summarize_wind(outcomes):
 
 # ------------------------------------------------------------------------- outdoor
 def _build_outdoor(n, laws, camera, seed):
-    jobs = []
-    for name in OUTDOOR_SCENARIOS:
-        sc = load_scenario(name)
-        for law in laws:
-            for k in range(n):
-                labels = (("scenario", name), ("law", law), ("try", k))
-                jobs.append(SortieJob(len(jobs), sc, law, seed * 1000 + k, camera, labels))
-    return jobs
+    return _build_grid([("scenario", s, s) for s in OUTDOOR_SCENARIOS], n, laws, camera, seed)
 
 
 def _summarize_outdoor(outcomes):

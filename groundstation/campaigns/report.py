@@ -75,6 +75,19 @@ def _plot_trajectories_3d(ax, outs: list[SortieOutcome], label_key: str = "law")
     ax.set_zlabel("z up (m)")
 
 
+def _trajectory_panels(outcomes, laws, scenarios, grid, figsize, out: Path, plots) -> None:
+    """trajectories_3d.png: one 3D panel per scenario with the first try of every law."""
+    fig = plt.figure(figsize=figsize)
+    for i, sc in enumerate(scenarios):
+        ax = fig.add_subplot(*grid, i + 1, projection="3d")
+        firsts = [_first(outcomes, scenario=sc, law=law, **{"try": 0}) for law in laws]
+        _plot_trajectories_3d(ax, [o for o in firsts if o is not None])
+        ax.set_title(sc)
+        if i == 0:
+            ax.legend(fontsize=7)
+    _savefig(fig, out, "trajectories_3d.png", plots)
+
+
 def _boxplot(ax, data: list[list[float]], labels: list[str], colours: list[str]) -> None:
     bp = ax.boxplot(data, patch_artist=True, showfliers=True)
     ax.set_xticks(range(1, len(labels) + 1), labels)
@@ -154,16 +167,9 @@ def _moving_plots(outcomes, out: Path) -> list[str]:
     plots: list[str] = []
     laws = _laws_of(outcomes)
     scenarios = list(dict.fromkeys(o.labels["scenario"] for o in outcomes))
-    fig = plt.figure(figsize=(5 * len(scenarios), 4.5))
-    for i, sc in enumerate(scenarios):
-        ax = fig.add_subplot(1, len(scenarios), i + 1, projection="3d")
-        _plot_trajectories_3d(
-            ax, [o for law in laws if (o := _first(outcomes, scenario=sc, law=law, **{"try": 0}))]
-        )
-        ax.set_title(sc)
-        if i == 0:
-            ax.legend(fontsize=7)
-    _savefig(fig, out, "trajectories_3d.png", plots)
+    _trajectory_panels(
+        outcomes, laws, scenarios, (1, len(scenarios)), (5 * len(scenarios), 4.5), out, plots
+    )
 
     fig, axes = plt.subplots(2, len(scenarios), figsize=(5 * len(scenarios), 6), squeeze=False)
     for i, sc in enumerate(scenarios):
@@ -282,16 +288,7 @@ def _outdoor_plots(outcomes, out: Path) -> list[str]:
     plots: list[str] = []
     laws = _laws_of(outcomes)
     scenarios = list(dict.fromkeys(o.labels["scenario"] for o in outcomes))
-    fig = plt.figure(figsize=(10, 8))
-    for i, sc in enumerate(scenarios):
-        ax = fig.add_subplot(2, 2, i + 1, projection="3d")
-        _plot_trajectories_3d(
-            ax, [o for law in laws if (o := _first(outcomes, scenario=sc, law=law, **{"try": 0}))]
-        )
-        ax.set_title(sc)
-        if i == 0:
-            ax.legend(fontsize=7)
-    _savefig(fig, out, "trajectories_3d.png", plots)
+    _trajectory_panels(outcomes, laws, scenarios, (2, 2), (10, 8), out, plots)
     fig, axes = plt.subplots(2, len(scenarios), figsize=(4.5 * len(scenarios), 6), squeeze=False)
     for i, sc in enumerate(scenarios):
         for law in laws:
