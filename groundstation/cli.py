@@ -31,6 +31,11 @@ def _build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.add_argument("--log", metavar="DIR", default=None, help="record the sortie to DIR (MCAP)")
+
+    r = sub.add_parser("replay", help="print a recorded sortie's summary")
+    r.add_argument("file", help="a sortie log (.mcap)")
+    r.add_argument("--json", action="store_true")
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
 
@@ -61,6 +66,7 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
     c.add_argument("--out", default=None, help="output folder (default logs/campaigns/...)")
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
+    c.add_argument("--log", metavar="DIR", default=None, help="record every sortie to DIR")
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
@@ -79,10 +85,18 @@ def _cmd_sortie(args: argparse.Namespace) -> int:
     from .sim.simulation import Simulation
 
     scenario = load_scenario(args.scenario)
-    sim = Simulation(scenario, args.law, args.seed, args.camera, keep_records=False)
+    sim = Simulation(
+        scenario, args.law, args.seed, args.camera, keep_records=False, log_dir=args.log
+    )
     result = sim.run()
+    rec = sim.recorder
+    if rec is not None and rec.error:
+        print(f"groundstation: warning: {rec.error}", file=sys.stderr)
     if args.json:
-        print(json.dumps(result.to_json_dict(), sort_keys=True))
+        out = result.to_json_dict()
+        if rec is not None:
+            out["log"] = str(rec.path)
+        print(json.dumps(out, sort_keys=True))
     else:
         r = result
         print(
@@ -93,6 +107,47 @@ def _cmd_sortie(args: argparse.Namespace) -> int:
             f"  law {r.law}, seed {r.seed}, camera {r.camera}, detections fused "
             f"{r.detections_fused}, rejected {r.detections_rejected}"
         )
+        if rec is not None:
+            print(f"  recorded to {rec.path}")
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from collections import Counter
+    from pathlib import Path
+
+    from .recording.reader import LogError, inspect_log, iter_messages
+
+    path = Path(args.file)
+    try:
+        if not path.is_file():
+            raise LogError(f"{path}: no such file")
+        info = inspect_log(path)
+        counts: Counter = Counter()
+        events = []
+        for topic, t, msg in iter_messages(path):
+            counts[topic] += 1
+            if topic == "/events":
+                events.append({"t_s": round(t, 3), "message": msg.get("message")})
+    except (LogError, OSError) as exc:
+        print(f"groundstation: error: {exc}", file=sys.stderr)
+        return 2
+    d = info.to_json_dict()
+    d["topics"] = dict(sorted(counts.items()))
+    d["events"] = events
+    if args.json:
+        print(json.dumps(d, sort_keys=True))
+        return 0
+    miss = "—" if info.miss_m is None else f"{info.miss_m:.3f} m"
+    dur = "—" if info.duration_s is None else f"{info.duration_s:.2f} s"
+    print(f"{info.name}: {info.status}" + (f" ({info.problem})" if info.problem else ""))
+    print(f"  {info.scenario}, law {info.law}, seed {info.seed}, camera {info.camera}")
+    print(
+        f"  outcome {info.outcome or 'none recorded'}, miss {miss}, duration {dur}, "
+        f"{info.messages} messages"
+    )
+    for e in events:
+        print(f"  t = {e['t_s']:7.3f} s  {e['message']}")
     return 0
 
 
@@ -129,6 +184,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_scenarios(args)
         if args.command == "serve":
             return _cmd_serve(args)
+        if args.command == "replay":
+            return _cmd_replay(args)
         if args.command == "campaign":
             from .campaigns.driver import main_campaign
 

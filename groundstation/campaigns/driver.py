@@ -3,6 +3,7 @@ the report."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shlex
 import sys
@@ -43,12 +44,15 @@ def run_campaign(
     runner: SortieRunner | None = None,
     progress: bool = True,
     command: str | None = None,
+    log_dir: Path | None = None,
 ) -> dict[str, Any]:
     campaign = get_campaign(name)
     if camera not in CAMERA_MODES:
         raise CampaignError(f"unknown camera mode {camera!r}; choose one of {CAMERA_MODES}")
     n = campaign.default_n if n is None else n
     jobs = build_jobs(name, n, laws, camera, seed)
+    if log_dir is not None:
+        jobs = [dataclasses.replace(j, log_dir=str(log_dir)) for j in jobs]
     runner = runner or LocalPoolRunner(workers)
     n_workers = getattr(runner, "workers", None)
     bar = tqdm(
@@ -100,6 +104,7 @@ def main_campaign(args) -> int:
         Path(args.out) if args.out else None,
         progress=not args.json,
         command=command,
+        log_dir=Path(args.log) if args.log else None,
     )
     meta = res["meta"]
     if args.json:

@@ -31,6 +31,7 @@ class SortieJob:
     camera: str = "projected"
     labels: tuple[tuple[str, Any], ...] = ()
     trace: bool = True
+    log_dir: str | None = None  # record the sortie there (MCAP)
 
 
 @dataclass
@@ -78,7 +79,9 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
 
 def run_job(job: SortieJob) -> SortieOutcome:
     """Run one sortie (in whatever process) and return its outcome."""
-    sim = Simulation(job.scenario, job.law, job.seed, job.camera, keep_records=job.trace)
+    sim = Simulation(
+        job.scenario, job.law, job.seed, job.camera, keep_records=job.trace, log_dir=job.log_dir
+    )
     initial_px = sim.camera_model.project(
         sim.R_WC().T @ (np.array(sim.target.p) - np.array(sim.vehicle.p))
     )

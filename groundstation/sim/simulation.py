@@ -12,6 +12,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -89,6 +90,7 @@ class Simulation:
         camera_mode: str = "projected",
         gains: Gains | None = None,
         keep_records: bool = True,
+        log_dir: Path | None = None,
     ) -> None:
         self.scenario = scenario
         self.law = law
@@ -139,6 +141,11 @@ class Simulation:
         self.closest_vel_m_s = tuple(self.vehicle.v)
         self.max_normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
+        self.recorder = None
+        if log_dir is not None:
+            from ..recording.writer import SortieRecorder
+
+            self.recorder = SortieRecorder(Path(log_dir), self)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -168,9 +175,13 @@ class Simulation:
                 np.array(self.target.p),
                 self.scenario.target.diameter_m,
             )
+            if self.recorder is not None:
+                self.recorder.on_frame(t, self.camera.last_frame)
         if k % self._control_div == 0:
             self._control_tick(t)
             if self._check_loop_outcome(t):
+                if self.recorder is not None:
+                    self.recorder.finish(self.result().to_json_dict())
                 return
         wind = self.wind.velocity_m_s
         veh.step(self.dt_s, wind)
@@ -178,6 +189,8 @@ class Simulation:
         self.wind.step(self.dt_s)
         self.step_index = k + 1
         self._check_physics_outcome(t)
+        if self.outcome is not None and self.recorder is not None:
+            self.recorder.finish(self.result().to_json_dict())
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -202,6 +215,8 @@ class Simulation:
         if vv > 0.25 and a_n > self.max_normal_accel_m_s2:
             self.max_normal_accel_m_s2 = a_n
         self.last_telemetry = tel
+        if self.recorder is not None:
+            self.recorder.on_tick(t, tel, a_n)
         if self.keep_records:
             rel = self._rel
             self.records.append(
@@ -257,6 +272,14 @@ class Simulation:
         elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED
 
+    def close_recording(self, reason: str) -> None:
+        """End the recording of a sortie stopped before its outcome (operator reset)."""
+        if self.recorder is not None and not self.recorder.closed:
+            if self.outcome is not None:
+                self.recorder.finish(self.result().to_json_dict())
+            else:
+                self.recorder.finish(None, reason)
+
     def step_control_period(self) -> None:
         """Advance to the next control tick (or the end)."""
         for _ in range(self._control_div):
@@ -296,6 +319,8 @@ def run_sortie(
     seed: int = 0,
     camera_mode: str = "projected",
     gains: Gains | None = None,
+    log_dir: Path | None = None,
 ) -> SortieResult:
-    """Run one sortie to its outcome."""
-    return Simulation(scenario, law, seed, camera_mode, gains, keep_records=False).run()
+    """Run one sortie to its outcome (recorded to ``log_dir`` if given)."""
+    sim = Simulation(scenario, law, seed, camera_mode, gains, keep_records=False, log_dir=log_dir)
+    return sim.run()

@@ -256,6 +256,13 @@ class DelayedKalmanFilter:
             lost=since > self.config.lost_timeout_s,
         )
 
+    def state_vector(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Current state (e_x, e_y, r_x, r_y) and the diagonal of its covariance, if any."""
+        if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        e = self._buf[-1]
+        return e.x.copy(), np.diag(e.P).copy()
+
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
         for e in reversed(self._buf):

@@ -1,0 +1,1 @@
+"""Sortie recording to MCAP (Foxglove's well-known JSON schemas) and reading it back."""

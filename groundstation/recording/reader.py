@@ -1,0 +1,240 @@
+"""Reading recorded sorties back: listing with a health status, summaries, time series and
+index-based seeking. Damaged files are read up to the damage, never trusted past it.
+
+Status of a file:
+- ``ok``: summary present, every chunk's CRC checks;
+- ``truncated``: the file stops early (a crash mid-sortie): readable up to the last chunk;
+- ``damaged``: bytes inside are corrupt: readable up to the first bad record.
+A file that is not MCAP at all is refused with :class:`LogError`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+from mcap.records import Chunk, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+class LogError(ValueError):
+    """Not a sortie log (not MCAP), or a name that would leave the log folder."""
+
+
+@dataclass
+class LogInfo:
+    name: str
+    size_bytes: int
+    status: str  # ok | truncated | damaged
+    problem: str | None
+    scenario: str | None = None
+    law: str | None = None
+    seed: int | None = None
+    camera: str | None = None
+    outcome: str | None = None
+    miss_m: float | None = None
+    duration_s: float | None = None
+    recorded_at_utc: str | None = None
+    messages: int = 0
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _check_magic(path: Path) -> None:
+    with open(path, "rb") as f:
+        head = f.read(len(MAGIC))
+    if head != MAGIC:
+        raise LogError(f"{path.name}: not an MCAP file")
+
+
+def _apply_metadata(info: LogInfo, name: str, data: dict[str, str]) -> None:
+    info.metadata[name] = dict(data)
+    if name == "sortie":
+        info.scenario = data.get("scenario")
+        info.law = data.get("law")
+        info.camera = data.get("camera")
+        info.recorded_at_utc = data.get("recorded_at_utc")
+        try:
+            info.seed = int(data.get("seed", ""))
+        except ValueError:
+            info.seed = None
+    elif name == "outcome":
+        out = {}
+        for k, v in data.items():
+            try:
+                out[k] = json.loads(v)
+            except ValueError:
+                out[k] = v
+        info.outcome = out.get("outcome")
+        info.miss_m = out.get("miss_m")
+
+
+def _stream_scan(path: Path, info: LogInfo) -> bool:
+    """Read every record in order with CRCs checked; stop at the first bad one. Returns whether
+    it stopped because the file ended early."""
+    first = last = None
+    ended_early = False
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
+                if isinstance(rec, Message):
+                    info.messages += 1
+                    first = rec.log_time if first is None else min(first, rec.log_time)
+                    last = rec.log_time if last is None else max(last, rec.log_time)
+                elif isinstance(rec, Metadata):
+                    _apply_metadata(info, rec.name, rec.metadata)
+        except Exception as exc:  # mcap, zstd and lz4 each raise their own types
+            info.problem = f"{type(exc).__name__}: {exc}".rstrip(": ")
+            ended_early = type(exc).__name__ in ("EndOfFile", "EOFError")
+    if first is not None:
+        info.duration_s = (last - first) / 1e9
+    return ended_early
+
+
+def inspect_log(path: Path) -> LogInfo:
+    """Status and summary of one log (reads the whole file once, checking every CRC)."""
+    path = Path(path)
+    _check_magic(path)
+    info = LogInfo(name=path.name, size_bytes=path.stat().st_size, status="ok", problem=None)
+    ended_early = _stream_scan(path, info)
+    if info.problem is not None:
+        info.status = "truncated" if ended_early else "damaged"
+        if ended_early:
+            info.problem = "the file ends early (a crash or copy cut it): readable up to the cut"
+    return info
+
+
+class LogIndex:
+    """Listing of a log folder; each file's inspection is cached by (size, mtime)."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = Path(directory)
+        self._cache: dict[str, tuple[tuple[int, int], LogInfo | str]] = {}
+
+    def resolve(self, name: str) -> Path:
+        """The path of log ``name``, refusing anything that would leave the folder."""
+        if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
+            raise LogError(f"bad log name {name!r}")
+        path = (self.directory / name).resolve()
+        if path.parent != self.directory.resolve() or path.suffix != ".mcap":
+            raise LogError(f"bad log name {name!r}")
+        return path
+
+    def list(self) -> list[dict[str, Any]]:
+        out = []
+        if not self.directory.is_dir():
+            return out
+        for path in sorted(self.directory.glob("*.mcap")):
+            st = path.stat()
+            key = (st.st_size, st.st_mtime_ns)
+            cached = self._cache.get(path.name)
+            if cached is None or cached[0] != key:
+                try:
+                    value: LogInfo | str = inspect_log(path)
+                except LogError as exc:
+                    value = str(exc)
+                self._cache[path.name] = (key, value)
+            value = self._cache[path.name][1]
+            if isinstance(value, str):
+                out.append(
+                    {
+                        "name": path.name,
+                        "size_bytes": st.st_size,
+                        "status": "not_mcap",
+                        "problem": value,
+                    }
+                )
+            else:
+                d = value.to_json_dict()
+                d.pop("metadata")
+                out.append(d)
+        return out
+
+    def info(self, name: str) -> LogInfo:
+        return inspect_log(self.resolve(name))
+
+
+def iter_messages(
+    path: Path,
+    topics: list[str] | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
+) -> Iterator[tuple[str, float, dict]]:
+    """(topic, time_s, decoded JSON) in time order. Uses the MCAP index (only the chunks that
+    overlap [start_s, end_s] are read) when the file is whole; streams a damaged or truncated
+    file from the start and stops at the damage."""
+    path = Path(path)
+    _check_magic(path)
+    start_ns = None if start_s is None else int(start_s * 1e9)
+    end_ns = None if end_s is None else int(end_s * 1e9)
+    wanted = None if topics is None else set(topics)
+    with open(path, "rb") as f:
+        try:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+        except Exception:
+            summary = None
+        last_ns = None  # time of the last message yielded from the index
+        if summary is not None and summary.chunk_indexes:
+            try:
+                window = {}
+                if start_ns is not None:
+                    window["starting_at"] = start_ns
+                if end_ns is not None:
+                    window["ending_before"] = end_ns
+                for _schema, channel, msg in reader.iter_messages(topics=topics, **window):
+                    last_ns = msg.log_time
+                    yield channel.topic, msg.log_time / 1e9, json.loads(msg.data)
+                return
+            except Exception:  # a damaged chunk: stream on from there, up to the damage
+                pass
+        f.seek(0)
+        channels: dict[int, str] = {}
+        try:
+            for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
+                if hasattr(rec, "topic") and hasattr(rec, "message_encoding"):
+                    channels[rec.id] = rec.topic
+                elif isinstance(rec, Message):
+                    topic = channels.get(rec.channel_id)
+                    if topic is None or (wanted is not None and topic not in wanted):
+                        continue
+                    if start_ns is not None and rec.log_time < start_ns:
+                        continue
+                    if last_ns is not None and rec.log_time <= last_ns:
+                        continue
+                    if end_ns is not None and rec.log_time >= end_ns:
+                        continue
+                    yield topic, rec.log_time / 1e9, json.loads(rec.data)
+        except Exception:
+            return  # the damage: everything before it has been yielded
+
+
+def scenario_attachment(path: Path) -> str | None:
+    _check_magic(path)
+    with open(path, "rb") as f:
+        try:
+            for att in make_reader(f).iter_attachments():
+                if att.name == "scenario.toml":
+                    return att.data.decode()
+        except Exception:
+            return None
+    return None
+
+
+__all__ = [
+    "Chunk",
+    "LogError",
+    "LogIndex",
+    "LogInfo",
+    "inspect_log",
+    "iter_messages",
+    "scenario_attachment",
+]
