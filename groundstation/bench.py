@@ -203,7 +203,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     scenario = with_changes(load_scenario("sm-tailgate"), gains={"v_max": 4.5})
     try:
         with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
-            gs = GroundStation(port=0, data_dir=Path(tmp) / "gs")
+            gs = GroundStation(port=0, data_dir=Path(tmp) / "gs", log_dir=Path(tmp) / "logs")
             gs.start_in_thread()
             try:
                 ctx = p.chromium.launch_persistent_context(

@@ -17,7 +17,7 @@ from onboard.gains import Gains
 
 @pytest.fixture
 def gs(tmp_path):
-    station = GroundStation(port=0, data_dir=tmp_path)
+    station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
     yield station
     station.close()
 
@@ -91,7 +91,7 @@ def test_no_auth_refused_off_loopback(tmp_path):
 
 
 def test_no_auth_on_loopback_serves_without_token(tmp_path):
-    station = GroundStation(port=0, no_auth=True, data_dir=tmp_path)
+    station = GroundStation(port=0, no_auth=True, data_dir=tmp_path, log_dir=tmp_path / "logs")
     try:
         with TestClient(station.app) as c:
             assert c.get("/api/status").status_code == 200
@@ -224,7 +224,7 @@ def test_telemetry_stream(client):
 
 
 def test_stopping_the_server_frees_its_ports(tmp_path):
-    station = GroundStation(port=0, data_dir=tmp_path)
+    station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
     station.start_in_thread()
     port, viser_port = station.port, station.viser_port
     assert port != 0
@@ -232,3 +232,76 @@ def test_stopping_the_server_frees_its_ports(tmp_path):
     for p in (port, viser_port):
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             s.bind(("127.0.0.1", p))  # raises if still held
+
+
+# ----------------------------------------------------------------------------- review
+def test_dashboard_records_lists_replays_and_refiles(client, gs, tmp_path):
+    client.post("/api/sortie/start", json={"scenario": "static-ahead-20m", "speed": "max"})
+    _wait(client, lambda s: s["state"] == "finished")
+    logs = client.get("/api/logs").json()
+    assert len(logs) == 1
+    name = logs[0]["name"]
+    assert logs[0]["status"] == "ok" and logs[0]["outcome"] == "HIT"
+    assert logs[0]["scenario"] == "static-ahead-20m" and logs[0]["duration_s"] > 3
+    assert client.get(f"/api/logs/{name}/file").content[:8] == b"\x89MCAP0\r\n"
+    # replay: open, seek, jump to closest approach, play
+    st = client.post("/api/replay/open", json={"name": name}).json()
+    assert st["state"] == "replay" and st["replay"]["file"] == name
+    st = client.post("/api/replay/seek", json={"t_s": 2.0}).json()
+    assert st["replay"]["t_s"] == pytest.approx(2.0)
+    with client.websocket_connect("/ws/telemetry") as ws:
+        snap = ws.receive_json()
+    assert snap["t"] == pytest.approx(2.0, abs=1e-6) and snap["vehicle"]["p"][1] > 3.0
+    st = client.post("/api/replay/closest").json()
+    assert st["replay"]["t_s"] == pytest.approx(st["replay"]["closest_time_s"])
+    for bad in ('{"t_s": NaN}', '{"t_s": "soon"}', "{}"):
+        r = client.post(
+            "/api/replay/seek", content=bad, headers={"content-type": "application/json"}
+        )
+        assert r.status_code == 422, bad
+    assert client.post("/api/replay/jump").status_code == 404
+    client.post("/api/replay/seek", json={"t_s": 0.0})
+    client.put("/api/sortie/speed", json={"speed": "5"})
+    client.post("/api/replay/play")
+    st = _wait(client, lambda s: s["replay"]["t_s"] > 1.0, timeout_s=5)
+    assert st["replay"]["playing"]
+    # re-fly the recorded target track with another law; the old sortie is overlaid
+    st = client.post(f"/api/logs/{name}/refly", json={"law": "pg", "speed": "max"}).json()
+    assert st["law"] == "pg"
+    st = _wait(client, lambda s: s["state"] == "finished")
+    assert st["outcome"] == "HIT"
+    logs = {r["name"]: r for r in client.get("/api/logs").json()}
+    assert len(logs) == 2 and {r["law"] for r in logs.values()} == {"png", "pg"}
+    series = client.get(f"/api/logs/{name}/series").json()
+    assert len(series["t_s"]) > 50 and len(series["range_m"]) == len(series["t_s"])
+    # compare two recordings
+    client.post("/api/replay/open", json={"name": name})
+    other = next(n for n in logs if n != name)
+    st = client.post("/api/replay/compare", json={"name": other}).json()
+    assert st["replay"]["compare"] == other
+
+
+def test_log_api_refuses_escapes_and_unconfirmed_deletes(client, gs):
+    client.post("/api/sortie/start", json={"scenario": "static-ahead-20m", "speed": "max"})
+    _wait(client, lambda s: s["state"] == "finished")
+    name = client.get("/api/logs").json()[0]["name"]
+    for bad in ("..%2F..%2Fetc%2Fpasswd", ".hidden.mcap", "notes.txt"):
+        assert client.get(f"/api/logs/{bad}").status_code in (400, 404)
+        assert client.get(f"/api/logs/{bad}/file").status_code in (400, 404)
+    assert client.delete(f"/api/logs/{name}").status_code == 400  # not confirmed
+    assert client.delete(f"/api/logs/{name}?confirm=other").status_code == 400
+    assert client.get("/api/logs").json()[0]["name"] == name  # still there
+    assert client.delete(f"/api/logs/{name}?confirm={name}").json() == {"deleted": name}
+    assert client.get("/api/logs").json() == []
+    (gs.log_dir / "junk.mcap").write_bytes(b"garbage, not a log")
+    listed = client.get("/api/logs").json()
+    assert listed[0]["status"] == "not_mcap"
+    assert client.post("/api/replay/open", json={"name": "junk.mcap"}).status_code == 422
+
+
+def test_reset_keeps_an_unfinished_recording(client, gs):
+    client.post("/api/sortie/start", json={"scenario": "sm-tailgate", "speed": "1"})
+    time.sleep(0.5)
+    client.post("/api/sortie/reset")
+    logs = client.get("/api/logs").json()
+    assert len(logs) == 1 and logs[0]["status"] == "ok" and logs[0]["outcome"] == "INCOMPLETE"

@@ -23,7 +23,8 @@ ARGS = [
 
 @pytest.fixture(scope="module")
 def station(tmp_path_factory):
-    gs = GroundStation(port=0, data_dir=tmp_path_factory.mktemp("gs"))
+    d = tmp_path_factory.mktemp("gs")
+    gs = GroundStation(port=0, data_dir=d, log_dir=d / "logs")
     gs.start_in_thread()
     yield gs
     gs.stop()
@@ -103,4 +104,45 @@ def test_viser_scene_connects_through_the_proxy(station, browser):
     page.goto(station.url())
     frame = page.frame_locator("#viser")
     frame.locator("text=Follow vehicle").wait_for(timeout=20000)  # GUI from the server
+    page.close()
+
+
+def test_open_a_recorded_sortie_and_scrub(station, browser):
+    from groundstation.app.session import SortieConfig
+    from groundstation.scenario import load_scenario
+
+    station.session.start(SortieConfig(load_scenario("cv-top-to-bottom"), speed="max"))
+    deadline = __import__("time").monotonic() + 30
+    while station.session.state != "finished" and __import__("time").monotonic() < deadline:
+        __import__("time").sleep(0.1)
+    page = browser.new_page(viewport={"width": 1500, "height": 1000})
+    page.goto(station.url())
+    page.goto(station.url().split("?")[0] + "sorties")
+    page.wait_for_selector("#logs tbody tr", timeout=10000)
+    row = page.locator("#logs tbody tr", has_text="cv-top-to-bottom").first
+    assert "HIT" in row.text_content()
+    row.locator("button[data-act=open]").click()
+    page.wait_for_url(re.compile(r"/$|/\?"))
+    page.wait_for_selector("#replay-panel:not([hidden])", timeout=10000)
+    for target in (1.5, 4.0, 2.5):  # scrub forward and back: the views follow
+        page.eval_on_selector(
+            "#rp-scrub",
+            "(el, v) => { el.value = v; el.dispatchEvent("
+            "new Event('input')); el.dispatchEvent(new Event('change')); }",
+            target,
+        )
+        page.wait_for_function(
+            f"window.peregrine.shownT !== undefined && "
+            f"Math.abs(window.peregrine.shownT - {target}) < 0.05",
+            timeout=10000,
+        )
+        assert f"t = {target:.2f} s" in page.text_content("#st-time")
+    e_y = page.evaluate("window.peregrine.snap.e_est_px[1]")
+    assert e_y is not None
+    page.click("#rp-closest")
+    page.wait_for_function(
+        "document.querySelector('#st-outcome').textContent.includes('HIT')"
+        " || window.peregrine.snap.status.replay.t_s > 5.5",
+        timeout=10000,
+    )
     page.close()

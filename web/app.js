@@ -34,6 +34,7 @@ class Plot {
     this.data = series.map(() => []);
   }
   clear() { this.data = this.series.map(() => []); }
+  setOverlay(rows) { this.overlay = rows; } // [[t, v] ...] per series, another sortie
   push(t, snap) {
     this.series.forEach((s, i) => {
       const v = s.get(snap);
@@ -48,6 +49,7 @@ class Plot {
     ctx.clearRect(0, 0, w, h);
     let lo = Infinity, hi = -Infinity;
     for (const d of this.data) for (const [, v] of d) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    for (const d of this.overlay || []) for (const [t, v] of d) if (t >= tNow - this.windowS && t <= tNow + 1) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
     if (!isFinite(lo)) { lo = 0; hi = 1; }
     if (hi - lo < 1e-6) { hi += 0.5; lo -= 0.5; }
     const pad = 0.08 * (hi - lo); lo -= pad; hi += pad;
@@ -68,6 +70,12 @@ class Plot {
       ctx.font = "11px sans-serif"; const tw = ctx.measureText(s.label).width;
       lx -= tw + 18; ctx.fillStyle = s.color; ctx.fillRect(lx, 4, 10, 10);
       ctx.fillStyle = "#1d2329"; ctx.fillText(s.label, lx + 13, 13);
+    });
+    (this.overlay || []).forEach((d) => {
+      const pts = d.filter(([t]) => t >= t0 && t <= t1); if (pts.length < 2) return;
+      ctx.strokeStyle = "#9aa3ab"; ctx.setLineDash([4, 3]); ctx.lineWidth = 1.2; ctx.beginPath();
+      pts.forEach(([t, v], k) => (k ? ctx.lineTo(X(t), Y(v)) : ctx.moveTo(X(t), Y(v))));
+      ctx.stroke(); ctx.setLineDash([]); ctx.lineWidth = 1;
     });
     this.series.forEach((s, i) => {
       const d = this.data[i]; if (d.length < 2) return;
@@ -155,6 +163,8 @@ function showStatus(st) {
   } else setBadge("st-dkf", "DKF —");
   setBadge("st-rate", `loop ${st.loop_rate_hz} Hz`);
   $("btn-pause").textContent = st.state === "paused" ? "Resume" : "Pause";
+  showReplay(st.replay);
+  loadOverlay(st.replay ? st.replay.compare : null);
   if (st.gains_applied_time_s !== null && st.gains_applied_time_s !== undefined)
     $("gains-applied").textContent = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
   if (st.gains_pending) $("gains-applied").textContent = "edit pending: next control tick";
@@ -205,6 +215,45 @@ function connect() {
   document.addEventListener("visibilitychange", wantFrames);
   ws.onmessage = (ev) => takeSnapshot(JSON.parse(ev.data));
   ws.onclose = () => { setBadge("st-link", "telemetry: reconnecting", "bad"); setTimeout(connect, 1000); };
+}
+
+// ------------------------------------------------------------------ replay
+let scrubbing = false, lastSeek = 0, seekTimer = null;
+function showReplay(rp) {
+  $("replay-panel").hidden = !rp;
+  if (!rp) return;
+  $("rp-file").textContent = `${rp.file}${rp.status !== "ok" ? " (" + rp.status + ": replayed up to the damage)" : ""}${rp.compare ? " · compared with " + rp.compare : ""}`;
+  const scrub = $("rp-scrub");
+  scrub.max = rp.duration_s;
+  if (!scrubbing) scrub.value = rp.t_s;
+  $("rp-time").textContent = `${Number(rp.t_s).toFixed(2)} / ${Number(rp.duration_s).toFixed(2)} s`;
+  $("rp-play").textContent = rp.playing ? "Pause" : "Play";
+}
+async function replay(action, body) {
+  try { showStatus(await api("POST", "/api/replay/" + action, body)); } catch (e) { msg($("rp-msg"), e.message, false); }
+}
+$("rp-play").onclick = () => replay($("rp-play").textContent === "Play" ? "play" : "pause");
+$("rp-closest").onclick = () => replay("closest");
+$("rp-scrub").oninput = () => {
+  scrubbing = true;
+  const go = () => { lastSeek = performance.now(); replay("seek", { t_s: parseFloat($("rp-scrub").value) }); };
+  clearTimeout(seekTimer);
+  if (performance.now() - lastSeek > 80) go(); else seekTimer = setTimeout(go, 80);
+};
+$("rp-scrub").onchange = () => { scrubbing = false; replay("seek", { t_s: parseFloat($("rp-scrub").value) }); };
+
+// a compared sortie's recorded series, drawn dashed under the live ones
+let overlayName = null;
+async function loadOverlay(name) {
+  if (name === overlayName) return;
+  overlayName = name;
+  if (!name) { plots.forEach((p) => p.setOverlay(null)); return; }
+  const s = await api("GET", `/api/logs/${encodeURIComponent(name)}/series`);
+  const col = (vals) => s.t_s.map((t, i) => [t, vals[i]]).filter(([, v]) => v !== null && v !== undefined);
+  plots[0].setOverlay([col(s.normal_accel_m_s2)]);
+  plots[1].setOverlay([col(s.speed_m_s)]);
+  plots[2].setOverlay([col(s.e_px.map((e) => (e ? e[0] : null))), col(s.e_px.map((e) => (e ? e[1] : null)))]);
+  plots[3].setOverlay([col(s.range_m)]);
 }
 
 // ------------------------------------------------------------------ simulator controls

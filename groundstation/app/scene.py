@@ -5,13 +5,26 @@ the sortie ends. Handles are created once and mutated inside ``server.atomic()``
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import viser
 
+from onboard.camera_model import CameraModel
 from onboard.geometry import quat_to_rotmat, rotmat_to_quat
 
-from ..sim.simulation import Simulation
+
+@dataclass(frozen=True)
+class SceneState:
+    """What the 3D view shows at one instant, from a running sortie or a recorded one."""
+
+    time_s: float
+    vehicle_p: tuple[float, float, float]
+    vehicle_q: tuple[float, float, float, float]  # (w, x, y, z)
+    target_p: tuple[float, float, float]
+    closest_point: tuple[float, float, float] | None = None  # once the sortie has ended
+    outcome_label: str = ""
+
 
 VEHICLE_RGB = (230, 60, 40)
 TARGET_RGB = (220, 20, 20)
@@ -56,11 +69,10 @@ class SceneView:
         self._vehicle = self._target = self._frustum = None
         self._trail_time_s = -1.0
 
-    def reset(self, sim: Simulation) -> None:
+    def reset(self, cam: CameraModel, diameter_m: float, state: SceneState) -> None:
         self.clear()
         self._closest_shown = False
         s = self.server.scene
-        cam = sim.camera_model
         self._vehicle = s.add_frame("/vehicle", axes_length=1.2, axes_radius=0.05)
         self._frustum = s.add_camera_frustum(
             "/vehicle/camera",
@@ -71,7 +83,7 @@ class SceneView:
             wxyz=tuple(rotmat_to_quat(cam.R_BC)),
             cast_shadow=False,
         )
-        self._diameter = sim.scenario.target.diameter_m
+        self._diameter = diameter_m
         self._target = s.add_icosphere(
             "/target",
             radius=self._diameter / 2.0,
@@ -85,7 +97,7 @@ class SceneView:
         ]
         # lines are created once and then only their points change: re-adding a node would
         # rebuild its geometry in every viewer
-        vp, tp = np.array(sim.vehicle.p, np.float32), np.array(sim.target.p, np.float32)
+        vp, tp = np.array(state.vehicle_p, np.float32), np.array(state.target_p, np.float32)
         self._los = s.add_line_segments(
             "/los", np.array([[vp, tp]]), colors=LOS_RGB, thickness=2.0, thickness_units="screen"
         )
@@ -107,7 +119,7 @@ class SceneView:
             self._los,
             *self._trails.values(),
         ]
-        self.update(sim, [], [])
+        self.update(state, [], [])
 
     @staticmethod
     def _segments(points: list[list[float]]) -> np.ndarray | None:
@@ -116,20 +128,22 @@ class SceneView:
         p = np.asarray(points, dtype=np.float32)
         return np.stack([p[:-1], p[1:]], axis=1)
 
-    def update(self, sim: Simulation, trail_vehicle, trail_target) -> None:
+    def update(self, state: SceneState, trail_vehicle, trail_target) -> None:
         if self._vehicle is None:
             return
         s = self.server.scene
-        vp = np.array(sim.vehicle.p)
-        tp = np.array(sim.target.p)
-        trails_due = sim.done or sim.time_s - self._trail_time_s >= 0.5 or sim.time_s < 0.05
+        vp = np.array(state.vehicle_p)
+        tp = np.array(state.target_p)
+        done = state.closest_point is not None
+        t = state.time_s
+        trails_due = done or abs(t - self._trail_time_s) >= 0.5 or t < 0.05
         with self.server.atomic():
             self._vehicle.position = vp
-            self._vehicle.wxyz = np.array(sim.vehicle.q)
+            self._vehicle.wxyz = np.array(state.vehicle_q)
             self._target.position = tp
             self._los.points = np.array([[vp, tp]], dtype=np.float32)
             if trails_due:
-                self._trail_time_s = sim.time_s
+                self._trail_time_s = t
                 for name, pts, end in (
                     ("/trail_vehicle", trail_vehicle, vp),
                     ("/trail_target", trail_target, tp),
@@ -141,24 +155,36 @@ class SceneView:
                         handle.colors = np.broadcast_to(
                             np.array(self._trail_rgb[name], np.uint8), seg.shape
                         ).copy()
-            if sim.done and not self._closest_shown:
+            if done and not self._closest_shown:
                 self._closest_shown = True
-                rel = np.array(sim.closest_rel_m)
-                label = s.add_label(
-                    "/closest/label", f"{sim.outcome.value} miss {sim.miss_m:.3f} m"
-                )
+                label = s.add_label("/closest/label", state.outcome_label)
                 marker = s.add_icosphere(
                     "/closest",
                     radius=0.08,
                     color=(0, 200, 0),
-                    position=tuple(tp - rel),
+                    position=state.closest_point,
                     cast_shadow=False,
                     receive_shadow=False,
                 )
                 self._handles = [label, marker, *self._handles]
         if self._follow.value:
-            R = quat_to_rotmat(sim.vehicle.q)
+            R = quat_to_rotmat(state.vehicle_q)
             eye = vp - 4.0 * R[:, 0] + np.array([0.0, 0.0, 1.5])
             for client in self.server.get_clients().values():
                 client.camera.position = eye
                 client.camera.look_at = vp + 3.0 * R[:, 0]
+
+    def overlay(self, trail_vehicle: list, trail_target: list) -> None:
+        """Another sortie's trails (grey), to compare with the one shown."""
+        s = self.server.scene
+        for name, pts, rgb in (
+            ("/compare/vehicle", trail_vehicle, (150, 150, 150)),
+            ("/compare/target", trail_target, (90, 90, 90)),
+        ):
+            seg = self._segments(pts)
+            if seg is not None:
+                self._handles.append(
+                    s.add_line_segments(
+                        name, seg, colors=rgb, thickness=2.0, thickness_units="screen"
+                    )
+                )

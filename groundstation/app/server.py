@@ -8,6 +8,7 @@ import asyncio
 import contextlib
 import io
 import json
+import math
 import socket
 import threading
 import time
@@ -26,10 +27,12 @@ from pydantic import BaseModel, Field
 from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.gains import GAIN_SPECS, GainError
 
-from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+from ..recording.reader import LogError, LogIndex, scenario_attachment
+from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios, with_changes
 from ..sim.camera import CAMERA_MODES
 from .auth import TokenAuthMiddleware, is_loopback, new_token
 from .gainsets import GainSetError, GainSetStore, default_data_dir
+from .replay import ReplayPlayer
 from .scene import SceneView
 from .session import SPEEDS, SessionError, SimSession, SortieConfig, with_wind
 
@@ -75,6 +78,13 @@ class TelemetryHub:
             q.put_nowait(full if frames else lean)
 
 
+class ReflyRequest(BaseModel):
+    law: str = "png"
+    seed: int | None = None
+    speed: str = "max"
+    gains: dict[str, float] | None = None
+
+
 class StartRequest(BaseModel):
     scenario: str | None = Field(None, description="name of a shipped scenario")
     toml: str | None = Field(None, description="scenario file text (instead of a name)")
@@ -114,7 +124,10 @@ def create_app(
     token: str | None,
     viser_port: int,
     gainsets: GainSetStore,
+    logs: LogIndex | None = None,
 ) -> FastAPI:
+    logs = logs or LogIndex(Path("logs"))
+
     @contextlib.asynccontextmanager
     async def lifespan(_app: FastAPI):
         hub.loop = asyncio.get_running_loop()
@@ -137,6 +150,10 @@ def create_app(
     @app.get("/favicon.ico", include_in_schema=False)
     async def favicon() -> Response:
         return Response(status_code=204)
+
+    @app.get("/sorties", include_in_schema=False)
+    async def sorties_page() -> HTMLResponse:
+        return HTMLResponse((web_dir() / "sorties.html").read_text(encoding="utf-8"))
 
     @app.get("/viser/", include_in_schema=False)
     async def viser_page() -> FileResponse:
@@ -298,6 +315,108 @@ def create_app(
         session.set_gains(gains)
         return await get_gains()
 
+    # ------------------------------------------------------------------ recorded sorties
+    def _log_path(name: str) -> Path:
+        try:
+            path = logs.resolve(name)
+        except LogError as exc:
+            raise HTTPException(400, str(exc)) from None
+        if not path.is_file():
+            raise HTTPException(404, f"no recorded sortie named {name!r}")
+        return path
+
+    def _player(name: str) -> ReplayPlayer:
+        try:
+            return ReplayPlayer(_log_path(name))
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @app.get("/api/logs", tags=["logs"])
+    async def list_logs() -> list[dict[str, Any]]:
+        return await asyncio.to_thread(logs.list)
+
+    @app.get("/api/logs/{name}", tags=["logs"])
+    async def log_info(name: str) -> dict[str, Any]:
+        try:
+            return logs.info(_log_path(name).name).to_json_dict()
+        except LogError as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @app.get("/api/logs/{name}/series", tags=["logs"])
+    async def log_series(name: str) -> dict[str, Any]:
+        return (await asyncio.to_thread(_player, name)).series()
+
+    @app.get("/api/logs/{name}/file", tags=["logs"])
+    async def download_log(name: str) -> FileResponse:
+        path = _log_path(name)
+        return FileResponse(path, media_type="application/octet-stream", filename=path.name)
+
+    @app.delete("/api/logs/{name}", tags=["logs"])
+    async def delete_log(name: str, confirm: str = "") -> dict[str, Any]:
+        path = _log_path(name)
+        if confirm != name:
+            raise HTTPException(400, "to delete, repeat the file name in ?confirm=")
+        rec = session.recording
+        if rec is not None and rec["file"] == name and not rec["closed"]:
+            raise HTTPException(409, "this sortie is still being recorded")
+        path.unlink()
+        return {"deleted": name}
+
+    @app.post("/api/replay/open", tags=["replay"])
+    async def replay_open(name: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
+        path = _log_path(name)
+        try:
+            await asyncio.to_thread(session.open_replay, path)
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        return session.status()
+
+    @app.post("/api/replay/compare", tags=["replay"])
+    async def replay_compare(name: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
+        path = _log_path(name)
+        try:
+            await asyncio.to_thread(session.compare_with, path)
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return session.status()
+
+    @app.post("/api/replay/{action}", tags=["replay"])
+    async def replay_action(
+        action: str, t_s: Annotated[float | None, Body(embed=True)] = None
+    ) -> dict[str, Any]:
+        if action not in ("play", "pause", "seek", "closest"):
+            raise HTTPException(404, f"unknown replay action {action!r}")
+        if action == "seek" and (t_s is None or not math.isfinite(t_s)):
+            raise HTTPException(422, "seek needs a finite t_s")
+        return _cmd(session.replay_command, action, t_s)
+
+    @app.post("/api/logs/{name}/refly", tags=["logs"])
+    async def refly(name: str, req: ReflyRequest) -> dict[str, Any]:
+        if req.law not in GUIDANCE_LAWS:
+            raise HTTPException(422, f"unknown law {req.law!r}")
+        player = await asyncio.to_thread(_player, name)
+        text = scenario_attachment(player.path)
+        if not text:
+            raise HTTPException(422, f"{name}: no scenario recorded with it")
+        try:
+            scenario = parse_scenario(text, source=name)
+            if req.gains:
+                scenario = with_changes(scenario, gains={**scenario.gains, **req.gains})
+        except (ScenarioError, GainError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        camera = player.info.camera if player.info.camera in CAMERA_MODES else "projected"
+        config = SortieConfig(
+            scenario,
+            req.law,
+            req.seed if req.seed is not None else (player.info.seed or 0),
+            camera,
+            req.speed,
+        )
+        _cmd(session.start, config, (player.tt, player.tp))
+        return _cmd(session.compare_with, player.path)
+
     def _cmd(fn, *args):
         try:
             fn(*args)
@@ -360,6 +479,7 @@ class GroundStation:
         port: int = 8000,
         no_auth: bool = False,
         data_dir: Path | None = None,
+        log_dir: Path | None = Path("logs"),
     ) -> None:
         if no_auth and not is_loopback(host):
             raise ValueError(f"--no-auth is refused on a non-loopback address ({host})")
@@ -372,9 +492,19 @@ class GroundStation:
         self.viser_port = self.viser.get_port()
         self.hub = TelemetryHub()
         self.scene = SceneView(self.viser)
-        self.session = SimSession(on_snapshot=self.hub.publish_from_thread, scene=self.scene)
+        self.log_dir = log_dir
+        self.session = SimSession(
+            on_snapshot=self.hub.publish_from_thread, scene=self.scene, log_dir=log_dir
+        )
         self.gainsets = GainSetStore((data_dir or default_data_dir()) / "gainsets")
-        self.app = create_app(self.session, self.hub, self.token, self.viser_port, self.gainsets)
+        self.app = create_app(
+            self.session,
+            self.hub,
+            self.token,
+            self.viser_port,
+            self.gainsets,
+            LogIndex(log_dir or Path("logs")),
+        )
         self.server = uvicorn.Server(
             uvicorn.Config(
                 self.app,

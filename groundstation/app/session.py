@@ -17,6 +17,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -26,6 +27,8 @@ from onboard.gains import Gains
 
 from ..scenario import Scenario, WindSpec, load_scenario, with_changes
 from ..sim.simulation import Simulation
+from .replay import ReplayPlayer
+from .scene import SceneState
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 PUBLISH_HZ = 25.0
@@ -54,7 +57,14 @@ class SimSession:
         on_snapshot: Callable[[dict[str, Any]], None] | None = None,
         scene: Any | None = None,
         publish_hz: float = PUBLISH_HZ,
+        log_dir: Path | None = None,
     ) -> None:
+        self.log_dir = log_dir  # every sortie is recorded there (None: not recorded)
+        self.replay: ReplayPlayer | None = None
+        self.compare: ReplayPlayer | None = None
+        self.replay_t = 0.0
+        self.replay_playing = False
+        self._force_frame = False
         self._on_snapshot = on_snapshot
         self.scene = scene
         self.publish_period_s = 1.0 / publish_hz
@@ -103,14 +113,22 @@ class SimSession:
             raise box["error"]
         return box.get("value")
 
-    def start(self, config: SortieConfig) -> None:
+    def start(self, config: SortieConfig, target_track=None) -> None:
         if config.speed not in SPEEDS:
             raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
 
         def go():
             gains = config.scenario.gains_obj()
+            self._close_current("the operator started another sortie")
             self.sim = Simulation(
-                config.scenario, config.law, config.seed, config.camera, gains, keep_records=False
+                config.scenario,
+                config.law,
+                config.seed,
+                config.camera,
+                gains,
+                keep_records=False,
+                log_dir=self.log_dir,
+                target_track=target_track,
             )
             self.config = config
             self.gains = gains
@@ -123,7 +141,9 @@ class SimSession:
             self.run_wall_s = self.run_sim_s = 0.0
             self._set_running()
             if self.scene is not None:
-                self.scene.reset(self.sim)
+                self.scene.reset(
+                    self.sim.camera_model, config.scenario.target.diameter_m, self._scene_state()
+                )
 
         self.submit(go)
 
@@ -163,7 +183,9 @@ class SimSession:
 
     def reset(self) -> None:
         def go():
+            self._close_current("operator reset")
             self.sim = None
+            self.replay = self.compare = None
             self.state = "idle"
             self._trail_vehicle, self._trail_target = [], []
             if self.scene is not None:
@@ -199,6 +221,75 @@ class SimSession:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)
+        self._close_current("the ground station stopped")
+
+    def _close_current(self, reason: str) -> None:
+        """End the recording of the sortie on screen (an unfinished one is kept, marked
+        INCOMPLETE with the reason: nothing recorded is ever lost)."""
+        if self.sim is not None:
+            self.sim.close_recording(reason)
+        self.replay = self.compare = None
+
+    @property
+    def recording(self) -> dict[str, Any] | None:
+        rec = None if self.sim is None else self.sim.recorder
+        if rec is None:
+            return None
+        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+
+    # ------------------------------------------------------------------ replay
+    def open_replay(self, path: Path) -> None:
+        player = ReplayPlayer(path)  # read (and validated) here, not on the sim thread
+
+        def go():
+            self._close_current("the operator opened a recorded sortie")
+            self.sim = None
+            self.replay, self.compare = player, None
+            self.replay_t, self.replay_playing = 0.0, False
+            self.state = "replay"
+            self._trail_vehicle, self._trail_target = [], []
+            if self.scene is not None:
+                self.scene.reset(player.camera, player.diameter_m, player.scene_state(0.0))
+            self._force_frame = True
+            self._publish(force=True)
+
+        self.submit(go)
+
+    def compare_with(self, path: Path) -> None:
+        other = ReplayPlayer(path)
+
+        def go():
+            if self.replay is None and self.sim is None:
+                raise SessionError("open a sortie (or run one) before comparing")
+            self.compare = other
+            if self.scene is not None:
+                self.scene.overlay(*other.trails(other.duration_s))
+            self._publish(force=True)
+
+        self.submit(go)
+
+    def replay_command(self, action: str, t_s: float | None = None) -> None:
+        def go():
+            if self.replay is None:
+                raise SessionError("no recorded sortie is open")
+            if action == "play":
+                if self.replay_t >= self.replay.duration_s - 1e-6:
+                    self.replay_t = 0.0
+                self.replay_playing = True
+            elif action == "pause":
+                self.replay_playing = False
+            elif action == "seek":
+                self.replay_t = min(max(float(t_s), 0.0), self.replay.duration_s)
+                self._force_frame = True
+            elif action == "closest":
+                self.replay_t = self.replay.closest_time_s
+                self.replay_playing = False
+                self._force_frame = True
+            else:
+                raise SessionError(f"unknown replay action {action!r}")
+            self._publish(force=True)
+
+        self.submit(go)
 
     # ------------------------------------------------------------------ the thread
     def _advance_one(self) -> None:
@@ -216,6 +307,7 @@ class SimSession:
     def _run(self) -> None:
         next_publish = 0.0
         last_wall = time.perf_counter()
+        last_wall_replay = last_wall
         was_running = False
         while not self._stop.is_set():
             now = time.perf_counter()
@@ -245,6 +337,14 @@ class SimSession:
                 if sim.done:
                     self.state = "finished"
                     next_publish = 0.0
+            if self.state == "replay" and self.replay is not None and self.replay_playing:
+                speed = 50.0 if math.isinf(self.speed) else self.speed
+                self.replay_t = min(
+                    self.replay_t + (now - last_wall_replay) * speed, self.replay.duration_s
+                )
+                if self.replay_t >= self.replay.duration_s:
+                    self.replay_playing = False
+            last_wall_replay = now
             was_running = self.state == "running"
             now2 = time.perf_counter()
             if now2 >= next_publish:
@@ -255,14 +355,37 @@ class SimSession:
     def _publish(self, force: bool = False) -> None:
         snap = self.snapshot()
         scene_due = force or self._publish_count % SCENE_EVERY == 0 or self.state != "running"
-        if self.scene is not None and self.sim is not None and scene_due:
+        if self.scene is not None and self.replay is not None and scene_due:
             try:
-                self.scene.update(self.sim, self._trail_vehicle, self._trail_target)
+                self.scene.update(
+                    self.replay.scene_state(self.replay_t), *self.replay.trails(self.replay_t)
+                )
+            except Exception as exc:  # a viewer problem must never stop the replay
+                self.scene_errors += 1
+                self.last_scene_error = f"{type(exc).__name__}: {exc}"
+        elif self.scene is not None and self.sim is not None and scene_due:
+            try:
+                self.scene.update(self._scene_state(), self._trail_vehicle, self._trail_target)
             except Exception as exc:  # a viewer problem must never stop the sortie
                 self.scene_errors += 1
                 self.last_scene_error = f"{type(exc).__name__}: {exc}"
         if self._on_snapshot is not None:
             self._on_snapshot(snap)
+
+    def _scene_state(self) -> SceneState:
+        sim = self.sim
+        closest = None
+        if sim.done:
+            tp = sim.target.p
+            closest = tuple(tp[i] - sim.closest_rel_m[i] for i in range(3))
+        return SceneState(
+            sim.time_s,
+            tuple(sim.vehicle.p),
+            tuple(sim.vehicle.q),
+            tuple(sim.target.p),
+            closest,
+            f"{sim.outcome.value} miss {sim.miss_m:.3f} m" if sim.done else "",
+        )
 
     # ------------------------------------------------------------------ observations
     def loop_rate_hz(self) -> float:
@@ -292,7 +415,31 @@ class SimSession:
             "gains_pending": self._gains_pending is not None,
             "real_time_ratio": (self.run_sim_s / self.run_wall_s) if self.run_wall_s > 0 else None,
             "scene_errors": self.scene_errors,
+            "recording": self.recording,
+            "replay": None
+            if self.replay is None
+            else {
+                "file": self.replay.path.name,
+                "t_s": round(self.replay_t, 4),
+                "duration_s": round(self.replay.duration_s, 4),
+                "playing": self.replay_playing,
+                "closest_time_s": round(self.replay.closest_time_s, 4),
+                "status": self.replay.info.status,
+                "compare": None if self.compare is None else self.compare.path.name,
+            },
         }
+        rp = self.replay
+        if rp is not None:  # what is on screen is the recorded sortie
+            at_end = self.replay_t >= rp.duration_s - 1e-6
+            out.update(
+                scenario=rp.info.scenario,
+                law=rp.info.law,
+                seed=rp.info.seed,
+                camera=rp.info.camera,
+                time_s=round(self.replay_t, 4),
+                outcome=rp.info.outcome if at_end else None,
+                miss_m=rp.info.miss_m if at_end else None,
+            )
         if sim is not None:
             dkf = sim.loop.dkf
             est = dkf.estimate()
@@ -312,6 +459,18 @@ class SimSession:
     def snapshot(self) -> dict[str, Any]:
         self._publish_count += 1
         snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
+        if self.replay is not None:
+            rp = self.replay
+            snap.update(rp.snapshot(self.replay_t))
+            snap["k_a"] = self.gains.k_a
+            if self._force_frame or (
+                self.replay_playing and self._publish_count % FRAME_EVERY == 0
+            ):
+                self._force_frame = False
+                frame = rp.frame_b64(self.replay_t)
+                if frame:
+                    snap["frame_jpeg_b64"] = frame
+            return snap
         sim = self.sim
         if sim is None:
             return snap

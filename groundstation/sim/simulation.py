@@ -24,7 +24,7 @@ from onboard.loop import InterceptionLoop
 
 from ..scenario import Scenario
 from .camera import SimCamera
-from .targets import Target
+from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
 
@@ -91,6 +91,7 @@ class Simulation:
         gains: Gains | None = None,
         keep_records: bool = True,
         log_dir: Path | None = None,
+        target_track: tuple[list[float], list[tuple[float, float, float]]] | None = None,
     ) -> None:
         self.scenario = scenario
         self.law = law
@@ -113,7 +114,11 @@ class Simulation:
             c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
         )
         self.vehicle = Multicopter(scenario.interceptor)
-        self.target = Target(scenario.target)
+        self.target = (
+            Target(scenario.target)
+            if target_track is None
+            else TrackTarget(scenario.target, *target_track)
+        )
         self.wind = Wind(scenario.wind, wind_rng)
         self.target.settle_in_wind(scenario.wind.mean_m_s)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)

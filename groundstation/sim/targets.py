@@ -113,3 +113,30 @@ class Target:
             if vr > 0.0:
                 v = [v[i] - vr * u[i] for i in range(3)]
         self.p, self.v = p, v
+
+
+class TrackTarget(Target):
+    """A target that follows a recorded track (times, positions), linearly interpolated and
+    continued at its last velocity after the end: for re-flying a recorded sortie."""
+
+    def __init__(self, spec: TargetSpec, times_s: list[float], positions_m: list) -> None:
+        super().__init__(spec)
+        if len(times_s) < 2 or len(times_s) != len(positions_m):
+            raise ValueError("a target track needs at least two (time, position) samples")
+        self._t = list(times_s)
+        self._p = [tuple(map(float, p)) for p in positions_m]
+        self.p = list(self._p[0])
+        self.v = self._velocity(0)
+
+    def _velocity(self, i: int) -> list[float]:
+        i = min(max(i, 0), len(self._t) - 2)
+        dt = self._t[i + 1] - self._t[i]
+        return [(b - a) / dt for a, b in zip(self._p[i], self._p[i + 1], strict=True)]
+
+    def advance(self, t: float, dt: float, wind) -> None:
+        import bisect
+
+        i = min(max(bisect.bisect_right(self._t, t) - 1, 0), len(self._t) - 2)
+        v = self._velocity(i)
+        self.v = v
+        self.p = [a + vi * (t - self._t[i]) for a, vi in zip(self._p[i], v, strict=True)]

@@ -1,0 +1,62 @@
+// Recorded sorties: list (sortable, filterable), open in the dashboard, compare two,
+// download, delete (confirmed), re-fly with another law.
+"use strict";
+const $ = (id) => document.getElementById(id);
+let rows = [];
+let sortKey = "name", sortDir = -1;
+
+async function api(method, path, body) {
+  const opts = { method, headers: {} };
+  if (body !== undefined) { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
+  const r = await fetch(path, opts);
+  let data = null; try { data = await r.json(); } catch (e) { data = null; }
+  if (!r.ok) throw new Error(data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : r.statusText);
+  return data;
+}
+function say(text, ok) { $("msg").textContent = text; $("msg").className = "msg " + (ok ? "ok" : "err"); }
+const fmt = (v, d) => (v === null || v === undefined ? "—" : typeof v === "number" ? v.toFixed(d) : v);
+const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+
+function render() {
+  const f = $("filter").value.trim().toLowerCase();
+  const shown = rows.filter((r) => !f || [r.name, r.scenario, r.law, r.outcome, r.status].join(" ").toLowerCase().includes(f));
+  shown.sort((a, b) => {
+    const x = a[sortKey] ?? "", y = b[sortKey] ?? "";
+    return (x > y ? 1 : x < y ? -1 : 0) * sortDir;
+  });
+  const tb = document.querySelector("#logs tbody");
+  tb.innerHTML = shown.map((r) => {
+    const n = encodeURIComponent(r.name);
+    const ok = r.status === "ok";
+    return `<tr data-name="${esc(r.name)}">
+      <td title="${esc(r.name)}">${esc(r.recorded_at_utc || r.name.slice(0, 16))}</td><td>${esc(r.scenario || "—")}</td><td>${esc(r.law || "—")}</td>
+      <td>${esc(r.outcome || "—")}</td><td>${fmt(r.miss_m, 3)}</td><td>${fmt(r.duration_s, 2)}</td>
+      <td class="${ok ? "" : "bad"}" title="${esc(r.problem || "")}">${esc(r.status)}</td><td>${(r.size_bytes / 1024).toFixed(0)} kB</td>
+      <td>${r.status === "not_mcap" ? "" : `<button data-act="open">Open</button> <button data-act="compare">Compare</button> <button data-act="refly">Re-fly</button>`}
+          <a href="/api/logs/${n}/file" download>Download</a> <button data-act="delete">Delete</button></td></tr>`;
+  }).join("");
+  $("count").textContent = `${shown.length} of ${rows.length} sorties`;
+}
+
+async function load() { rows = await api("GET", "/api/logs"); render(); }
+
+document.querySelectorAll("#logs th[data-k]").forEach((th) => {
+  th.style.cursor = "pointer";
+  th.onclick = () => { const k = th.dataset.k; sortDir = sortKey === k ? -sortDir : 1; sortKey = k; render(); };
+});
+$("filter").oninput = render;
+document.querySelector("#logs tbody").onclick = async (ev) => {
+  const btn = ev.target.closest("button"); if (!btn) return;
+  const name = btn.closest("tr").dataset.name;
+  try {
+    if (btn.dataset.act === "open") { await api("POST", "/api/replay/open", { name }); location.href = "/"; }
+    else if (btn.dataset.act === "compare") { await api("POST", "/api/replay/compare", { name }); say(`overlaying ${name} in the dashboard`, true); location.href = "/?compare=" + encodeURIComponent(name); }
+    else if (btn.dataset.act === "refly") { await api("POST", `/api/logs/${encodeURIComponent(name)}/refly`, { law: $("refly-law").value }); location.href = "/?compare=" + encodeURIComponent(name); }
+    else if (btn.dataset.act === "delete") {
+      if (!window.confirm(`Delete ${name}? This cannot be undone.`)) return;
+      await api("DELETE", `/api/logs/${encodeURIComponent(name)}?confirm=${encodeURIComponent(name)}`);
+      say(`deleted ${name}`, true); await load();
+    }
+  } catch (e) { say(e.message, false); }
+};
+load().catch((e) => say(e.message, false));
