@@ -74,6 +74,11 @@ def _build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true")
     b.add_argument("--campaigns", action="store_true", help="campaign throughput instead")
     b.add_argument(
+        "--recording",
+        action="store_true",
+        help="recording cost, listing 200 logs, seeking in a 10-minute sortie",
+    )
+    b.add_argument(
         "--dashboard",
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
@@ -191,8 +196,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return main_campaign(args)
         if args.command == "bench":
-            from .bench import run_bench, run_campaign_bench, run_dashboard_bench
+            from .bench import (
+                run_bench,
+                run_campaign_bench,
+                run_dashboard_bench,
+                run_recording_bench,
+            )
 
+            if args.recording:
+                return run_recording_bench(as_json=args.json)
             if args.dashboard:
                 return run_dashboard_bench(as_json=args.json)
             if args.campaigns:

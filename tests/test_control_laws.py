@@ -100,9 +100,20 @@ def test_hover_case_accelerates_along_los():
 
 
 def test_speed_ramp_and_cap():
+    # far below v_max: the full k_a (eq. 14)
     assert_allclose(ramped_speed(5.0, G, 0.01), 5.02)
-    assert ramped_speed(11.999, G, 0.01) == G.v_max
-    assert ramped_speed(15.0, G, 0.01) == G.v_max  # faster than v_max: slow down
+    # within k_a / k_brake of v_max: a speed hold, k_brake (v_max - |v|)
+    assert_allclose(ramped_speed(11.5, G, 0.01), 11.5 + 0.5 * 0.01)
+    assert ramped_speed(12.0, G, 0.01) == 12.0
+    # faster than v_max: slow down, at most at k_a, never by the whole excess at once
+    assert_allclose(ramped_speed(12.5, G, 0.01), 12.5 - 0.5 * 0.01)
+    assert_allclose(ramped_speed(15.0, G, 0.01), 15.0 - 2.0 * 0.01)
+
+
+def test_png_at_the_speed_cap_keeps_tangential_acceleration_within_k_a():
+    for speed in (11.99, 12.0, 12.03, 13.0):
+        out = png_law(_inp([0, speed, 0]), G)
+        assert abs(out.accel_desired_enu_m_s2[1]) <= G.k_a + 1e-9, speed
 
 
 def test_acceleration_saturation_keeps_direction():

@@ -67,8 +67,14 @@ def saturate_norm(vec: np.ndarray, limit: float) -> np.ndarray:
 
 
 def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
-    """|v_d| = |v| + k_a dt, capped at v_max (paper eq. 14)."""
-    return min(speed_m_s + gains.k_a * dt_s, gains.v_max)
+    """|v_d| = |v| + a_t dt (paper eq. 14): the tangential acceleration a_t is k_a, tapering
+    near v_max as a speed hold, a_t = clip(k_brake (v_max - |v|), -k_a, k_a).
+
+    Asking for v_max outright (eq. 17 divides by dt) would turn centimetres per second of
+    overspeed into a saturated brake and then a full k_a again: the vehicle pitches back and
+    forth by atan(k_a / g) and its flight path walks off, which PN cannot see from far away."""
+    a_t = min(max(gains.k_brake * (gains.v_max - speed_m_s), -gains.k_a), gains.k_a)
+    return speed_m_s + a_t * dt_s
 
 
 def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
