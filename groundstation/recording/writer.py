@@ -6,9 +6,10 @@ overwritten) and each full chunk goes to disk as it is written, so a crash leave
 file up to the last chunk. A write error (a full disk) ends the recording with a clear
 message in ``error`` and never the sortie.
 
-Rates: the vehicle's pose, /tf, /control and /dkf every ``record_every`` control ticks (20 Hz
-by default: recording must cost a sortie at most about a tenth of its simulation time, and
-every message costs a few microseconds), the target's pose at half that; /scene at 1 Hz;
+Rates: the vehicle's pose and /control every ``record_every`` control ticks (20 Hz by
+default: recording must cost a sortie at most about a tenth of its simulation time, and
+every message costs a few microseconds); the target's pose, /tf (the vehicle's pose again,
+which Foxglove interpolates) and /dkf at half that; /scene at 1 Hz;
 image annotations at every ``annotate_every``-th camera capture (10 Hz) and the frames
 themselves at every ``frame_every``-th (5 Hz: a JPEG encode costs as much as rendering the
 frame); /gains and /events as they happen.
@@ -247,17 +248,18 @@ class SortieRecorder:
         self._put(
             "/world/vehicle", t_s, (_POSE % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw)).encode()
         )
-        if (self._tick - 1) % (2 * self.record_every) == 0:  # the target at half rate
+        half = (self._tick - 1) % (2 * self.record_every) == 0
+        if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
             self._put(
                 "/world/target",
                 t_s,
                 (_POSE % (sec, nsec, tp[0], tp[1], tp[2], 0, 0, 0, 1)).encode(),
             )
-        self._put(
-            "/tf",
-            t_s,
-            (_TF % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw, self._tf_camera)).encode(),
-        )
+            self._put(
+                "/tf",
+                t_s,
+                (_TF % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw, self._tf_camera)).encode(),
+            )
         a = tel.accel_desired_enu_m_s2
         w = tel.command.body_rates_flu_rad_s
         v = sim.vehicle.v
@@ -298,8 +300,14 @@ class SortieRecorder:
                 )
             ).encode(),
         )
-        dkf = loop.dkf
-        state = dkf.state_vector()
+        if half:
+            self._dkf(t_s, tel)
+        if (self._tick - 1) % (self.record_every * 20) == 0:  # /scene at a twentieth
+            self._scene(t_s, p, tp)
+
+    def _dkf(self, t_s: float, tel: ControlTelemetry) -> None:
+        loop = self.sim.loop
+        state = loop.dkf.state_vector()
         if state is None:
             st = cov = "null"
         else:
@@ -321,8 +329,6 @@ class SortieRecorder:
                 )
             ).encode(),
         )
-        if (self._tick - 1) % (self.record_every * 20) == 0:  # /scene at a twentieth
-            self._scene(t_s, p, tp)
 
     def _scene(self, t_s: float, p, tp) -> None:
         stamp = _stamp(t_s)
