@@ -23,6 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from onboard.control.guidance import normal_component
 from onboard.gains import Gains
 
 from ..scenario import Scenario, WindSpec, load_scenario, with_changes
@@ -480,8 +481,7 @@ class SimSession:
         rng = float(np.linalg.norm(rel))
         v = np.array(veh.v)
         speed = float(np.linalg.norm(v))
-        los = rel / rng if rng > 0 else rel
-        v_n = float(np.linalg.norm(v - (v @ los) * los))
+        v_n = normal_component(v, rel)  # velocity normal to the line of sight
         tel = sim.last_telemetry
         det = sim.last_detection
         snap.update(
@@ -509,12 +509,7 @@ class SimSession:
         if tel is not None:
             snap["mode"] = tel.mode.value
             snap["e_est_px"] = tel.e_est_px
-            a = veh.accel
-            av = sum(x * y for x, y in zip(a, veh.v, strict=True))
-            aa = sum(x * x for x in a)
-            snap["normal_accel_m_s2"] = math.sqrt(
-                max(aa - (av * av / (speed * speed) if speed > 0.5 else 0.0), 0.0)
-            )
+            snap["normal_accel_m_s2"] = sim.normal_accel_m_s2
         if det is not None:
             snap["e_raw_px"] = cam.error_px(*det.center_px)
             snap["raw_capture_t"] = det.capture_time_s

@@ -6,7 +6,6 @@ process pool on this machine; another engine (a cluster) only has to implement
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -15,6 +14,8 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+
+from onboard.control.guidance import normal_component
 
 from ..scenario import Scenario
 from ..sim.simulation import Simulation
@@ -52,11 +53,8 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
         tgt.append([round(c, 4) for c in rec.target_pos_m])
         vel.append([round(c, 4) for c in rec.vehicle_vel_m_s])
         a_n.append(round(rec.normal_accel_m_s2, 4))
-        los = [tc - vc for tc, vc in zip(rec.target_pos_m, rec.vehicle_pos_m, strict=True)]
-        rng = math.sqrt(sum(c * c for c in los)) or 1.0
-        along = sum(v * c for v, c in zip(rec.vehicle_vel_m_s, los, strict=True)) / rng
-        speed2 = sum(v * v for v in rec.vehicle_vel_m_s)
-        v_n.append(round(math.sqrt(max(speed2 - along * along, 0.0)), 4))
+        los = np.subtract(rec.target_pos_m, rec.vehicle_pos_m)
+        v_n.append(round(normal_component(np.asarray(rec.vehicle_vel_m_s), los), 4))
         est = rec.telemetry.e_est_px
         if est is None:
             e.append(None)

@@ -145,6 +145,7 @@ class Simulation:
         self.closest_rel_m = tuple(self._rel)  # target minus vehicle at closest approach
         self.closest_vel_m_s = tuple(self.vehicle.v)
         self.max_normal_accel_m_s2 = 0.0
+        self.normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
         self.recorder = None
         if log_dir is not None:
@@ -217,6 +218,7 @@ class Simulation:
         av = a[0] * v[0] + a[1] * v[1] + a[2] * v[2]
         aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
         a_n = math.sqrt(max(aa - (av * av / vv if vv > 1e-9 else 0.0), 0.0))
+        self.normal_accel_m_s2 = a_n  # actual, normal to the velocity, at this tick
         if vv > 0.25 and a_n > self.max_normal_accel_m_s2:
             self.max_normal_accel_m_s2 = a_n
         self.last_telemetry = tel
