@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.util
 import io
 import json
 import math
 import socket
 import threading
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -40,11 +40,16 @@ VISER_INDEX = Path(viser.__file__).parent / "client" / "build" / "index.html"
 
 
 def web_dir() -> Path:
-    """The dashboard's static files: inside the installed package, or web/ of a checkout."""
+    """The dashboard's static files: groundstation/web of an installed package (a folder of
+    pages, not a Python package), or web/ of a source checkout."""
     try:
-        return Path(str(resources.files("groundstation.web")))
+        spec = importlib.util.find_spec("groundstation.web")
     except ModuleNotFoundError:
-        return Path(__file__).resolve().parents[2] / "web"
+        spec = None
+    for location in (spec.submodule_search_locations or []) if spec else []:
+        if (Path(location) / "index.html").is_file():
+            return Path(location)
+    return Path(__file__).resolve().parents[2] / "web"
 
 
 class TelemetryHub:
