@@ -73,6 +73,18 @@ def _plot_trajectories_3d(ax, outs: list[SortieOutcome], label_key: str = "law")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
     ax.set_zlabel("z up (m)")
+    _equal_axes(ax)
+
+
+def _equal_axes(ax) -> None:
+    """One metre is as long on every axis: trajectories in their true proportions."""
+    lims = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
+    centre = lims.mean(axis=1)
+    half = max(float((lims[:, 1] - lims[:, 0]).max()) / 2.0, 0.5)
+    ax.set_xlim3d(centre[0] - half, centre[0] + half)
+    ax.set_ylim3d(centre[1] - half, centre[1] + half)
+    ax.set_zlim3d(max(centre[2] - half, 0.0), max(centre[2] - half, 0.0) + 2 * half)
+    ax.set_box_aspect((1, 1, 1))
 
 
 def _trajectory_panels(outcomes, laws, scenarios, grid, figsize, out: Path, plots) -> None:
