@@ -296,7 +296,11 @@ class SimSession:
     def _advance_one(self) -> None:
         sim = self.sim
         sim.step_control_period()
-        self._tick_walls.append(time.perf_counter())
+        now = time.perf_counter()
+        walls = self._tick_walls  # appended and pruned here only: the simulation thread
+        walls.append(now)
+        while walls[0] < now - 1.0:
+            walls.popleft()
         if self._gains_pending is not None and sim.loop.gains is self._gains_pending:
             self.gains_applied_time_s = sim.loop.last_tick_time_s
             self._gains_pending = None
@@ -391,13 +395,12 @@ class SimSession:
     # ------------------------------------------------------------------ observations
     def loop_rate_hz(self) -> float:
         """Control ticks run per wall-clock second, over the last second."""
-        now = time.perf_counter()
-        w = self._tick_walls
-        while w and w[0] < now - 1.0:
-            w.popleft()
-        if not w or self.state != "running":
+        if self.state != "running":
             return 0.0
-        return len(w) / min(1.0, max(now - self._anchor_wall, 1e-3))
+        now = time.perf_counter()
+        # read-only here: status() is also called from the web server's thread
+        recent = sum(1 for t in tuple(self._tick_walls) if t >= now - 1.0)
+        return recent / min(1.0, max(now - self._anchor_wall, 1e-3))
 
     def status(self) -> dict[str, Any]:
         sim = self.sim

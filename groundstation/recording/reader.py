@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from mcap.reader import make_reader
-from mcap.records import Chunk, Message, Metadata
+from mcap.records import Message, Metadata
 from mcap.stream_reader import StreamReader
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -230,7 +230,6 @@ def scenario_attachment(path: Path) -> str | None:
 
 
 __all__ = [
-    "Chunk",
     "LogError",
     "LogIndex",
     "LogInfo",
