@@ -44,7 +44,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--sim",
         action="store_true",
         default=True,
-        help="simulator mode (the default; a live MAVLink vehicle comes later)",
+        help="simulator mode (the default unless --mavlink is given)",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
     sv.add_argument("--port", type=int, default=8000)
@@ -55,6 +55,50 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     sv.add_argument(
         "--data-dir", default=None, help="where named gain sets are kept (default ~/.peregrine)"
+    )
+
+    sv.add_argument(
+        "--mavlink",
+        metavar="URL",
+        default=None,
+        help="live mode: the onboard computer's ground link (e.g. udpin:127.0.0.1:14550)",
+    )
+    sv.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key (live mode)")
+    sv.add_argument("--log-dir", default="logs", help="where sorties are recorded (default logs)")
+
+    st = sub.add_parser("sitl", help="run the simulator as a PX4-like vehicle over MAVLink")
+    st.add_argument(
+        "scenario",
+        nargs="?",
+        default="cv-top-to-bottom",
+        help="scenario TOML file or shipped name (default cv-top-to-bottom)",
+    )
+    st.add_argument(
+        "--mavlink",
+        metavar="URL",
+        default=None,
+        help="pymavlink connection string (default udpout:127.0.0.1:14540, PX4's)",
+    )
+    st.add_argument(
+        "--camera-port",
+        type=int,
+        default=5600,
+        help="TCP port of the camera stream on 127.0.0.1 (0: any free port)",
+    )
+    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    st.add_argument(
+        "--offboard-loss",
+        type=float,
+        default=1.0,
+        help="PX4 COM_OF_LOSS_T: seconds without setpoints before HOLD",
+    )
+    st.add_argument(
+        "--camera-blackout-after",
+        type=float,
+        default=None,
+        metavar="S",
+        help="fault injection: no camera frames after S s of sortie time",
     )
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
@@ -159,17 +203,59 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from onboard.link.px4 import LinkError, load_signing_key
+
     from .app.server import GroundStation
 
     try:
+        key = load_signing_key(args.signing_key) if args.signing_key else None
         gs = GroundStation(
-            args.host, args.port, args.no_auth, Path(args.data_dir) if args.data_dir else None
+            args.host,
+            args.port,
+            args.no_auth,
+            Path(args.data_dir) if args.data_dir else None,
+            log_dir=Path(args.log_dir),
+            mavlink_url=args.mavlink,
+            signing_key=key,
         )
-    except ValueError as exc:
+    except (ValueError, LinkError) as exc:
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2
-    print(f"Peregrine ground station (simulator mode): open {gs.url()}", flush=True)
+    mode = f"live on {args.mavlink}" if args.mavlink else "simulator mode"
+    print(f"Peregrine ground station ({mode}): open {gs.url()}", flush=True)
     gs.run_forever()
+    return 0
+
+
+def _cmd_sitl(args: argparse.Namespace) -> int:
+    import signal
+
+    from onboard.link.px4 import DEFAULT_SITL_URL, LinkError, MavLink
+
+    from .sitl.camera_server import CameraServer
+    from .sitl.vehicle import SitlOptions, SitlVehicle
+
+    scenario = load_scenario(args.scenario)
+    try:
+        link = MavLink(args.mavlink or DEFAULT_SITL_URL, 1, 1)
+        camera = CameraServer("127.0.0.1", args.camera_port)
+    except (LinkError, OSError) as exc:
+        print(f"groundstation: error: {exc}", file=sys.stderr)
+        return 2
+    vehicle = SitlVehicle(
+        scenario,
+        link,
+        camera,
+        SitlOptions(args.offboard_loss, args.camera_blackout_after, args.seed),
+    )
+    signal.signal(signal.SIGTERM, lambda *_: vehicle.stop())
+    try:
+        vehicle.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        camera.close()
+        link.close()
     return 0
 
 
@@ -191,6 +277,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_serve(args)
         if args.command == "replay":
             return _cmd_replay(args)
+        if args.command == "sitl":
+            return _cmd_sitl(args)
         if args.command == "campaign":
             from .campaigns.driver import main_campaign
 

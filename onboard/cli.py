@@ -1,9 +1,9 @@
-"""``onboard`` command line. Today: inspect and check gains; the MAVLink runtime
-(``onboard run``) comes with the vehicle integration."""
+"""``onboard`` command line: inspect and check gains, and run the loop on the vehicle."""
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -27,27 +27,113 @@ def load_gains_file(path: str | Path) -> Gains:
     return Gains.from_mapping(data, source=str(path))
 
 
+def _gains(args) -> int:
+    values = Gains().to_dict()
+    if args.check:
+        try:
+            values = load_gains_file(args.check).to_dict()
+        except GainError as exc:
+            print(f"onboard: error: {exc}", file=sys.stderr)
+            return 2
+    print(f"{'name':10s} {'value':>8s} {'default':>8s} {'unit':9s} {'range':16s} meaning")
+    for s in GAIN_SPECS:
+        rng = f"[{s.minimum:g}, {s.maximum:g}]"
+        print(f"{s.name:10s} {values[s.name]:8g} {s.default:8g} {s.unit:9s} {rng:16s} {s.meaning}")
+    return 0
+
+
+def _run(args) -> int:
+    from .link.px4 import LinkError, load_signing_key
+    from .runtime.runner import OnboardRuntime, RuntimeConfig
+
+    try:
+        key = load_signing_key(args.signing_key) if args.signing_key else None
+        if args.sitl_auto_start and not args.camera.startswith("sitl://"):
+            raise LinkError("--sitl-auto-start is only allowed with a sitl:// camera")
+        config = RuntimeConfig(
+            fc_url=args.mavlink,
+            camera=args.camera,
+            gcs_url=args.gcs or None,
+            params_path=Path(args.params) if args.params else None,
+            control_rate_hz=args.rate,
+            signing_key=key,
+            auto_start=args.sitl_auto_start,
+            stats_path=Path(args.stats) if args.stats else None,
+            log_dir=Path(args.log) if args.log else None,
+        )
+        if not 10.0 <= args.rate <= 1000.0:
+            raise LinkError(f"--rate {args.rate}: expected 10 to 1000 Hz")
+        runtime = OnboardRuntime(config)
+    except (GainError, LinkError, OSError) as exc:
+        print(f"onboard: error: {exc}", file=sys.stderr)
+        return 2
+    if key is None and config.gcs_url:
+        print(
+            "onboard: warning: no --signing-key: anyone on the ground link may command the vehicle",
+            file=sys.stderr,
+        )
+    signal.signal(signal.SIGTERM, lambda *_: runtime.stop())
+    return runtime.run(args.duration)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    from .link.px4 import DEFAULT_GCS_URL, DEFAULT_ONBOARD_FC_URL
+
     parser = argparse.ArgumentParser(prog="onboard", description="Peregrine onboard loop")
     sub = parser.add_subparsers(dest="command", required=True)
     g = sub.add_parser("gains", help="list every gain (default, unit, range, meaning)")
     g.add_argument("--check", metavar="FILE", help="validate a gains TOML file and print it")
+    r = sub.add_parser("run", help="fly: the interception loop against PX4 over MAVLink")
+    r.add_argument(
+        "--mavlink",
+        default=DEFAULT_ONBOARD_FC_URL,
+        metavar="URL",
+        help="flight controller: pymavlink connection string (serial device with "
+        "baud as /dev/ttyTHS1,921600, udpin:, udpout:, tcp:); default %(default)s",
+    )
+    r.add_argument(
+        "--camera",
+        required=True,
+        metavar="SOURCE",
+        help="OpenCV source (device index, /dev/videoN, GStreamer pipeline, video "
+        "file) or sitl://HOST:PORT",
+    )
+    r.add_argument(
+        "--gcs",
+        default=DEFAULT_GCS_URL,
+        metavar="URL",
+        help="ground link for telemetry, parameters and commands (default "
+        "%(default)s; '' for none)",
+    )
+    r.add_argument(
+        "--params",
+        metavar="FILE",
+        help="parameter file (TOML), read at start and rewritten on every change",
+    )
+    r.add_argument("--rate", type=float, default=200.0, help="control rate, Hz (default 200)")
+    r.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="MAVLink 2 signing key (64 hex digits): the ground link then accepts "
+        "only signed parameters and commands",
+    )
+    r.add_argument(
+        "--sitl-auto-start",
+        action="store_true",
+        help="SITL only: start the intercept as soon as the target is in view",
+    )
+    r.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    r.add_argument("--stats", metavar="FILE", help="write timing figures (JSON) here at exit")
+    r.add_argument(
+        "--log",
+        metavar="DIR",
+        help="record every MAVLink frame in and out to DIR/<UTC>_onboard.tlog",
+    )
     args = parser.parse_args(argv)
     if args.command == "gains":
-        values = Gains().to_dict()
-        if args.check:
-            try:
-                values = load_gains_file(args.check).to_dict()
-            except GainError as exc:
-                print(f"onboard: error: {exc}", file=sys.stderr)
-                return 2
-        print(f"{'name':10s} {'value':>8s} {'default':>8s} {'unit':9s} {'range':16s} meaning")
-        for s in GAIN_SPECS:
-            rng = f"[{s.minimum:g}, {s.maximum:g}]"
-            print(
-                f"{s.name:10s} {values[s.name]:8g} {s.default:8g} {s.unit:9s} {rng:16s} {s.meaning}"
-            )
-        return 0
+        return _gains(args)
+    if args.command == "run":
+        return _run(args)
     return 2  # pragma: no cover
 
 

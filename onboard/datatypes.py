@@ -68,6 +68,7 @@ class LoopMode(enum.Enum):
     WAITING = "waiting"  # no target estimate yet: hold position
     TRACKING = "tracking"  # guidance law active
     LOST = "lost"  # estimate lost: brake and hold
+    BRAKE = "brake"  # told to brake and hold (operator abort), estimate still running
 
 
 @dataclass(frozen=True, slots=True)

@@ -89,7 +89,9 @@ class InterceptionLoop:
         self._detections.append(detection)
 
     # ------------------------------------------------------------------ the tick
-    def tick(self, state: VehicleState) -> ControlTelemetry:
+    def tick(self, state: VehicleState, brake: bool = False) -> ControlTelemetry:
+        """One control tick at ``state.time_s``; with ``brake`` the estimate keeps running but
+        the command brakes and holds (an operator abort)."""
         t = state.time_s
         if self._pending_gains is not None:
             self.gains, self._pending_gains = self._pending_gains, None
@@ -115,9 +117,11 @@ class InterceptionLoop:
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0
-        if est is None or est.lost:
-            mode = LoopMode.LOST if self.acquired else LoopMode.WAITING
+        if brake or est is None or est.lost:
+            mode = LoopMode.BRAKE if brake else LoopMode.LOST if self.acquired else LoopMode.WAITING
             a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
+            if est is not None and not est.lost:
+                e_est, e_rate = est.e_px, est.e_rate_px_s
         else:
             mode = LoopMode.TRACKING
             self.acquired = True

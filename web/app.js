@@ -163,12 +163,42 @@ function showStatus(st) {
   } else setBadge("st-dkf", "DKF —");
   setBadge("st-rate", `loop ${st.loop_rate_hz} Hz`);
   $("btn-pause").textContent = st.state === "paused" ? "Resume" : "Pause";
+  showLive(st.live);
   showReplay(st.replay);
   loadOverlay(st.replay ? st.replay.compare : null);
   if (st.gains_applied_time_s !== null && st.gains_applied_time_s !== undefined)
     $("gains-applied").textContent = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
-  if (st.gains_pending) $("gains-applied").textContent = "edit pending: next control tick";
+  if (st.gains_pending) $("gains-applied").textContent = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
 }
+
+// ------------------------------------------------------------------ live vehicle
+function showLive(lv) {
+  $("live-panel").hidden = !lv;
+  if (!lv) return;
+  $("sim-panel").hidden = true;
+  $("lv-url").textContent = `${lv.url}${lv.signed ? " · signed" : " · unsigned"}`;
+  $("lv-link").textContent = lv.link; $("lv-link").className = lv.link === "up" ? "ok" : "err";
+  $("lv-state").textContent = lv.onboard_state;
+  $("lv-fc").textContent = `${lv.fc_link ? "link up" : "no link"} · ${lv.fc_mode} · ${lv.fc_armed ? "armed" : "disarmed"}${lv.target_reported ? " · target reports its position" : ""}`;
+  const num = (x, d) => (x === null || x === undefined ? "—" : Number(x).toFixed(d));
+  $("lv-loop").textContent = `jitter p99 ${num(lv.loop_jitter_p99_ms, 2)} ms · capture→command ${num(lv.latency_ms, 1)} ms · overruns ${num(lv.overruns, 0)}`;
+  const pend = Object.keys(lv.params_pending), refused = Object.values(lv.params_refused);
+  $("lv-params").textContent = `${lv.params_received}/${lv.params_total} read` + (pend.length ? ` · waiting for PARAM_VALUE: ${pend.join(", ")}` : "") + (refused.length ? ` · refused: ${refused.join("; ")}` : "");
+  $("lv-ack").textContent = lv.last_ack ? `${lv.last_ack.command}: ${lv.last_ack.result}` : "—";
+  $("lv-rates").textContent = Object.entries(lv.rates_hz).map(([k, v]) => `${k} ${v}`).join(" · ") + (lv.bad_frames ? ` · bad frames ${lv.bad_frames}` : "");
+  const ev = $("lv-events"); ev.innerHTML = "";
+  for (const e of lv.events.slice().reverse()) {
+    const d = document.createElement("div");
+    d.className = e.severity <= 3 ? "sev-err" : e.severity === 4 ? "sev-warn" : "";
+    d.textContent = `${e.source}: ${e.text}`; ev.appendChild(d);
+  }
+}
+async function liveCommand(action) {
+  try { const r = await api("POST", "/api/live/" + action); msg($("live-msg"), `${action}: ${r.ack.result}`, true); }
+  catch (e) { msg($("live-msg"), e.message, false); }
+}
+$("btn-live-start").onclick = () => liveCommand("start");
+$("btn-live-abort").onclick = () => liveCommand("abort");
 
 // ------------------------------------------------------------------ telemetry
 // Each message is taken in at once (cheap: parse, append to the plots' data); the views are

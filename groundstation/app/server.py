@@ -291,12 +291,18 @@ def create_app(
             new = session.gains.replace(**changes)
         except (GainError, TypeError) as exc:
             raise HTTPException(422, str(exc)) from None
-        session.set_gains(new)
+        try:
+            await asyncio.to_thread(session.set_gains, new)
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
         return await get_gains()
 
     @app.post("/api/gains/reset", tags=["gains"])
     async def reset_gains() -> dict[str, Any]:
-        session.set_gains(session.config.scenario.gains_obj())
+        try:
+            await asyncio.to_thread(session.set_gains, session.default_gains())
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
         return await get_gains()
 
     @app.get("/api/gainsets", tags=["gains"])
@@ -317,7 +323,10 @@ def create_app(
             gains = gainsets.load(name)
         except (GainSetError, GainError) as exc:
             raise HTTPException(422, str(exc)) from None
-        session.set_gains(gains)
+        try:
+            await asyncio.to_thread(session.set_gains, gains)
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
         return await get_gains()
 
     # ------------------------------------------------------------------ recorded sorties
@@ -466,6 +475,26 @@ def create_app(
     async def status() -> dict[str, Any]:
         return session.status()
 
+    async def _live(action: str) -> dict[str, Any]:
+        fn = getattr(session, f"live_{action}", None)
+        if fn is None:
+            raise HTTPException(409, "simulator mode: there is no live vehicle")
+        try:
+            ack = await asyncio.to_thread(fn)
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return {"ack": ack, "status": session.status()}
+
+    @app.post("/api/live/start", tags=["live"])
+    async def live_start() -> dict[str, Any]:
+        """Send the start command to the onboard computer and wait for its COMMAND_ACK."""
+        return await _live("start")
+
+    @app.post("/api/live/abort", tags=["live"])
+    async def live_abort() -> dict[str, Any]:
+        """Send abort (brake and hold) and wait for the COMMAND_ACK."""
+        return await _live("abort")
+
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
 
 
@@ -485,6 +514,8 @@ class GroundStation:
         no_auth: bool = False,
         data_dir: Path | None = None,
         log_dir: Path | None = Path("logs"),
+        mavlink_url: str | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
         if no_auth and not is_loopback(host):
             raise ValueError(f"--no-auth is refused on a non-loopback address ({host})")
@@ -498,9 +529,21 @@ class GroundStation:
         self.hub = TelemetryHub()
         self.scene = SceneView(self.viser)
         self.log_dir = log_dir
-        self.session = SimSession(
-            on_snapshot=self.hub.publish_from_thread, scene=self.scene, log_dir=log_dir
-        )
+        self.live = mavlink_url is not None
+        if mavlink_url is not None:
+            from .live import LiveSession
+
+            self.session = LiveSession(
+                mavlink_url,
+                signing_key,
+                on_snapshot=self.hub.publish_from_thread,
+                scene=self.scene,
+                log_dir=log_dir,
+            )
+        else:
+            self.session = SimSession(
+                on_snapshot=self.hub.publish_from_thread, scene=self.scene, log_dir=log_dir
+            )
         self.gainsets = GainSetStore((data_dir or default_data_dir()) / "gainsets")
         self.app = create_app(
             self.session,

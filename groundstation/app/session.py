@@ -219,6 +219,10 @@ class SimSession:
 
         return self.submit(go)
 
+    def default_gains(self) -> Gains:
+        """The gains of the scenario on screen (what "reset gains" restores)."""
+        return self.config.scenario.gains_obj()
+
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)

@@ -244,17 +244,18 @@ class SortieRecorder:
         sec, nsec = divmod(_ns(t_s), 1_000_000_000)
         p, q = sim.vehicle.p, sim.vehicle.q
         qx, qy, qz, qw = q[1], q[2], q[3], q[0]
-        tp = sim.target.p
+        tp = sim.target.p  # None: a live target that does not report its position
         self._put(
             "/world/vehicle", t_s, (_POSE % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw)).encode()
         )
         half = (self._tick - 1) % (2 * self.record_every) == 0
-        if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
+        if half and tp is not None:
             self._put(
                 "/world/target",
                 t_s,
                 (_POSE % (sec, nsec, tp[0], tp[1], tp[2], 0, 0, 0, 1)).encode(),
             )
+        if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
             self._put(
                 "/tf",
                 t_s,
@@ -263,7 +264,11 @@ class SortieRecorder:
         a = tel.accel_desired_enu_m_s2
         w = tel.command.body_rates_flu_rad_s
         v = sim.vehicle.v
-        rx, ry, rz = tp[0] - p[0], tp[1] - p[1], tp[2] - p[2]
+        if tp is not None:
+            rx, ry, rz = tp[0] - p[0], tp[1] - p[1], tp[2] - p[2]
+            range_js = "%.4f" % math.sqrt(rx * rx + ry * ry + rz * rz)
+        else:
+            range_js = "null"
         e, er = tel.e_est_px, tel.e_rate_est_px_s
         self._put(
             "/control",
@@ -274,7 +279,7 @@ class SortieRecorder:
                 '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
                 '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
                 '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%.4f,'
-                '"range_m":%.4f}'
+                '"range_m":%s}'
                 % (
                     t_s,
                     tel.mode.value,
@@ -296,13 +301,13 @@ class SortieRecorder:
                     _js2(e),
                     _js2(er),
                     math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
-                    math.sqrt(rx * rx + ry * ry + rz * rz),
+                    range_js,
                 )
             ).encode(),
         )
         if half:
             self._dkf(t_s, tel)
-        if (self._tick - 1) % (self.record_every * 20) == 0:  # /scene at a twentieth
+        if (self._tick - 1) % (self.record_every * 20) == 0 and tp is not None:  # /scene
             self._scene(t_s, p, tp)
 
     def _dkf(self, t_s: float, tel: ControlTelemetry) -> None:
@@ -312,7 +317,7 @@ class SortieRecorder:
             st = cov = "null"
         else:
             st = "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[0])
-            cov = "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[1])
+            cov = "null" if state[1] is None else "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[1])
         self._put(
             "/dkf",
             t_s,
@@ -439,11 +444,13 @@ class SortieRecorder:
         t_end = self.sim.time_s
         if summary is not None:
             level = "info" if summary.get("outcome") == "HIT" else "warning"
+            miss = summary.get("miss_m")
             self.event(
                 t_end,
                 level,
                 f"outcome {summary['outcome']}: miss "
-                f"{summary['miss_m']:.3f} m at t = {summary['intercept_time_s']:.2f} s",
+                + ("unknown" if miss is None else f"{miss:.3f} m")
+                + f" at t = {summary['intercept_time_s']:.2f} s",
             )
         else:
             self.event(t_end, "warning", f"sortie stopped early: {reason or 'no outcome'}")

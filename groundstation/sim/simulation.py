@@ -81,6 +81,20 @@ class TickRecord:
     telemetry: ControlTelemetry = field(repr=False)
 
 
+def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool]:
+    """Closest approach within one physics step, the relative position moving linearly from
+    ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
+    position there, whether the range was closing at the start and is opening at the end."""
+    d0, d1, d2 = r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    r0d = r0[0] * d0 + r0[1] * d1 + r0[2] * d2
+    s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+    c = (r0[0] + s * d0, r0[1] + s * d1, r0[2] + s * d2)
+    dist = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+    opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
+    return dist, s, c, r0d < 0.0, opening_now
+
+
 class Simulation:
     def __init__(
         self,
@@ -254,12 +268,7 @@ class Simulation:
         tp, vp = self.target.p, self.vehicle.p
         r1 = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
         self._rel = r1
-        d0, d1, d2 = r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        r0d = r0[0] * d0 + r0[1] * d1 + r0[2] * d2
-        s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
-        c0, c1, c2 = r0[0] + s * d0, r0[1] + s * d1, r0[2] + s * d2
-        dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        dist, s, (c0, c1, c2), closing_before, opening_now = closest_in_step(r0, r1)
         veh = self.vehicle
         v = veh.v
         if dist < self.miss_m:
@@ -268,8 +277,7 @@ class Simulation:
             self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
             self.closest_rel_m = (c0, c1, c2)
             self.closest_vel_m_s = (v[0], v[1], v[2])
-        opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
-        if r0d < 0.0 and opening_now and dist < PASS_RADIUS_M:
+        if closing_before and opening_now and dist < PASS_RADIUS_M:
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
         elif (
             not (veh.finite() and math.isfinite(r1[0] + r1[1] + r1[2]))

@@ -1,0 +1,635 @@
+"""Live mode: the dashboard on a real (or SITL) vehicle through the onboard computer's ground
+link. The same views as simulator mode are fed from MAVLink: the flight controller's pose
+(passed through by the onboard component), the controller state in ``DEBUG_FLOAT_ARRAY``
+(layout: :mod:`onboard.link.telemetry`), a cooperative target's own position (system 2)
+when it reports one, and ``STATUSTEXT`` events.
+
+Gain edits go out as ``PARAM_SET`` and count as applied only when the matching
+``PARAM_VALUE`` comes back; start and abort are ``COMMAND_LONG`` answered by
+``COMMAND_ACK``. A sortie is recorded to MCAP from the accepted start until the onboard
+component reports it finished (or the link is lost).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from onboard.camera_model import CameraModel
+from onboard.control.guidance import normal_component
+from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.gains import GAIN_NAMES, Gains
+from onboard.link import telemetry as tm
+from onboard.link.params import PARAM_SPECS
+from onboard.link.px4 import (
+    AUTOPILOT_COMPONENT_ID,
+    CMD_ABORT,
+    CMD_START,
+    GCS_COMPONENT_ID,
+    GCS_SYSTEM_ID,
+    ONBOARD_COMPONENT_ID,
+    TARGET_SYSTEM_ID,
+    VEHICLE_SYSTEM_ID,
+    MavLink,
+    mavlink,
+    message_text,
+    ned_to_enu,
+    param_id_str,
+    px4_mode_name,
+    quat_ned_frd_to_enu_flu,
+)
+
+from .scene import SceneState
+from .session import SessionError
+
+PUBLISH_HZ = 25.0
+SCENE_EVERY = 5
+LINK_TIMEOUT_S = 2.0
+ACK_TIMEOUT_S = 2.0
+TARGET_DIAMETER_M = 0.3  # drawn size of a cooperative target (its telemetry has no size)
+FINISHED_STATES = ("finished", "link_lost")
+ACK_NAMES = {
+    mavlink.MAV_RESULT_ACCEPTED: "accepted",
+    mavlink.MAV_RESULT_DENIED: "denied",
+    mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
+    mavlink.MAV_RESULT_FAILED: "failed",
+    mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
+}
+
+
+# ---------------------------------------------------------------------- recorder adapter
+class _LiveScenario:
+    """What the recorder reads of a scenario, for a live sortie."""
+
+    def __init__(self, control_rate_hz: float) -> None:
+        self.name = "live"
+        self.source = "live MAVLink"
+        self.text = ""
+        self.sim = type("SimSpec", (), {"control_rate_hz": control_rate_hz})()
+        self.target = type("TargetSpec", (), {"diameter_m": TARGET_DIAMETER_M})()
+
+
+class _Obj:
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
+
+
+class _DkfView:
+    def __init__(self, session: LiveSession) -> None:
+        self.s = session
+
+    def state_vector(self):
+        t = self.s.tel
+        if t.get("e_est_u_px") is None:
+            return None
+        return (
+            [
+                t["e_est_u_px"],
+                t["e_est_v_px"],
+                t["e_rate_u_px_s"] or 0.0,
+                t["e_rate_v_px_s"] or 0.0,
+            ],
+            None,
+        )
+
+
+class LiveSortieView:
+    """The attributes :class:`~groundstation.recording.writer.SortieRecorder` reads of a
+    simulation, from live telemetry (times relative to the accepted start)."""
+
+    def __init__(self, session: LiveSession, law: str, t0_s: float) -> None:
+        self.s = session
+        self.law = law
+        self.seed = 0
+        self.t0_s = t0_s
+        self.scenario = _LiveScenario(50.0)
+        self.camera = _Obj(mode="live")
+        self.camera_model = session.camera_model()
+        self.loop = _Obj(gains=session.gains, acquired=False, guard_trips=0, dkf=_DkfView(session))
+        self.vehicle = _Obj(p=[0.0, 0.0, 0.0], q=[1.0, 0.0, 0.0, 0.0], v=[0.0, 0.0, 0.0])
+        self.target = _Obj(p=None)
+        self.last_telemetry: ControlTelemetry | None = None
+        self.last_detection: Detection | None = None
+        self.time_s = 0.0
+
+
+# ---------------------------------------------------------------------- the session
+class LiveSession:
+    """Plays the part of :class:`~groundstation.app.session.SimSession` for a live link."""
+
+    def __init__(
+        self,
+        url: str,
+        signing_key: bytes | None = None,
+        on_snapshot: Callable[[dict[str, Any]], None] | None = None,
+        scene: Any | None = None,
+        log_dir: Path | None = None,
+        publish_hz: float = PUBLISH_HZ,
+    ) -> None:
+        self.link = MavLink(url, GCS_SYSTEM_ID, GCS_COMPONENT_ID, signing_key, unsigned_ok=None)
+        self.url = url
+        self.signed = signing_key is not None
+        self.log_dir = log_dir
+        self._on_snapshot = on_snapshot
+        self.scene = scene
+        self.publish_period_s = 1.0 / publish_hz
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self.replay = self.compare = None
+        self.state = "live"
+        self.params: dict[str, float] = {}
+        self.pending: dict[str, float] = {}  # PARAM_SET sent, PARAM_VALUE not yet back
+        self.refused: dict[str, str] = {}
+        self.gains = Gains()
+        self.gains_applied_time_s: float | None = None
+        self.tel: dict[str, float | None] = {}
+        self.tel_rx_s: float | None = None
+        self.onboard_rx_s: float | None = None
+        self.onboard_state = "unknown"
+        self.fc_mode = "—"
+        self.fc_armed = False
+        self.fc_rx_s: float | None = None
+        self.vehicle_p: list[float] | None = None
+        self.vehicle_v = [0.0, 0.0, 0.0]
+        self.vehicle_q = [1.0, 0.0, 0.0, 0.0]
+        self.target_p: list[float] | None = None
+        self.target_rx_s: float | None = None
+        self.events: deque[dict[str, Any]] = deque(maxlen=50)
+        self.acks: dict[int, tuple[float, int]] = {}
+        self.last_ack: dict[str, Any] | None = None
+        self._acked = threading.Condition(self._lock)
+        self.recorder = None
+        self.view: LiveSortieView | None = None
+        self._trail_vehicle: list[list[float]] = []
+        self._trail_target: list[list[float]] = []
+        self._last_trail = -1.0
+        self._params_requested = -1e9
+        self._publish_count = 0
+        self._scene_reset = False
+        self._prev_vel: tuple[float, list[float]] | None = None
+        self.normal_accel_m_s2: float | None = None
+        self.miss_m: float | None = None
+        self._rel_prev = None
+        self.scene_errors = 0
+        self._thread = threading.Thread(target=self._run, name="live-link", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ simulator commands
+    def _not_live(self, *_a, **_k):
+        raise SessionError("live mode: the simulator controls are not available")
+
+    start = pause = resume = step = reset = set_speed = _not_live
+    open_replay = compare_with = replay_command = _not_live
+
+    def default_gains(self) -> Gains:
+        return Gains()
+
+    @property
+    def config(self):  # what the gain-set routes read
+        return _Obj(scenario=_Obj(gains_obj=Gains))
+
+    # ------------------------------------------------------------------ operator commands
+    def set_gains(self, gains: Gains) -> Gains:
+        """Send a PARAM_SET for every gain that differs from the vehicle's value."""
+        with self._lock:
+            if not self.link_up():
+                raise SessionError("no link to the onboard computer: gains not sent")
+            for name in GAIN_NAMES:
+                new = float(getattr(gains, name))
+                cur = self.params.get(name)
+                if cur is None or not math.isclose(new, cur, rel_tol=1e-6, abs_tol=1e-7):
+                    self.pending[name] = new
+                    self.refused.pop(name, None)
+                    self.link.send(
+                        self.link.mav.param_set_encode(
+                            VEHICLE_SYSTEM_ID,
+                            ONBOARD_COMPONENT_ID,
+                            name.encode("ascii"),
+                            new,
+                            mavlink.MAV_PARAM_TYPE_REAL32,
+                        )
+                    )
+        return gains
+
+    def _command(self, command: int, label: str) -> dict[str, Any]:
+        with self._lock:
+            if not self.link_up():
+                raise SessionError(f"{label}: no link to the onboard computer")
+            sent_at = time.monotonic()
+            self.link.send(
+                self.link.mav.command_long_encode(
+                    VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, command, 0, 0, 0, 0, 0, 0, 0, 0
+                )
+            )
+            while True:
+                ack = self.acks.get(command)
+                if ack is not None and ack[0] >= sent_at:
+                    break
+                left = sent_at + ACK_TIMEOUT_S - time.monotonic()
+                if left <= 0:
+                    raise SessionError(f"{label}: no acknowledgement from the onboard computer")
+                self._acked.wait(left)
+            result = ack[1]
+            self.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
+            if result != mavlink.MAV_RESULT_ACCEPTED:
+                why = next((e["text"] for e in reversed(self.events) if label in e["text"]), "")
+                raise SessionError(
+                    f"{label} {self.last_ack['result']}" + (f": {why}" if why else "")
+                )
+            if command == CMD_START and self.recorder is None:
+                self._start_recording()
+            return self.last_ack
+
+    def live_start(self) -> dict[str, Any]:
+        return self._command(CMD_START, "start")
+
+    def live_abort(self) -> dict[str, Any]:
+        return self._command(CMD_ABORT, "abort")
+
+    # ------------------------------------------------------------------ the link thread
+    def link_up(self) -> bool:
+        return (
+            self.onboard_rx_s is not None and time.monotonic() - self.onboard_rx_s < LINK_TIMEOUT_S
+        )
+
+    def _run(self) -> None:
+        next_publish = 0.0
+        while not self._stop.is_set():
+            msgs = self.link.poll()
+            now = time.monotonic()
+            with self._lock:
+                for m in msgs:
+                    try:
+                        self._take(m, now)
+                    except (AttributeError, ValueError, TypeError, IndexError):
+                        self.link.bad_frames += 1  # well-formed MAVLink with nonsense inside
+                if (
+                    self.link_up()
+                    and len(self.params) < len(PARAM_SPECS)
+                    and (now - self._params_requested > 3.0)
+                ):
+                    self._params_requested = now
+                    self.link.send(
+                        self.link.mav.param_request_list_encode(
+                            VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID
+                        )
+                    )
+                self._maybe_finish(now)
+            if now >= next_publish:
+                next_publish = now + self.publish_period_s
+                self._publish()
+            self._stop.wait(0.005)
+
+    def _take(self, m, now: float) -> None:
+        kind = m.get_type()
+        sys_id, comp = m.get_srcSystem(), m.get_srcComponent()
+        if sys_id == TARGET_SYSTEM_ID:
+            if kind == "LOCAL_POSITION_NED":
+                p = ned_to_enu((m.x, m.y, m.z))
+                if np.all(np.isfinite(p)):
+                    self.target_p, self.target_rx_s = [float(c) for c in p], now
+            return
+        if sys_id != VEHICLE_SYSTEM_ID:
+            return
+        if comp == AUTOPILOT_COMPONENT_ID:
+            self.fc_rx_s = now
+            if kind == "HEARTBEAT":
+                self.fc_mode = px4_mode_name(m.custom_mode)
+                self.fc_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            elif kind == "ATTITUDE_QUATERNION":
+                q = quat_ned_frd_to_enu_flu((m.q1, m.q2, m.q3, m.q4))
+                if np.all(np.isfinite(q)):
+                    self.vehicle_q = [float(c) for c in q]
+            elif kind == "LOCAL_POSITION_NED":
+                p, v = ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz))
+                if np.all(np.isfinite(p)) and np.all(np.isfinite(v)):
+                    self.vehicle_p, self.vehicle_v = [float(c) for c in p], [float(c) for c in v]
+            elif kind == "STATUSTEXT":
+                self._event(now, "px4", message_text(m), m.severity)
+            return
+        if comp != ONBOARD_COMPONENT_ID:
+            return
+        self.onboard_rx_s = now
+        if kind == "HEARTBEAT":
+            code = int(m.custom_mode)
+            self.onboard_state = tm.STATE_CODES[code] if 0 <= code < len(tm.STATE_CODES) else "?"
+        elif kind == "DEBUG_FLOAT_ARRAY" and m.array_id == tm.ARRAY_ID:
+            self._telemetry(tm.unpack(m.data), now)
+        elif kind == "STATUSTEXT":
+            self._event(now, "onboard", message_text(m), m.severity)
+        elif kind == "PARAM_VALUE":
+            name = param_id_str(m.param_id)
+            value = float(m.param_value)
+            self.params[name] = value
+            if name in self.pending:
+                want = self.pending.pop(name)
+                if math.isclose(want, value, rel_tol=1e-6, abs_tol=1e-6):
+                    self.gains_applied_time_s = self.tel.get("t_s")
+                else:
+                    self.refused[name] = f"{name}: vehicle kept {value:g}"
+            if name in GAIN_NAMES:
+                with contextlib.suppress(ValueError):
+                    self.gains = self.gains.replace(**{name: value})
+        elif kind == "COMMAND_ACK":
+            self.acks[int(m.command)] = (now, int(m.result))
+            self._acked.notify_all()
+
+    def _event(self, now: float, source: str, text: str, severity: int) -> None:
+        self.events.append(
+            {"t": round(now, 3), "source": source, "text": text, "severity": int(severity)}
+        )
+        if self.recorder is not None and self.view is not None:
+            level = (
+                "error"
+                if severity <= mavlink.MAV_SEVERITY_ERROR
+                else ("warning" if severity == mavlink.MAV_SEVERITY_WARNING else "info")
+            )
+            self.recorder.event(self.view.time_s, level, f"{source}: {text}")
+
+    def _telemetry(self, t: dict[str, float | None], now: float) -> None:
+        self.tel, self.tel_rx_s = t, now
+        code = t.get("state")
+        if code is not None and 0 <= int(code) < len(tm.STATE_CODES):
+            self.onboard_state = tm.STATE_CODES[int(code)]
+        v = [t.get("vel_e_m_s"), t.get("vel_n_m_s"), t.get("vel_u_m_s")]
+        ts = t.get("t_s")
+        if None not in v and ts is not None:
+            if self._prev_vel is not None and ts > self._prev_vel[0]:
+                dt = ts - self._prev_vel[0]
+                a = (np.array(v) - np.array(self._prev_vel[1])) / dt
+                self.normal_accel_m_s2 = normal_component(a, np.array(v))
+            self._prev_vel = (ts, v)
+        self._track_miss()
+        if self.recorder is not None and self.view is not None and ts is not None:
+            self._record(t, ts)
+        if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
+            self._last_trail = ts
+            self._trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
+            if self.target_p is not None:
+                self._trail_target.append([round(c, 3) for c in self.target_p])
+
+    def _track_miss(self) -> None:
+        if self.recorder is None or self.vehicle_p is None or self.target_p is None:
+            return
+        r = float(np.linalg.norm(np.array(self.target_p) - np.array(self.vehicle_p)))
+        self.miss_m = r if self.miss_m is None else min(self.miss_m, r)
+
+    # ------------------------------------------------------------------ recording
+    def camera_model(self) -> CameraModel:
+        t = self.tel
+        w, h = int(t.get("image_w_px") or 640), int(t.get("image_h_px") or 480)
+        hfov = self.params.get("CAM_HFOV_DEG", 90.0)
+        return CameraModel(
+            w, h, hfov, self.params.get("CAM_PITCH_DEG", 0.0), self.params.get("CAM_ROLL_DEG", 0.0)
+        )
+
+    def _start_recording(self) -> None:
+        if self.log_dir is None:
+            return
+        from ..recording.writer import SortieRecorder
+
+        law = tm.LAW_CODES[int(self.params.get("LAW", 0))]
+        self.view = LiveSortieView(self, law, self.tel.get("t_s") or 0.0)
+        self.miss_m = None
+        self._trail_vehicle, self._trail_target = [], []
+        self.recorder = SortieRecorder(
+            Path(self.log_dir), self.view, record_every=1, annotate_every=1, frame_every=1000000
+        )
+        self._scene_reset = True
+
+    def _record(self, t: dict[str, float | None], ts: float) -> None:
+        view = self.view
+        view.time_s = max(ts - view.t0_s, 0.0)
+        view.vehicle.p, view.vehicle.v, view.vehicle.q = (
+            list(self.vehicle_p or [0.0, 0.0, 0.0]),
+            list(self.vehicle_v),
+            list(self.vehicle_q),
+        )
+        view.target.p = None if self.target_p is None else list(self.target_p)
+        view.loop.gains = self.gains
+        mode = LoopMode(tm.LOOP_MODE_CODES[int(t.get("loop_mode") or 0)])
+        view.loop.acquired = view.loop.acquired or mode is LoopMode.TRACKING
+        view.loop.guard_trips = int(t.get("guard_trips") or 0)
+
+        def pair(a, b):
+            return None if t.get(a) is None or t.get(b) is None else (t[a], t[b])
+
+        nan = math.nan
+        tel = ControlTelemetry(
+            time_s=view.time_s,
+            mode=mode,
+            law=view.law,
+            e_est_px=pair("e_est_u_px", "e_est_v_px"),
+            e_rate_est_px_s=pair("e_rate_u_px_s", "e_rate_v_px_s"),
+            los_elev_rad=t.get("los_elev_rad") or nan,
+            los_azim_rad=t.get("los_azim_rad") or nan,
+            vel_elev_rad=t.get("vel_elev_rad") or nan,
+            vel_azim_rad=t.get("vel_azim_rad") or nan,
+            accel_desired_enu_m_s2=np.array(
+                [
+                    t.get("acc_des_e_m_s2") or 0.0,
+                    t.get("acc_des_n_m_s2") or 0.0,
+                    t.get("acc_des_u_m_s2") or 0.0,
+                ]
+            ),
+            accel_normal_desired_m_s2=t.get("acc_normal_des_m_s2") or 0.0,
+            yaw_rate_cmd_rad_s=t.get("yaw_rate_cmd_rad_s") or 0.0,
+            command=RateThrustCommand(
+                view.time_s,
+                np.array(
+                    [
+                        t.get("rate_cmd_x_rad_s") or 0.0,
+                        t.get("rate_cmd_y_rad_s") or 0.0,
+                        t.get("rate_cmd_z_rad_s") or 0.0,
+                    ]
+                ),
+                t.get("thrust_cmd") or 0.0,
+            ),
+            dkf_time_since_detection_s=t.get("dkf_since_det_s") or math.inf,
+            dkf_lost=bool(t.get("dkf_lost")),
+            guard_tripped=False,
+        )
+        view.last_telemetry = tel
+        raw = pair("e_raw_u_px", "e_raw_v_px")
+        if raw is not None:
+            cam = view.camera_model
+            u, v = cam.cu_px + raw[0], cam.cv_px + raw[1]
+            view.last_detection = Detection(view.time_s, (u, v), (u - 5, v - 5, 10, 10), 100.0)
+        self.recorder.on_tick(view.time_s, tel, self.normal_accel_m_s2 or 0.0)
+        if int(ts * 50) % 5 == 0:  # annotations at about 10 Hz
+            self.recorder.on_frame(view.time_s, None)
+
+    def _maybe_finish(self, now: float) -> None:
+        if self.recorder is None:
+            return
+        if (
+            self.onboard_state in FINISHED_STATES
+            or not self.link_up()
+            or (self.onboard_state in ("ready", "waiting_target") and self.view.time_s > 1.0)
+        ):
+            self._finish_recording(None if self.link_up() else "link to the onboard lost")
+
+    def _finish_recording(self, reason: str | None) -> None:
+        rec, view = self.recorder, self.view
+        if rec is None:
+            return
+        why = reason or next(
+            (e["text"] for e in reversed(self.events) if e["text"].startswith("finished")),
+            self.onboard_state,
+        )
+        summary = {
+            "outcome": "LIVE_" + self.onboard_state.upper(),
+            "miss_m": self.miss_m,
+            "intercept_time_s": view.time_s,
+            "reason": why,
+            "law": view.law,
+        }
+        rec.finish(summary)
+        self.recorder = None
+
+    @property
+    def recording(self) -> dict[str, Any] | None:
+        rec = self.recorder
+        if rec is None:
+            return None
+        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+
+    # ------------------------------------------------------------------ observations
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            t = self.tel
+            now = time.monotonic()
+            return {
+                "state": "live",
+                "scenario": "live",
+                "law": tm.LAW_CODES[int(self.params.get("LAW", 0))],
+                "seed": "—",
+                "camera": "onboard",
+                "speed": "1",
+                "time_s": round(t.get("t_s") or 0.0, 3),
+                "outcome": None,
+                "miss_m": None,
+                "loop_rate_hz": round(t.get("loop_rate_hz") or 0.0, 1),
+                "gains_applied_time_s": self.gains_applied_time_s,
+                "gains_pending": bool(self.pending),
+                "real_time_ratio": 1.0,
+                "scene_errors": self.scene_errors,
+                "recording": self.recording,
+                "replay": None,
+                "dkf": None
+                if not t
+                else {
+                    "acquired": t.get("loop_mode") is not None and int(t["loop_mode"]) != 0,
+                    "lost": bool(t.get("dkf_lost")),
+                    "time_since_detection_s": t.get("dkf_since_det_s"),
+                },
+                "live": {
+                    "url": self.url,
+                    "signed": self.signed,
+                    "link": "up"
+                    if self.link_up()
+                    else ("never heard" if self.onboard_rx_s is None else "lost"),
+                    "onboard_state": self.onboard_state,
+                    "fc_mode": self.fc_mode,
+                    "fc_armed": self.fc_armed,
+                    "fc_link": self.fc_rx_s is not None and now - self.fc_rx_s < LINK_TIMEOUT_S,
+                    "target_reported": self.target_rx_s is not None
+                    and now - self.target_rx_s < LINK_TIMEOUT_S,
+                    "rates_hz": self.link.rates_hz(),
+                    "bad_frames": self.link.bad_frames,
+                    "loop_jitter_p99_ms": t.get("loop_jitter_p99_ms"),
+                    "latency_ms": t.get("latency_ms"),
+                    "overruns": t.get("overruns"),
+                    "params_received": len(self.params),
+                    "params_total": len(PARAM_SPECS),
+                    "params_pending": dict(self.pending),
+                    "params_refused": dict(self.refused),
+                    "last_ack": self.last_ack,
+                    "events": list(self.events)[-8:],
+                    "miss_m": self.miss_m,
+                },
+            }
+
+    def snapshot(self) -> dict[str, Any]:
+        self._publish_count += 1
+        snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
+        with self._lock:
+            t = self.tel
+            if not t or self.vehicle_p is None:
+                return snap
+            vp = np.array(self.vehicle_p)
+            v = np.array(self.vehicle_v)
+            tp = self.target_p
+            rng = None if tp is None else float(np.linalg.norm(np.array(tp) - vp))
+            w, h, f = t.get("image_w_px") or 640, t.get("image_h_px") or 480, t.get("f_px")
+            f = f or 320.0
+
+            def pair(a, b):
+                return None if t.get(a) is None or t.get(b) is None else [t[a], t[b]]
+
+            snap.update(
+                {
+                    "t": round(t.get("t_s") or 0.0, 4),
+                    "vehicle": {"p": list(vp), "v": list(v), "q": list(self.vehicle_q)},
+                    "target": None if tp is None else {"p": tp, "diameter_m": TARGET_DIAMETER_M},
+                    "range_m": rng,
+                    "speed_m_s": float(np.linalg.norm(v)),
+                    "normal_vel_m_s": None
+                    if tp is None
+                    else normal_component(v, np.array(tp) - vp),
+                    "normal_accel_m_s2": self.normal_accel_m_s2,
+                    "image": {
+                        "w": w,
+                        "h": h,
+                        "f": f,
+                        "vfov_deg": math.degrees(2 * math.atan(h / 2 / f)),
+                    },
+                    "e_est_px": pair("e_est_u_px", "e_est_v_px"),
+                    "e_raw_px": pair("e_raw_u_px", "e_raw_v_px"),
+                    "raw_capture_t": t.get("raw_capture_t_s"),
+                    "mode": tm.LOOP_MODE_CODES[int(t.get("loop_mode") or 0)],
+                    "k_a": self.gains.k_a,
+                }
+            )
+        return snap
+
+    def _publish(self) -> None:
+        snap = self.snapshot()
+        if (
+            self.scene is not None
+            and self.vehicle_p is not None
+            and (self._publish_count % SCENE_EVERY == 0)
+        ):
+            try:
+                tp = self.target_p or self.vehicle_p  # no target report: nothing to draw apart
+                state = SceneState(
+                    self.tel.get("t_s") or 0.0,
+                    tuple(self.vehicle_p),
+                    tuple(self.vehicle_q),
+                    tuple(tp),
+                    None,
+                    "",
+                )
+                if self._scene_reset or not getattr(self, "_scene_ready", False):
+                    self.scene.reset(self.camera_model(), TARGET_DIAMETER_M, state)
+                    self._scene_ready, self._scene_reset = True, False
+                self.scene.update(state, self._trail_vehicle[-600:], self._trail_target[-600:])
+            except Exception:  # a viewer problem must never stop the link
+                self.scene_errors += 1
+        if self._on_snapshot is not None:
+            self._on_snapshot(snap)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        with self._lock:
+            self._finish_recording("the ground station stopped")
+        self.link.close()

@@ -1,0 +1,167 @@
+"""The onboard component's MAVLink parameters: every gain (``onboard/gains.py``, live) and the
+runtime settings below (applied only while not flying). Names are at most 16 characters,
+values REAL32. A value outside its range is refused and the old one stays.
+
+The table is saved as ``name = value`` TOML (the same format ``onboard gains --check``
+reads), written to a temporary file and renamed, so a crash never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..gains import GAIN_SPECS, GainError, Gains
+from .telemetry import LAW_CODES
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+def _param(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any:
+    return field(default=default, metadata={"unit": unit, "min": lo, "max": hi, "meaning": meaning})
+
+
+@dataclass(frozen=True)
+class RuntimeParams:
+    LAW: float = _param(0, "-", 0, len(LAW_CODES) - 1, "guidance law: 0 png, 1 pg, 2 ibvs")
+    CAM_HFOV_DEG: float = _param(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
+    CAM_PITCH_DEG: float = _param(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
+    CAM_ROLL_DEG: float = _param(0.0, "deg", -180.0, 180.0, "camera mount roll")
+    CAM_LAT_S: float = _param(0.0, "s", 0.0, 0.5, "OpenCV cameras: exposure-to-grab latency")
+    HOVER_THR: float = _param(1.0 / 3.0, "-", 0.05, 0.95, "normalised thrust that hovers")
+    TGT_LOST_S: float = _param(0.5, "s", 0.1, 5.0, "no detection this long: brake and hold")
+    DONE_SIZE: float = _param(
+        0.2,
+        "-",
+        0.01,
+        1.0,
+        "target lost after it grew past this fraction of the image width: the pass is done",
+    )
+    HOLD_SPEED: float = _param(0.3, "m/s", 0.05, 2.0, "braking ends below this speed")
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise GainError(f"parameter {f.name}: expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise GainError(f"parameter {f.name}: {value} is not finite")
+            lo, hi = f.metadata["min"], f.metadata["max"]
+            if not lo <= value <= hi:
+                raise GainError(f"parameter {f.name} = {value} is outside its range [{lo}, {hi}]")
+            object.__setattr__(self, f.name, float(value))
+        if int(self.LAW) != self.LAW:
+            raise GainError(f"parameter LAW = {self.LAW} must be 0, 1 or 2")
+
+    @property
+    def law(self) -> str:
+        return LAW_CODES[int(self.LAW)]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    default: float
+    minimum: float
+    maximum: float
+    unit: str
+    meaning: str
+    live: bool  # applied while flying (gains) or only on the ground
+
+
+PARAM_SPECS: tuple[ParamSpec, ...] = tuple(
+    ParamSpec(s.name, s.default, s.minimum, s.maximum, s.unit, s.meaning, True) for s in GAIN_SPECS
+) + tuple(
+    ParamSpec(
+        f.name,
+        f.default,
+        f.metadata["min"],
+        f.metadata["max"],
+        f.metadata["unit"],
+        f.metadata["meaning"],
+        False,
+    )
+    for f in dataclasses.fields(RuntimeParams)
+)
+PARAM_INDEX = {s.name: i for i, s in enumerate(PARAM_SPECS)}
+assert all(len(s.name) <= 16 for s in PARAM_SPECS)
+assert len(PARAM_INDEX) == len(PARAM_SPECS)
+
+
+class ParamTable:
+    """Current gains and runtime parameters, validated, optionally backed by a file."""
+
+    def __init__(self, path: Path | None = None) -> None:
+        self.path = path
+        self.gains = Gains()
+        self.runtime = RuntimeParams()
+        self.version = 0
+        if path is not None and path.exists():
+            self.load(path)
+
+    def load(self, path: Path) -> None:
+        """Read ``path``; a bad file raises :class:`GainError` naming it and changes nothing."""
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
+            raise GainError(f"{path}: cannot read: {exc}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise GainError(f"{path}: not valid TOML: {exc}") from None
+        unknown = set(data) - set(PARAM_INDEX)
+        if unknown:
+            raise GainError(f"{path}: unknown parameter(s): {', '.join(sorted(unknown))}")
+        gains = {k: v for k, v in data.items() if k in Gains.__dataclass_fields__}
+        runtime = {k: v for k, v in data.items() if k in RuntimeParams.__dataclass_fields__}
+        try:
+            g = Gains().replace(**gains)
+            r = RuntimeParams(**runtime)
+        except (GainError, TypeError) as exc:
+            raise GainError(f"{path}: {exc}") from None
+        self.gains, self.runtime = g, r
+
+    def save(self) -> None:
+        if self.path is None:
+            return
+        lines = ["# Peregrine onboard parameters (written by onboard run)"]
+        lines += [f"{s.name} = {self.get(s.name)!r}" for s in PARAM_SPECS]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        os.replace(tmp, self.path)
+
+    def get(self, name: str) -> float:
+        if name in Gains.__dataclass_fields__:
+            return float(getattr(self.gains, name))
+        return float(getattr(self.runtime, name))
+
+    def set(self, name: str, value: float, flying: bool) -> tuple[bool, str]:
+        """Try to set ``name``; returns (applied, reason when not). Never raises."""
+        if name not in PARAM_INDEX:
+            return False, f"unknown parameter {name}"
+        spec = PARAM_SPECS[PARAM_INDEX[name]]
+        if flying and not spec.live:
+            return False, f"{name} cannot change in flight"
+        try:
+            value = float(value)
+            if spec.live:
+                new_gains = self.gains.replace(**{name: value})
+                new_runtime = self.runtime
+            else:
+                new_gains = self.gains
+                new_runtime = dataclasses.replace(self.runtime, **{name: value})
+        except (GainError, TypeError, ValueError) as exc:
+            return False, str(exc)
+        self.gains, self.runtime = new_gains, new_runtime
+        self.version += 1
+        try:
+            self.save()
+        except OSError as exc:
+            return True, f"applied but not saved: {exc}"
+        return True, ""

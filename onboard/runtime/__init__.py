@@ -1,0 +1,1 @@
+"""The onboard runtime: the interception loop on a real (or SITL) vehicle over MAVLink."""

@@ -1,0 +1,166 @@
+"""Runs ``groundstation sitl`` and ``onboard run`` as separate processes on loopback, with
+this test process as the ground (or a real ground station), for the SITL tests."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from onboard.link import telemetry as tm
+from onboard.link.px4 import CMD_ABORT, CMD_START, MavLink, mavlink, message_text
+
+
+def free_port(kind=socket.SOCK_DGRAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Rig:
+    def __init__(
+        self,
+        tmp: Path,
+        scenario: str = "cv-top-to-bottom",
+        sitl_args: tuple[str, ...] = (),
+        onboard_args: tuple[str, ...] = (),
+        sitl_listens: bool = True,
+        onboard_gcs_listens: bool = False,
+        ground: bool = True,
+    ) -> None:
+        self.tmp = tmp
+        self.fc_port = free_port()
+        self.gcs_port = free_port()
+        self.cam_port = free_port(socket.SOCK_STREAM)
+        fc = f"udp{'in' if sitl_listens else 'out'}:127.0.0.1:{self.fc_port}"
+        onb_fc = f"udp{'out' if sitl_listens else 'in'}:127.0.0.1:{self.fc_port}"
+        onb_gcs = f"udp{'in' if onboard_gcs_listens else 'out'}:127.0.0.1:{self.gcs_port}"
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        py = sys.executable
+        self.sitl_out = tmp / "sitl.log"
+        self.onboard_out = tmp / "onboard.log"
+        self.stats = tmp / "stats.json"
+        self.params = tmp / "params.toml"
+        self.sitl = subprocess.Popen(
+            [py, "-m", "groundstation", "sitl", scenario, "--mavlink", fc,
+             "--camera-port", str(self.cam_port), *sitl_args],
+            stdout=self.sitl_out.open("w"), stderr=subprocess.STDOUT, env=env, cwd=tmp,
+        )  # fmt: skip
+        self.ground = None
+        if ground:
+            ground_url = f"udp{'out' if onboard_gcs_listens else 'in'}:127.0.0.1:{self.gcs_port}"
+            self.ground = MavLink(ground_url, 255, 190)
+        self.onboard = subprocess.Popen(
+            [py, "-m", "onboard", "run", "--mavlink", onb_fc,
+             "--camera", f"sitl://127.0.0.1:{self.cam_port}", "--gcs", onb_gcs,
+             "--params", str(self.params), "--stats", str(self.stats), *onboard_args],
+            stdout=self.onboard_out.open("w"), stderr=subprocess.STDOUT, env=env, cwd=tmp,
+        )  # fmt: skip
+        self.texts: list[tuple[float, str]] = []  # (receipt time, STATUSTEXT)
+        self.telemetry: list[dict] = []
+        self.acks: list[tuple[int, int]] = []
+        self.params_seen: dict[str, float] = {}
+        self._last_hb = -1e9
+
+    # -------------------------------------------------------------- the ground
+    def pump(self, seconds: float = 0.0) -> None:
+        end = time.monotonic() + seconds
+        while True:
+            if time.monotonic() - self._last_hb > 0.5:  # a ground station's heartbeat
+                self._last_hb = time.monotonic()
+                self.ground.heartbeat(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            for m in self.ground.poll():
+                k = m.get_type()
+                if k == "STATUSTEXT":
+                    self.texts.append((time.monotonic(), message_text(m)))
+                elif k == "DEBUG_FLOAT_ARRAY" and m.array_id == tm.ARRAY_ID:
+                    self.telemetry.append(tm.unpack(m.data))
+                elif k == "COMMAND_ACK":
+                    self.acks.append((m.command, m.result))
+                elif k == "PARAM_VALUE":
+                    name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
+                    self.params_seen[name.rstrip("\x00")] = m.param_value
+            if time.monotonic() >= end:
+                return
+            time.sleep(0.005)
+
+    def wait_text(self, needle: str, timeout_s: float = 15.0) -> float:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            for t, text in self.texts:
+                if needle in text:
+                    return t
+            self.pump(0.05)
+            self.check_alive()
+        raise AssertionError(f"no {needle!r} within {timeout_s} s; got {self.texts}\n{self.logs()}")
+
+    def command(self, command: int, timeout_s: float = 3.0) -> int:
+        n = len(self.acks)
+        self.ground.send(
+            self.ground.mav.command_long_encode(1, 191, command, 0, 0, 0, 0, 0, 0, 0, 0)
+        )
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            self.pump(0.02)
+            for cmd, result in self.acks[n:]:
+                if cmd == command:
+                    return result
+        raise AssertionError(f"no COMMAND_ACK for {command}\n{self.logs()}")
+
+    def start(self) -> int:
+        return self.command(CMD_START)
+
+    def abort(self) -> int:
+        return self.command(CMD_ABORT)
+
+    def param_set(self, name: str, value: float, timeout_s: float = 3.0) -> float:
+        self.params_seen.pop(name, None)
+        self.ground.send(self.ground.mav.param_set_encode(1, 191, name.encode(), value, 9))
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            self.pump(0.02)
+            if name in self.params_seen:
+                return self.params_seen[name]
+        raise AssertionError(f"no PARAM_VALUE for {name}")
+
+    # -------------------------------------------------------------- the processes
+    def check_alive(self) -> None:
+        for name, p in (("sitl", self.sitl), ("onboard", self.onboard)):
+            if p.poll() is not None and p is not getattr(self, "_killed", None):
+                raise AssertionError(f"{name} exited with {p.returncode}\n{self.logs()}")
+
+    def sitl_result(self, timeout_s: float = 20.0) -> dict:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            for line in self.sitl_out.read_text().splitlines():
+                if line.startswith("SITL_RESULT "):
+                    return json.loads(line.removeprefix("SITL_RESULT "))
+            if self.ground is not None:
+                self.pump(0.1)
+            else:
+                time.sleep(0.1)
+            self.check_alive()
+        raise AssertionError(f"no SITL result\n{self.logs()}")
+
+    def logs(self) -> str:
+        return (
+            f"--- sitl\n{self.sitl_out.read_text()[-3000:]}\n"
+            f"--- onboard\n{self.onboard_out.read_text()[-3000:]}"
+        )
+
+    def close(self) -> dict | None:
+        for p in (self.onboard, self.sitl):
+            if p.poll() is None:
+                p.terminate()
+        for p in (self.onboard, self.sitl):
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        if self.ground is not None:
+            self.ground.close()
+        return json.loads(self.stats.read_text()) if self.stats.exists() else None
