@@ -123,6 +123,12 @@ def _build_parser() -> argparse.ArgumentParser:
         help="recording cost, listing 200 logs, seeking in a 10-minute sortie",
     )
     b.add_argument(
+        "--sitl",
+        action="store_true",
+        help="onboard run against the SITL vehicle: loop rate, jitter, latency, CPU, memory",
+    )
+    b.add_argument("--seconds", type=float, default=20.0, help="--sitl: how long to fly")
+    b.add_argument(
         "--dashboard",
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
@@ -289,8 +295,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 run_campaign_bench,
                 run_dashboard_bench,
                 run_recording_bench,
+                run_sitl_bench,
             )
 
+            if args.sitl:
+                return run_sitl_bench(args.seconds, as_json=args.json)
             if args.recording:
                 return run_recording_bench(as_json=args.json)
             if args.dashboard:

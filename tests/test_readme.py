@@ -20,3 +20,14 @@ def test_ci_runs_the_readme_test_command_exactly():
     test = _commands()[1]
     ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
     assert test in ci_lines
+
+
+def test_readme_documents_every_telemetry_field_and_parameter():
+    from onboard.link import telemetry as tm
+    from onboard.link.params import PARAM_SPECS
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    for i, (name, _, _) in enumerate(tm.FIELDS):
+        assert f"| {i} | `{name}` |" in text, name
+    for spec in PARAM_SPECS:
+        assert f"| `{spec.name}` | {spec.default:g} |" in text, spec.name

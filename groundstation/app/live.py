@@ -28,7 +28,7 @@ from onboard.control.guidance import normal_component
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
-from onboard.link.params import PARAM_SPECS
+from onboard.link.params import PARAM_INDEX, PARAM_SPECS
 from onboard.link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     CMD_ABORT,
@@ -179,6 +179,8 @@ class LiveSession:
         self.miss_m: float | None = None
         self._rel_prev = None
         self.scene_errors = 0
+        self.errors = 0
+        self.last_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="live-link", daemon=True)
         self._thread.start()
 
@@ -202,10 +204,16 @@ class LiveSession:
         with self._lock:
             if not self.link_up():
                 raise SessionError("no link to the onboard computer: gains not sent")
+            missing = [n for n in GAIN_NAMES if n not in self.params]
+            if missing:
+                raise SessionError(
+                    "the vehicle's parameters are not read yet (missing "
+                    + ", ".join(missing[:4])
+                    + "): gains not sent"
+                )
             for name in GAIN_NAMES:
                 new = float(getattr(gains, name))
-                cur = self.params.get(name)
-                if cur is None or not math.isclose(new, cur, rel_tol=1e-6, abs_tol=1e-7):
+                if not math.isclose(new, self.params[name], rel_tol=1e-6, abs_tol=1e-7):
                     self.pending[name] = new
                     self.refused.pop(name, None)
                     self.link.send(
@@ -263,30 +271,36 @@ class LiveSession:
     def _run(self) -> None:
         next_publish = 0.0
         while not self._stop.is_set():
-            msgs = self.link.poll()
-            now = time.monotonic()
-            with self._lock:
-                for m in msgs:
-                    try:
-                        self._take(m, now)
-                    except (AttributeError, ValueError, TypeError, IndexError):
-                        self.link.bad_frames += 1  # well-formed MAVLink with nonsense inside
-                if (
-                    self.link_up()
-                    and len(self.params) < len(PARAM_SPECS)
-                    and (now - self._params_requested > 3.0)
-                ):
-                    self._params_requested = now
-                    self.link.send(
-                        self.link.mav.param_request_list_encode(
-                            VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID
-                        )
-                    )
-                self._maybe_finish(now)
-            if now >= next_publish:
-                next_publish = now + self.publish_period_s
-                self._publish()
+            try:
+                next_publish = self._iterate(next_publish)
+            except Exception as exc:  # never let one bad message end the live view
+                self.errors += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
             self._stop.wait(0.005)
+
+    def _iterate(self, next_publish: float) -> float:
+        msgs = self.link.poll()
+        now = time.monotonic()
+        with self._lock:
+            for m in msgs:
+                try:
+                    self._take(m, now)
+                except (AttributeError, ValueError, TypeError, IndexError):
+                    self.link.bad_frames += 1  # well-formed MAVLink with nonsense inside
+            if (
+                self.link_up()
+                and len(self.params) < len(PARAM_SPECS)
+                and (now - self._params_requested > 3.0)
+            ):
+                self._params_requested = now
+                self.link.send(
+                    self.link.mav.param_request_list_encode(VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
+                )
+            self._maybe_finish(now)
+        if now >= next_publish:
+            next_publish = now + self.publish_period_s
+            self._publish()
+        return next_publish
 
     def _take(self, m, now: float) -> None:
         kind = m.get_type()
@@ -328,6 +342,8 @@ class LiveSession:
         elif kind == "PARAM_VALUE":
             name = param_id_str(m.param_id)
             value = float(m.param_value)
+            if name not in PARAM_INDEX or not math.isfinite(value):
+                raise ValueError(f"PARAM_VALUE {name!r} = {value}")
             self.params[name] = value
             if name in self.pending:
                 want = self.pending.pop(name)
@@ -355,6 +371,18 @@ class LiveSession:
             self.recorder.event(self.view.time_s, level, f"{source}: {text}")
 
     def _telemetry(self, t: dict[str, float | None], now: float) -> None:
+        for key, codes in (
+            ("state", tm.STATE_CODES),
+            ("loop_mode", tm.LOOP_MODE_CODES),
+            ("law", tm.LAW_CODES),
+        ):
+            v = t.get(key)
+            if v is not None and not (0 <= v < len(codes) and v == int(v)):
+                t[key] = None  # a code we do not know: show nothing rather than fail
+        for key in ("image_w_px", "image_h_px", "f_px"):
+            v = t.get(key)
+            if v is not None and not 1.0 <= v <= 16384.0:
+                t[key] = None
         self.tel, self.tel_rx_s = t, now
         code = t.get("state")
         if code is not None and 0 <= int(code) < len(tm.STATE_CODES):
@@ -545,6 +573,7 @@ class LiveSession:
                     and now - self.target_rx_s < LINK_TIMEOUT_S,
                     "rates_hz": self.link.rates_hz(),
                     "bad_frames": self.link.bad_frames,
+                    "errors": self.errors,
                     "loop_jitter_p99_ms": t.get("loop_jitter_p99_ms"),
                     "latency_ms": t.get("latency_ms"),
                     "overruns": t.get("overruns"),

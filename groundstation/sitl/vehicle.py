@@ -121,6 +121,7 @@ class SitlVehicle:
         self._rel = None
         self._frames: list = []  # (send time, n, capture time, image)
         self._n = 0
+        self.rates_hz = dict(RATES_HZ)  # MAV_CMD_SET_MESSAGE_INTERVAL changes these
         self._next_send = {k: 0.0 for k in RATES_HZ}
         self._next_target_s = 0.0
         self._next_hb_s = 0.0
@@ -321,8 +322,8 @@ class SitlVehicle:
                 if int(msg.param1) in mavlink.mavlink_map
                 else None
             )
-            if name in RATES_HZ and msg.param2 > 0:
-                RATES_HZ[name] = min(1e6 / msg.param2, 500.0)
+            if name in self.rates_hz and msg.param2 > 0:
+                self.rates_hz[name] = min(1e6 / msg.param2, 500.0)
                 self._ack(cmd, mavlink.MAV_RESULT_ACCEPTED)
             else:
                 self._ack(cmd, mavlink.MAV_RESULT_DENIED)
@@ -356,7 +357,7 @@ class SitlVehicle:
             )
         due = self._next_send
         if now >= due["ATTITUDE_QUATERNION"]:
-            due["ATTITUDE_QUATERNION"] = now + 1.0 / RATES_HZ["ATTITUDE_QUATERNION"]
+            due["ATTITUDE_QUATERNION"] = now + 1.0 / self.rates_hz["ATTITUDE_QUATERNION"]
             q = quat_enu_flu_to_ned_frd(veh.q)
             w = flu_to_frd(veh.w)
             link.send(
@@ -365,7 +366,7 @@ class SitlVehicle:
                 )
             )
         if now >= due["HIGHRES_IMU"]:
-            due["HIGHRES_IMU"] = now + 1.0 / RATES_HZ["HIGHRES_IMU"]
+            due["HIGHRES_IMU"] = now + 1.0 / self.rates_hz["HIGHRES_IMU"]
             noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
             g = flu_to_frd(np.array(veh.read_gyro()) + noise)
             R = quat_to_rotmat(veh.q)
@@ -391,7 +392,7 @@ class SitlVehicle:
                 )
             )
         if now >= due["LOCAL_POSITION_NED"]:
-            due["LOCAL_POSITION_NED"] = now + 1.0 / RATES_HZ["LOCAL_POSITION_NED"]
+            due["LOCAL_POSITION_NED"] = now + 1.0 / self.rates_hz["LOCAL_POSITION_NED"]
             p, v = enu_to_ned(veh.p), enu_to_ned(veh.v)
             link.send(mav.local_position_ned_encode(boot_ms, *map(float, p), *map(float, v)))
         if now >= self._next_target_s:

@@ -55,6 +55,11 @@ from .state_machine import Inputs, OffboardStateMachine, Output, State
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
 MAX_RATE_RAD_S = 20.0
+STREAM_RATES_HZ = {
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 200.0,
+    mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100.0,
+}
 SEVERITY = {
     "critical": mavlink.MAV_SEVERITY_CRITICAL,
     "error": mavlink.MAV_SEVERITY_ERROR,
@@ -337,6 +342,11 @@ class OnboardRuntime:
             self.commands_sent += 1
         return sent
 
+    def _request_streams(self) -> None:
+        """Ask PX4 for the state at the rates the loop needs (MAV_CMD_SET_MESSAGE_INTERVAL)."""
+        for msg_id, hz in STREAM_RATES_HZ.items():
+            self._fc_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+
     def _fc_command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))
         self.fc.send(
@@ -540,6 +550,8 @@ class OnboardRuntime:
         )
         for ev in decision.events:
             self._event(*ev)
+            if ev[1] == "FC link up":
+                self._request_streams()
         if decision.output is not Output.NONE and tel is not None:
             self._send_command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised, now)
             sent_at = self.clock.now()

@@ -1,0 +1,148 @@
+"""The ground station's live mode in-process, against a fake onboard component."""
+
+import math
+import socket
+import time
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from groundstation.app.live import LiveSession
+from groundstation.app.server import GroundStation
+from groundstation.app.session import SessionError
+from onboard.gains import GAIN_NAMES, Gains
+from onboard.link import telemetry as tm
+from onboard.link.px4 import MavLink, mavlink
+
+
+def _port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait(pred, timeout_s=3.0):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def _telemetry(onboard: MavLink, t: float, **extra) -> None:
+    vals = {"t_s": t, "state": 2, "loop_mode": 1, "e_est_u_px": 3.0, "e_est_v_px": -2.0,
+            "pos_e_m": 0.0, "pos_n_m": 1.0, "pos_u_m": 10.0, "vel_e_m_s": 0.0,
+            "vel_n_m_s": 2.0, "vel_u_m_s": 0.0, "image_w_px": 640, "image_h_px": 480,
+            "f_px": 320.0, "loop_rate_hz": 200.0}  # fmt: skip
+    vals.update(extra)
+    data = [float(v) for v in tm.pack({k: v for k, v in vals.items() if k in tm.INDEX})]
+    for k, v in extra.items():
+        if k.startswith("raw_"):
+            data[int(k[4:])] = v
+    onboard.send(onboard.mav.debug_float_array_encode(int(t * 1e6), b"PRG_CTRL", 1, data))
+
+
+def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
+    port = _port()
+    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
+    fc = MavLink(f"udpout:127.0.0.1:{port}", 1, 1)
+    try:
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+        _telemetry(onboard, 1.0)
+        fc.send(fc.mav.local_position_ned_encode(0, 1.0, 0.0, -10.0, 2.0, 0.0, 0.0))
+        assert _wait(lambda: session.status()["live"]["link"] == "up")
+        assert _wait(lambda: session.vehicle_p is not None)
+        assert np.allclose(session.vehicle_p, [0.0, 1.0, 10.0])  # NED -> ENU
+        junk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rng = np.random.default_rng(5)
+        for _ in range(100):
+            junk.sendto(rng.bytes(int(rng.integers(1, 300))), ("127.0.0.1", port))
+        junk.close()
+        _telemetry(onboard, 1.1, loop_mode=57, state=-3, f_px=math.nan, image_w_px=1e12)
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 999, 3)
+        onboard.send(onboard.mav.param_value_encode(b"k_a", math.nan, 9, 22, 0))
+        onboard.send(onboard.mav.param_value_encode(b"evil", 1.0, 9, 22, 0))
+        onboard.send(onboard.mav.param_value_encode(b"k_a", 50.0, 9, 22, 0))  # out of range
+        fc.send(fc.mav.local_position_ned_encode(0, math.nan, 0, 0, 0, 0, 0))
+        time.sleep(0.3)
+        st = session.status()
+        snap = session.snapshot()
+        assert st["live"]["bad_frames"] >= 100 and st["live"]["errors"] == 0
+        assert snap["mode"] == "waiting" and snap["image"]["w"] == 640
+        assert session.gains.k_a == 2.0 and "evil" not in session.params
+        assert np.allclose(session.vehicle_p, [0.0, 1.0, 10.0])  # the NaN position ignored
+        _telemetry(onboard, 1.2)
+        assert _wait(lambda: session.snapshot().get("t") == 1.2)
+        with pytest.raises(SessionError, match="live mode"):
+            session.pause()
+    finally:
+        session.close()
+        onboard.close()
+        fc.close()
+
+
+def test_gain_edits_wait_for_the_vehicles_param_value():
+    port = _port()
+    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
+    try:
+        with pytest.raises(SessionError, match="no link"):
+            session.set_gains(session.gains.replace(k_a=3.0))
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+        assert _wait(lambda: session.link_up())
+        with pytest.raises(SessionError, match="not read yet"):
+            session.set_gains(session.gains.replace(k_a=3.0))
+        for i, (name, value) in enumerate(Gains().to_dict().items()):
+            onboard.send(onboard.mav.param_value_encode(name.encode(), value, 9, 22, i))
+        assert _wait(lambda: len(session.params) == len(GAIN_NAMES))
+        session.set_gains(session.gains.replace(k_a=3.0))
+        sets = []
+
+        def got_param_set():
+            sets.extend(m for m in onboard.poll() if m.get_type() == "PARAM_SET")
+            return bool(sets)
+
+        assert _wait(got_param_set)
+        assert sets[0].param_id == "k_a" and sets[0].param_value == 3.0
+        st = session.status()
+        assert st["gains_pending"] and st["live"]["params_pending"] == {"k_a": 3.0}
+        assert session.gains.k_a == 2.0  # not applied until the vehicle says so
+        onboard.send(onboard.mav.param_value_encode(b"k_a", 2.0, 9, 22, 0))  # refused
+        assert _wait(lambda: not session.status()["gains_pending"])
+        assert session.status()["live"]["params_refused"] == {"k_a": "k_a: vehicle kept 2"}
+        session.set_gains(session.gains.replace(k_a=3.0))
+        onboard.send(onboard.mav.param_value_encode(b"k_a", 3.0, 9, 22, 0))
+        assert _wait(lambda: session.gains.k_a == 3.0 and not session.status()["gains_pending"])
+    finally:
+        session.close()
+        onboard.close()
+
+
+def test_live_routes_in_simulator_mode_are_refused(tmp_path):
+    gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
+    try:
+        with TestClient(gs.app, base_url="http://127.0.0.1") as c:
+            assert c.post("/api/live/start").status_code == 401  # the token first
+            c.headers["Authorization"] = f"Bearer {gs.token}"
+            r = c.post("/api/live/start")
+            assert r.status_code == 409 and "simulator mode" in r.json()["detail"]
+    finally:
+        gs.close()
+
+
+def test_live_start_without_onboard_is_a_clear_error(tmp_path):
+    gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs",
+                       mavlink_url=f"udpin:127.0.0.1:{_port()}")  # fmt: skip
+    try:
+        with TestClient(gs.app, base_url="http://127.0.0.1") as c:
+            c.headers["Authorization"] = f"Bearer {gs.token}"
+            r = c.post("/api/live/abort")
+            assert r.status_code == 409 and "no link" in r.json()["detail"]
+            r = c.post("/api/sortie/start", json={"scenario": "cv-top-to-bottom"})
+            assert r.status_code == 409 and "live mode" in r.json()["detail"]
+            assert c.get("/api/status").json()["live"]["link"] == "never heard"
+    finally:
+        gs.close()
