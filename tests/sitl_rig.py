@@ -88,10 +88,11 @@ class Rig:
                 return
             time.sleep(0.005)
 
-    def wait_text(self, needle: str, timeout_s: float = 15.0) -> float:
+    def wait_text(self, needle: str, timeout_s: float = 15.0, after: int = 0) -> float:
+        """Receipt time of the first STATUSTEXT containing ``needle`` (from index ``after``)."""
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
-            for t, text in self.texts:
+            for t, text in self.texts[after:]:
                 if needle in text:
                     return t
             self.pump(0.05)

@@ -179,3 +179,17 @@ def test_px4_leaving_offboard_ends_the_sortie():
     assert sm.state is State.INTERCEPT
     d = sm.step(_inputs(1.4, offboard=False))
     assert sm.state is State.FINISHED and d.output is Output.NONE
+
+
+def test_a_new_sortie_can_start_after_one_finished():
+    sm = OffboardStateMachine()
+    _to_intercept(sm)
+    sm.step(_inputs(1.0, offboard=False))
+    sm.step(_inputs(1.4, offboard=False))
+    assert sm.state is State.FINISHED
+    sm.step(_inputs(1.5, tracking=False))
+    assert sm.command_start()[0] is False  # nothing in view
+    sm.step(_inputs(1.6))
+    assert sm.state is State.FINISHED and sm.command_start()[0] is True
+    sm.step(_inputs(1.7))
+    assert sm.state is State.STARTING

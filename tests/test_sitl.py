@@ -268,3 +268,48 @@ def test_garbage_on_every_port_and_an_out_of_range_param(rig_factory, sitl_liste
         assert stats["bad_frames_fc"] >= 100, stats
     assert stats["overruns"] <= 0.01 * stats["ticks"], stats
     _no_traceback(rig)
+
+
+def test_abort_brakes_and_px4_rules_for_offboard(rig_factory):
+    """The operator's abort brakes and hands over to PX4's Hold; the SITL vehicle refuses
+    offboard without a setpoint stream and falls back to Hold when the stream stops."""
+    from onboard.link.px4 import MavLink
+
+    rig = rig_factory(sitl_listens=True)
+    rig.wait_text("target in view")
+    intruder = MavLink(f"udpout:127.0.0.1:{rig.fc_port}", 255, 190)
+    intruder.send(
+        intruder.mav.command_long_encode(
+            1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0
+        )
+    )  # fmt: skip
+    end = time.monotonic() + 3.0
+    acks = []
+    while time.monotonic() < end and not acks:
+        acks = [m for m in intruder.poll() if m.get_type() == "COMMAND_ACK"]
+        time.sleep(0.01)
+    intruder.close()
+    assert acks and acks[0].result == mavlink.MAV_RESULT_DENIED  # no setpoints: no offboard
+    assert acks[0].target_system == 255 and acks[0].target_component == 190
+    assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
+    rig.wait_text("offboard: intercepting")
+    rig.pump(1.5)
+    assert rig.abort() == mavlink.MAV_RESULT_ACCEPTED
+    rig.wait_text("abort: braking and holding")
+    rig.wait_text("finished (aborted by the operator): PX4 holds", timeout_s=15.0)
+    rig.pump(0.3)
+    last = rig.telemetry[-1]
+    assert np.linalg.norm([last["vel_e_m_s"], last["vel_n_m_s"], last["vel_u_m_s"]]) < 0.5
+    assert "SITL_RESULT" not in rig.sitl_out.read_text()  # aborted before the pass
+    # a second sortie: start again, then the onboard process dies: PX4's offboard-loss
+    # failsafe (1 s without a setpoint) puts the vehicle in Hold
+    mark = len(rig.texts)
+    assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
+    rig.wait_text("offboard: intercepting", after=mark)
+    rig._killed = rig.onboard
+    rig.onboard.kill()
+    deadline = time.monotonic() + 4.0
+    while "offboard loss" not in rig.sitl_out.read_text() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert "HOLD: offboard loss" in rig.sitl_out.read_text(), rig.logs()
+    assert rig.sitl.poll() is None

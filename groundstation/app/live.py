@@ -354,7 +354,7 @@ class LiveSession:
             if name in GAIN_NAMES:
                 with contextlib.suppress(ValueError):
                     self.gains = self.gains.replace(**{name: value})
-        elif kind == "COMMAND_ACK":
+        elif kind == "COMMAND_ACK" and m.target_component in (0, GCS_COMPONENT_ID):
             self.acks[int(m.command)] = (now, int(m.result))
             self._acked.notify_all()
 

@@ -174,6 +174,15 @@ class SortieRecorder:
         except OSError as exc:
             self._fail(exc)
 
+    def _put_many(self, ns: int, items: list[tuple[int, bytes]]) -> None:
+        """Several messages at one log time (channel id, data): the record tick's hot path."""
+        add = self._w.add_message
+        try:
+            for ch, data in items:
+                add(ch, ns, data, ns)
+        except OSError as exc:
+            self._fail(exc)
+
     def _json(self, topic: str, t_s: float, obj: dict) -> None:
         self._put(topic, t_s, json.dumps(obj, separators=(",", ":")).encode())
 
@@ -241,25 +250,21 @@ class SortieRecorder:
         self._tick += 1
         if (self._tick - 1) % self.record_every:
             return
-        sec, nsec = divmod(_ns(t_s), 1_000_000_000)
+        ns = _ns(t_s)
+        sec, nsec = divmod(ns, 1_000_000_000)
+        ch = self._ch
         p, q = sim.vehicle.p, sim.vehicle.q
         qx, qy, qz, qw = q[1], q[2], q[3], q[0]
         tp = sim.target.p  # None: a live target that does not report its position
-        self._put(
-            "/world/vehicle", t_s, (_POSE % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw)).encode()
-        )
+        items = [
+            (ch["/world/vehicle"], (_POSE % (sec, nsec, *p, qx, qy, qz, qw)).encode()),
+        ]
         half = (self._tick - 1) % (2 * self.record_every) == 0
-        if half and tp is not None:
-            self._put(
-                "/world/target",
-                t_s,
-                (_POSE % (sec, nsec, tp[0], tp[1], tp[2], 0, 0, 0, 1)).encode(),
-            )
         if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
-            self._put(
-                "/tf",
-                t_s,
-                (_TF % (sec, nsec, p[0], p[1], p[2], qx, qy, qz, qw, self._tf_camera)).encode(),
+            if tp is not None:
+                items.append((ch["/world/target"], (_POSE % (sec, nsec, *tp, 0, 0, 0, 1)).encode()))
+            items.append(
+                (ch["/tf"], (_TF % (sec, nsec, *p, qx, qy, qz, qw, self._tf_camera)).encode())
             )
         a = tel.accel_desired_enu_m_s2
         w = tel.command.body_rates_flu_rad_s
@@ -270,47 +275,49 @@ class SortieRecorder:
         else:
             range_js = "null"
         e, er = tel.e_est_px, tel.e_rate_est_px_s
-        self._put(
-            "/control",
-            t_s,
+        items.append(
             (
-                '{"t_s":%.6f,"mode":"%s","law":"%s","los_elev_rad":%s,"los_azim_rad":%s,'
-                '"vel_elev_rad":%s,"vel_azim_rad":%s,"accel_desired_m_s2":[%.4f,%.4f,%.4f],'
-                '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
-                '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
-                '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%.4f,'
-                '"range_m":%s}'
-                % (
-                    t_s,
-                    tel.mode.value,
-                    tel.law,
-                    _js(tel.los_elev_rad),
-                    _js(tel.los_azim_rad),
-                    _js(tel.vel_elev_rad),
-                    _js(tel.vel_azim_rad),
-                    a[0],
-                    a[1],
-                    a[2],
-                    _js(tel.accel_normal_desired_m_s2),
-                    _js(normal_accel_m_s2),
-                    w[0],
-                    w[1],
-                    w[2],
-                    tel.command.thrust_normalised,
-                    _js(tel.yaw_rate_cmd_rad_s),
-                    _js2(e),
-                    _js2(er),
-                    math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
-                    range_js,
-                )
-            ).encode(),
+                ch["/control"],
+                (
+                    '{"t_s":%.6f,"mode":"%s","law":"%s","los_elev_rad":%s,"los_azim_rad":%s,'
+                    '"vel_elev_rad":%s,"vel_azim_rad":%s,"accel_desired_m_s2":[%.4f,%.4f,%.4f],'
+                    '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
+                    '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
+                    '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%.4f,'
+                    '"range_m":%s}'
+                    % (
+                        t_s,
+                        tel.mode.value,
+                        tel.law,
+                        _js(tel.los_elev_rad),
+                        _js(tel.los_azim_rad),
+                        _js(tel.vel_elev_rad),
+                        _js(tel.vel_azim_rad),
+                        a[0],
+                        a[1],
+                        a[2],
+                        _js(tel.accel_normal_desired_m_s2),
+                        _js(normal_accel_m_s2),
+                        w[0],
+                        w[1],
+                        w[2],
+                        tel.command.thrust_normalised,
+                        _js(tel.yaw_rate_cmd_rad_s),
+                        _js2(e),
+                        _js2(er),
+                        math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
+                        range_js,
+                    )
+                ).encode(),
+            )
         )
         if half:
-            self._dkf(t_s, tel)
+            items.append((ch["/dkf"], self._dkf(t_s, tel)))
+        self._put_many(ns, items)
         if (self._tick - 1) % (self.record_every * 20) == 0 and tp is not None:  # /scene
             self._scene(t_s, p, tp)
 
-    def _dkf(self, t_s: float, tel: ControlTelemetry) -> None:
+    def _dkf(self, t_s: float, tel: ControlTelemetry) -> bytes:
         loop = self.sim.loop
         state = loop.dkf.state_vector()
         if state is None:
@@ -318,22 +325,18 @@ class SortieRecorder:
         else:
             st = "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[0])
             cov = "null" if state[1] is None else "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[1])
-        self._put(
-            "/dkf",
-            t_s,
-            (
-                '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,'
-                '"time_since_detection_s":%s}'
-                % (
-                    t_s,
-                    st,
-                    cov,
-                    "true" if loop.acquired else "false",
-                    "true" if tel.dkf_lost else "false",
-                    _js(tel.dkf_time_since_detection_s),
-                )
-            ).encode(),
-        )
+        return (
+            '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,'
+            '"time_since_detection_s":%s}'
+            % (
+                t_s,
+                st,
+                cov,
+                "true" if loop.acquired else "false",
+                "true" if tel.dkf_lost else "false",
+                _js(tel.dkf_time_since_detection_s),
+            )
+        ).encode()
 
     def _scene(self, t_s: float, p, tp) -> None:
         stamp = _stamp(t_s)

@@ -284,17 +284,22 @@ class SitlVehicle:
         self.setpoint = (frd_to_flu(rates), float(msg.thrust))
         self.last_setpoint_s = now
 
-    def _ack(self, command: int, result: int) -> None:
-        self.link.send(self.link.mav.command_ack_encode(command, result))
+    def _ack(self, msg, result: int) -> None:
+        """COMMAND_ACK addressed to whoever sent the command (PX4 fills the target too)."""
+        self.link.send(
+            self.link.mav.command_ack_encode(
+                msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+            )
+        )
 
     def _command(self, msg, now: float) -> None:
         cmd = msg.command
         if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if msg.param1 == 1.0:
                 self.armed = True
-                self._ack(cmd, mavlink.MAV_RESULT_ACCEPTED)
+                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
             else:
-                self._ack(cmd, mavlink.MAV_RESULT_DENIED)  # airborne: no disarm
+                self._ack(msg, mavlink.MAV_RESULT_DENIED)  # airborne: no disarm
                 self._say(mavlink.MAV_SEVERITY_WARNING, "disarm refused: in air")
         elif cmd == mavlink.MAV_CMD_DO_SET_MODE:
             main, _sub = int(msg.param2), int(msg.param3)
@@ -306,16 +311,16 @@ class SitlVehicle:
                             self.sortie_start_s = self.time_s
                             self._rel = None
                         self._say(mavlink.MAV_SEVERITY_INFO, "OFFBOARD")
-                    self._ack(cmd, mavlink.MAV_RESULT_ACCEPTED)
+                    self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
                 else:
-                    self._ack(cmd, mavlink.MAV_RESULT_DENIED)
+                    self._ack(msg, mavlink.MAV_RESULT_DENIED)
                     self._say(mavlink.MAV_SEVERITY_WARNING, "offboard refused: no setpoints")
             elif main in (PX4_MAIN_AUTO, PX4_MAIN_POSCTL):
                 if self.custom_mode != MODE_HOLD:
                     self._enter_hold("")
-                self._ack(cmd, mavlink.MAV_RESULT_ACCEPTED)
+                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
             else:
-                self._ack(cmd, mavlink.MAV_RESULT_UNSUPPORTED)
+                self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
         elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             name = (
                 mavlink.mavlink_map[int(msg.param1)].msgname
@@ -324,11 +329,11 @@ class SitlVehicle:
             )
             if name in self.rates_hz and msg.param2 > 0:
                 self.rates_hz[name] = min(1e6 / msg.param2, 500.0)
-                self._ack(cmd, mavlink.MAV_RESULT_ACCEPTED)
+                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
             else:
-                self._ack(cmd, mavlink.MAV_RESULT_DENIED)
+                self._ack(msg, mavlink.MAV_RESULT_DENIED)
         else:
-            self._ack(cmd, mavlink.MAV_RESULT_UNSUPPORTED)
+            self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
 
     # ------------------------------------------------------------------ MAVLink out
     def _send_due(self, now: float) -> None:

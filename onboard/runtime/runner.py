@@ -221,6 +221,8 @@ class OnboardRuntime:
         elif kind == "STATUSTEXT":
             self._forward(msg, now, always=True)
         elif kind == "COMMAND_ACK":
+            if msg.target_component not in (0, ONBOARD_COMPONENT_ID):
+                return  # an answer to somebody else on the link
             if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested:
                 if msg.result == mavlink.MAV_RESULT_ACCEPTED:
                     f.custom_mode = self._mode_requested  # the next heartbeat confirms
@@ -304,12 +306,16 @@ class OnboardRuntime:
         elif cmd == CMD_ABORT:
             ok, why = self.sm.command_abort()
         else:
-            self.gcs.send(self.gcs.mav.command_ack_encode(cmd, mavlink.MAV_RESULT_UNSUPPORTED))
+            self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
             return
         self._event("info" if ok else "warning", why)
+        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED)
+
+    def _ack(self, msg, result: int) -> None:
+        """COMMAND_ACK addressed to the sender of the command."""
         self.gcs.send(
             self.gcs.mav.command_ack_encode(
-                cmd, mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED
+                msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
             )
         )
 

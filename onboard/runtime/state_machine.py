@@ -73,17 +73,18 @@ class OffboardStateMachine:
         self._offboard_gone_s: float | None = None
         self._start_pending = False
         self._abort_pending = False
+        self._tracking = False
         self.max_size_frac = 0.0
 
     # ------------------------------------------------------------------ operator
     def command_start(self) -> tuple[bool, str]:
         """The operator's start: accepted only with a target in view and the link up."""
-        if self.state is State.READY:
+        if self.state is State.READY or (self.state is State.FINISHED and self._tracking):
             self._start_pending = True
             return True, "start accepted"
         if self.state in (State.STARTING, State.INTERCEPT):
             return True, "already started"
-        if self.state is State.WAITING_TARGET:
+        if self.state in (State.WAITING_TARGET, State.FINISHED):
             return False, "start refused: no target in view"
         if self.state in (State.LINK_DOWN, State.LINK_LOST):
             return False, "start refused: no flight-controller link"
@@ -92,7 +93,7 @@ class OffboardStateMachine:
     def command_abort(self) -> tuple[bool, str]:
         if self.state in (State.STARTING, State.INTERCEPT):
             self._abort_pending = True
-            return True, "abort: braking and holding"
+            return True, "abort accepted"
         return True, f"abort: nothing flying ({self.state.value})"
 
     @property
@@ -111,6 +112,7 @@ class OffboardStateMachine:
         d = Decision(Output.NONE)
         link_ok = i.fc_heartbeat_age_s is not None and i.fc_heartbeat_age_s <= LINK_TIMEOUT_S
         s = self.state
+        self._tracking = i.tracking
         if i.tracking:
             self.max_size_frac = max(self.max_size_frac, i.target_size_frac)
         if not link_ok:
@@ -129,9 +131,11 @@ class OffboardStateMachine:
         if s in (State.LINK_DOWN, State.LINK_LOST):
             self._go(State.WAITING_TARGET, now, d, "info", "FC link up")
             s = self.state
+        if s is State.FINISHED and self._start_pending:
+            s = self.state = State.READY if i.tracking else State.WAITING_TARGET
         if s in (State.WAITING_TARGET, State.READY, State.FINISHED):
             if s is State.FINISHED:
-                return d
+                return d  # stays finished (the ground sees it) until the next start
             if i.tracking and s is State.WAITING_TARGET:
                 self._go(State.READY, now, d, "info", "target in view: ready")
             elif not i.tracking and s is State.READY:

@@ -1,0 +1,118 @@
+"""The onboard runtime in-process: the last-line output guard, loop overruns, and the
+parameter protocol, against sockets this test reads."""
+
+import math
+import socket
+import time
+
+import numpy as np
+
+from onboard.link.px4 import MavLink, mavlink
+from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
+
+
+def _udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _runtime(tmp_path, **kw):
+    fc_port, gcs_port = _udp_port(), _udp_port()
+    fc = MavLink(f"udpin:127.0.0.1:{fc_port}", 1, 1)
+    gcs = MavLink(f"udpin:127.0.0.1:{gcs_port}", 255, 190)
+    cfg = RuntimeConfig(
+        fc_url=f"udpout:127.0.0.1:{fc_port}",
+        camera="sitl://127.0.0.1:9",  # nothing there: the camera thread retries quietly
+        gcs_url=f"udpout:127.0.0.1:{gcs_port}",
+        params_path=tmp_path / "params.toml",
+        **kw,
+    )
+    lines: list[str] = []
+    return OnboardRuntime(cfg, log=lines.append), fc, gcs, lines
+
+
+def _collect(link: MavLink, kind: str, seconds: float = 1.0) -> list:
+    out, end = [], time.monotonic() + seconds
+    while time.monotonic() < end:
+        out += [m for m in link.poll() if m.get_type() == kind]
+        time.sleep(0.005)
+    return out
+
+
+def test_a_non_finite_command_never_reaches_px4(tmp_path):
+    rt, fc, gcs, lines = _runtime(tmp_path)
+    try:
+        rt._send_command(np.array([math.nan, 0.0, 0.0]), 0.5, 1.0)
+        rt._send_command(np.array([0.1, 0.2, 0.3]), 1.7, 1.01)  # thrust out of range
+        rt._send_command(np.array([0.1, -0.2, 0.3]), 0.4, 1.02)
+        rt._flush_events()
+        sent = _collect(fc, "SET_ATTITUDE_TARGET", 0.5)
+        assert len(sent) == 3
+        for m in sent[:2]:
+            assert (m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate) == (0.0, 0.0, 0.0)
+            assert m.thrust == np.float32(rt.params.runtime.HOVER_THR)
+        ok = sent[2]  # FLU (0.1, -0.2, 0.3) -> FRD (0.1, 0.2, -0.3)
+        assert np.allclose([ok.body_roll_rate, ok.body_pitch_rate, ok.body_yaw_rate],
+                           [0.1, 0.2, -0.3], atol=1e-6)  # fmt: skip
+        assert ok.type_mask & mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+        assert sum("output guard" in line for line in lines) == 2
+        texts = [m.text for m in _collect(gcs, "STATUSTEXT", 0.3)]
+        assert any("output guard" in t for t in texts)
+    finally:
+        rt.camera.stop()
+        for link in (fc, gcs, rt.fc, rt.gcs):
+            link.close()
+
+
+def test_a_slow_tick_is_reported_as_an_overrun(tmp_path):
+    rt, fc, gcs, lines = _runtime(tmp_path, control_rate_hz=100.0)
+    tick = rt.tick
+    slow = {"n": 0}
+
+    def slow_tick():
+        tick()
+        slow["n"] += 1
+        if slow["n"] == 10:
+            time.sleep(0.03)  # three periods
+
+    rt.tick = slow_tick
+    rt.run(duration_s=0.5)
+    assert rt.overruns == 1
+    assert any("loop overrun" in line for line in lines)
+    assert 40 <= rt.stats()["ticks"] <= 51  # 100 Hz for 0.5 s, less the stall
+    for link in (fc, gcs):
+        link.close()
+
+
+def test_parameter_protocol_read_list_and_set(tmp_path):
+    rt, fc, gcs, _ = _runtime(tmp_path)
+    try:
+        gcs.heartbeat(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        rt._heartbeats(0.0)
+        time.sleep(0.05)
+        gcs.poll()
+        gcs.send(gcs.mav.param_request_list_encode(1, 191))
+        gcs.send(gcs.mav.param_request_read_encode(1, 191, b"K_z", -1))
+        gcs.send(gcs.mav.param_request_read_encode(1, 191, b"", 2))
+        gcs.send(gcs.mav.param_set_encode(1, 191, b"k_brake", 2.5, 9))
+        gcs.send(gcs.mav.param_set_encode(1, 191, b"CAM_HFOV_DEG", 500.0, 9))
+        gcs.send(gcs.mav.param_set_encode(1, 42, b"k_brake", 3.0, 9))  # not for us
+        end = time.monotonic() + 1.0
+        values = []
+        while time.monotonic() < end:
+            rt.tick()
+            values += [m for m in gcs.poll() if m.get_type() == "PARAM_VALUE"]
+            time.sleep(0.005)
+        total = values[0].param_count
+        assert total == 22 and {m.param_index for m in values} == set(range(total))
+        assert sum(m.param_id == "K_z" for m in values) == 3  # list, read by name, by index
+        brake = [m.param_value for m in values if m.param_id == "k_brake"]
+        assert brake[-1] == 2.5 and rt.params.gains.k_brake == 2.5
+        hfov = [m.param_value for m in values if m.param_id == "CAM_HFOV_DEG"]
+        assert hfov[-1] == 90.0  # out of range: the unchanged value comes back
+        assert "k_brake = 2.5" in (tmp_path / "params.toml").read_text()
+    finally:
+        rt.camera.stop()
+        for link in (fc, gcs, rt.fc, rt.gcs):
+            link.close()
