@@ -261,7 +261,8 @@ def test_garbage_on_every_port_and_an_out_of_range_param(rig_factory, sitl_liste
         assert result["rejected_setpoints"] >= 10  # the NaN / out-of-range ones
     rig.pump(0.5)
     rates = [t["loop_rate_hz"] for t in rig.telemetry if t["state"] == 4]
-    assert rates and min(rates[len(rates) // 3 :]) >= 190.0, rates
+    steady = sorted(rates[len(rates) // 3 :])  # after the first second's window fills
+    assert steady and steady[len(steady) // 2] >= 195.0 and steady[0] >= 180.0, rates
     stats = rig.close()
     assert stats["bad_frames_gcs"] >= 100, stats
     if not sitl_listens:
