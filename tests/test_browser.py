@@ -146,3 +146,132 @@ def test_open_a_recorded_sortie_and_scrub(station, browser):
         timeout=10000,
     )
     page.close()
+
+
+# ---------------------------------------------------------------------- live mode
+class FakeOnboard:
+    """Plays the onboard component on the ground link: heartbeat, telemetry, parameters,
+    and COMMAND_ACK for start and abort."""
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        from onboard.gains import Gains
+        from onboard.link.params import PARAM_SPECS
+        from onboard.link.px4 import MavLink
+
+        self.link = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
+        self.values = {s.name: s.default for s in PARAM_SPECS}
+        self.values.update(Gains().to_dict())
+        self.names = [s.name for s in PARAM_SPECS]
+        self.state = 2  # ready
+        self.commands: list[int] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import time
+
+        from onboard.link import telemetry as tm
+        from onboard.link.px4 import CMD_START, mavlink
+
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            link = self.link
+            for m in link.poll():
+                kind = m.get_type()
+                if kind == "PARAM_REQUEST_LIST":
+                    for i, n in enumerate(self.names):
+                        link.send(link.mav.param_value_encode(n.encode(), self.values[n], 9,
+                                                              len(self.names), i))  # fmt: skip
+                elif kind == "PARAM_SET":
+                    name = m.param_id
+                    if name == "k_p" and 0.0 <= m.param_value <= 0.2:
+                        self.values[name] = m.param_value
+                    link.send(link.mav.param_value_encode(
+                        name.encode(), self.values[name], 9, len(self.names),
+                        self.names.index(name)))  # fmt: skip
+                elif kind == "COMMAND_LONG":
+                    self.commands.append(m.command)
+                    if m.command == CMD_START:
+                        self.state = 4
+                    link.send(link.mav.command_ack_encode(m.command, 0, 0, 0, 255, 190))
+            t = time.monotonic() - t0
+            if k % 20 == 0:
+                link.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, self.state, 3)
+            vals = {"t_s": t, "state": self.state, "loop_mode": 1, "e_est_u_px": 20.0,
+                    "e_est_v_px": -10.0, "pos_e_m": 0.0, "pos_n_m": t, "pos_u_m": 10.0,
+                    "vel_e_m_s": 0.0, "vel_n_m_s": 1.0, "vel_u_m_s": 0.0, "image_w_px": 640,
+                    "image_h_px": 480, "f_px": 320.0, "loop_rate_hz": 200.0,
+                    "loop_jitter_p99_ms": 0.8, "latency_ms": 86.0}  # fmt: skip
+            link.send(link.mav.debug_float_array_encode(int(t * 1e6), b"PRG_CTRL", 1,
+                                                        tm.pack(vals)))  # fmt: skip
+            k += 1
+            time.sleep(0.05)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.link.close()
+
+
+def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs",
+                       mavlink_url=f"udpin:127.0.0.1:{port}")  # fmt: skip
+    gs.start_in_thread()
+    fake = FakeOnboard(port)
+    page = browser.new_page(viewport={"width": 1500, "height": 1000})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(gs.url())
+        page.wait_for_selector("#live-panel:not([hidden])", timeout=15000)
+        assert page.is_hidden("#sim-panel")
+        page.wait_for_function("document.querySelector('#lv-link').textContent === 'up'")
+        page.wait_for_function(
+            "document.querySelector('#lv-params').textContent.startsWith('22/22')",
+            timeout=10000,
+        )
+        assert page.text_content("#lv-state") == "ready"
+        assert "DEBUG_FLOAT_ARRAY" in page.text_content("#lv-rates")
+        page.wait_for_function("window.peregrine.snap && window.peregrine.snap.e_est_px")
+
+        # a gain edit goes out as PARAM_SET; the page shows it once PARAM_VALUE is back
+        page.wait_for_function("document.querySelectorAll('#gains input').length > 5")
+        page.fill('#gains input[data-gain="k_p"]', "0.05")
+        page.click("#btn-apply-gains")
+        page.wait_for_function(
+            "document.querySelector('#gains input[data-gain=\"k_p\"]').value === '0.05'"
+            " && !document.querySelector('#gains-applied').textContent.includes('waiting')",
+            timeout=10000,
+        )
+        assert fake.values["k_p"] == pytest.approx(0.05)
+        assert gs.session.gains.k_p == 0.05  # the float32 on the wire, read back as 0.05
+        page.wait_for_function(  # every gain shown as the decimal it is, not float32 noise
+            "[...document.querySelectorAll('#gains input')].every(i => i.value.length < 8)"
+        )
+
+        page.click("#btn-live-start")
+        page.wait_for_function(
+            "document.querySelector('#live-msg').textContent === 'start: accepted'"
+        )
+        page.wait_for_function("document.querySelector('#lv-state').textContent === 'intercept'")
+        assert "start: accepted" in page.text_content("#lv-ack")
+        page.click("#btn-live-abort")
+        page.wait_for_function(
+            "document.querySelector('#live-msg').textContent === 'abort: accepted'"
+        )
+        assert fake.commands == [31010, 31011]
+        page.screenshot(path=str(tmp_path / "live.png"))
+        assert not errors, errors
+    finally:
+        page.close()
+        fake.close()
+        gs.stop()

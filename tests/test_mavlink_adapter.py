@@ -174,3 +174,12 @@ def test_tlog_is_readable_by_pymavlink_and_never_overwritten(tmp_path):
     with pytest.raises(FileExistsError):
         TlogWriter(path)
     assert struct.unpack(">Q", path.read_bytes()[:8])[0] > 1.6e15  # UNIX microseconds
+
+
+def test_real32_parameter_values_read_back_as_their_decimals():
+    from onboard.link.px4 import real32
+
+    for v in (0.05, 0.01, 1.8, 12.0, 1.0 / 3.0, 0.003):
+        assert real32(float(np.float32(v))) == pytest.approx(v, rel=1e-7)
+    assert real32(float(np.float32(0.05))) == 0.05
+    assert math.isnan(real32(math.nan))

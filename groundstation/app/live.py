@@ -45,6 +45,7 @@ from onboard.link.px4 import (
     param_id_str,
     px4_mode_name,
     quat_ned_frd_to_enu_flu,
+    real32,
 )
 
 from .scene import SceneState
@@ -341,7 +342,7 @@ class LiveSession:
             self._event(now, "onboard", message_text(m), m.severity)
         elif kind == "PARAM_VALUE":
             name = param_id_str(m.param_id)
-            value = float(m.param_value)
+            value = real32(m.param_value)
             if name not in PARAM_INDEX or not math.isfinite(value):
                 raise ValueError(f"PARAM_VALUE {name!r} = {value}")
             self.params[name] = value
@@ -384,6 +385,15 @@ class LiveSession:
             if v is not None and not 1.0 <= v <= 16384.0:
                 t[key] = None
         self.tel, self.tel_rx_s = t, now
+        if self.fc_rx_s is None or now - self.fc_rx_s > 1.0:
+            # no pass-through from the flight controller: the pose the control tick used
+            p = [t.get("pos_e_m"), t.get("pos_n_m"), t.get("pos_u_m")]
+            v = [t.get("vel_e_m_s"), t.get("vel_n_m_s"), t.get("vel_u_m_s")]
+            q = [t.get("q_w"), t.get("q_x"), t.get("q_y"), t.get("q_z")]
+            if None not in p and None not in v:
+                self.vehicle_p, self.vehicle_v = p, v
+            if None not in q:
+                self.vehicle_q = q
         code = t.get("state")
         if code is not None and 0 <= int(code) < len(tm.STATE_CODES):
             self.onboard_state = tm.STATE_CODES[int(code)]

@@ -368,6 +368,13 @@ def message_text(msg) -> str:
     return t.rstrip("\x00")
 
 
+def real32(value: float) -> float:
+    """A REAL32 parameter value as the decimal it was meant to be (0.05, not 0.0500000007):
+    seven significant digits are what a float32 carries."""
+    value = float(value)
+    return float(f"{value:.7g}") if math.isfinite(value) else value
+
+
 def param_id_str(param_id) -> str:
     if isinstance(param_id, bytes):
         param_id = param_id.decode("ascii", "replace")

@@ -46,6 +46,7 @@ from ..link.px4 import (
     ned_to_enu,
     param_id_str,
     quat_ned_frd_to_enu_flu,
+    real32,
 )
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
@@ -254,7 +255,7 @@ class OnboardRuntime:
             if 0 <= idx < len(PARAM_SPECS):
                 self._send_param(idx)
         elif kind == "PARAM_SET" and self._for_us(msg):
-            self._param_set(param_id_str(msg.param_id), msg.param_value)
+            self._param_set(param_id_str(msg.param_id), real32(msg.param_value))
         elif kind == "COMMAND_LONG" and self._for_us(msg):
             self._command(msg)
 
