@@ -17,8 +17,28 @@ class GainError(ValueError):
     """A gain is unknown, not a number, or outside its allowed range."""
 
 
-def _gain(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any:
+def ranged(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any:
+    """A dataclass field with its unit, allowed range and meaning (see :func:`check_ranges`)."""
     return field(default=default, metadata={"unit": unit, "min": lo, "max": hi, "meaning": meaning})
+
+
+_gain = ranged
+
+
+def check_ranges(obj: Any, kind: str) -> None:
+    """Validate every :func:`ranged` field of a frozen dataclass and store it as a float;
+    anything else is a :class:`GainError` naming the field."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise GainError(f"{kind} {f.name}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise GainError(f"{kind} {f.name}: {value} is not finite")
+        lo, hi = f.metadata["min"], f.metadata["max"]
+        if not lo <= value <= hi:
+            unit = f.metadata["unit"]
+            raise GainError(f"{kind} {f.name} = {value} is outside its range [{lo}, {hi}] {unit}")
+        object.__setattr__(obj, f.name, float(value))
 
 
 @dataclass(frozen=True)
@@ -38,17 +58,7 @@ class Gains:
     k_ibvs: float = _gain(1.0, "-", 0.0, 10.0, "IBVS baseline: image-error decay per unit closing")
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise GainError(f"gain {f.name}: expected a number, got {value!r}")
-            if not math.isfinite(value):
-                raise GainError(f"gain {f.name}: {value} is not finite")
-            lo, hi = f.metadata["min"], f.metadata["max"]
-            if not lo <= value <= hi:
-                unit = f.metadata["unit"]
-                raise GainError(f"gain {f.name} = {value} is outside its range [{lo}, {hi}] {unit}")
-            object.__setattr__(self, f.name, float(value))
+        check_ranges(self, "gain")
 
     def replace(self, **changes: float) -> Gains:
         """A validated copy with some gains changed; unknown names raise :class:`GainError`."""

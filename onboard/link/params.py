@@ -9,14 +9,12 @@ reads), written to a temporary file and renamed, so a crash never leaves half a 
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from ..gains import GAIN_SPECS, GainError, Gains
+from ..gains import GAIN_SPECS, GainError, Gains, check_ranges, ranged
 from .telemetry import LAW_CODES
 
 if sys.version_info >= (3, 11):
@@ -25,39 +23,26 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
-def _param(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any:
-    return field(default=default, metadata={"unit": unit, "min": lo, "max": hi, "meaning": meaning})
-
-
 @dataclass(frozen=True)
 class RuntimeParams:
-    LAW: float = _param(0, "-", 0, len(LAW_CODES) - 1, "guidance law: 0 png, 1 pg, 2 ibvs")
-    CAM_HFOV_DEG: float = _param(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
-    CAM_PITCH_DEG: float = _param(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
-    CAM_ROLL_DEG: float = _param(0.0, "deg", -180.0, 180.0, "camera mount roll")
-    CAM_LAT_S: float = _param(0.0, "s", 0.0, 0.5, "OpenCV cameras: exposure-to-grab latency")
-    HOVER_THR: float = _param(1.0 / 3.0, "-", 0.05, 0.95, "normalised thrust that hovers")
-    TGT_LOST_S: float = _param(0.5, "s", 0.1, 5.0, "no detection this long: brake and hold")
-    DONE_SIZE: float = _param(
+    LAW: float = ranged(0, "-", 0, len(LAW_CODES) - 1, "guidance law: 0 png, 1 pg, 2 ibvs")
+    CAM_HFOV_DEG: float = ranged(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
+    CAM_PITCH_DEG: float = ranged(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
+    CAM_ROLL_DEG: float = ranged(0.0, "deg", -180.0, 180.0, "camera mount roll")
+    CAM_LAT_S: float = ranged(0.0, "s", 0.0, 0.5, "OpenCV cameras: exposure-to-grab latency")
+    HOVER_THR: float = ranged(1.0 / 3.0, "-", 0.05, 0.95, "normalised thrust that hovers")
+    TGT_LOST_S: float = ranged(0.5, "s", 0.1, 5.0, "no detection this long: brake and hold")
+    DONE_SIZE: float = ranged(
         0.2,
         "-",
         0.01,
         1.0,
         "target lost after it grew past this fraction of the image width: the pass is done",
     )
-    HOLD_SPEED: float = _param(0.3, "m/s", 0.05, 2.0, "braking ends below this speed")
+    HOLD_SPEED: float = ranged(0.3, "m/s", 0.05, 2.0, "braking ends below this speed")
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise GainError(f"parameter {f.name}: expected a number, got {value!r}")
-            if not math.isfinite(value):
-                raise GainError(f"parameter {f.name}: {value} is not finite")
-            lo, hi = f.metadata["min"], f.metadata["max"]
-            if not lo <= value <= hi:
-                raise GainError(f"parameter {f.name} = {value} is outside its range [{lo}, {hi}]")
-            object.__setattr__(self, f.name, float(value))
+        check_ranges(self, "parameter")
         if int(self.LAW) != self.LAW:
             raise GainError(f"parameter LAW = {self.LAW} must be 0, 1 or 2")
 
