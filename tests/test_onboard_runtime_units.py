@@ -109,7 +109,7 @@ def test_never_starts_by_itself_and_refuses_a_start_without_target():
     assert sm.step(_inputs(0.0, fc_heartbeat_age_s=None)).output is Output.NONE
     assert sm.state is State.LINK_DOWN
     assert sm.command_start()[0] is False
-    sm.step(_inputs(0.1, tracking=False))
+    assert sm.step(_inputs(0.1, tracking=False)).request_streams  # once, as the link comes up
     assert sm.state is State.WAITING_TARGET
     ok, why = sm.command_start()
     assert not ok and "no target" in why

@@ -195,10 +195,6 @@ class LiveSession:
     def default_gains(self) -> Gains:
         return Gains()
 
-    @property
-    def config(self):  # what the gain-set routes read
-        return _Obj(scenario=_Obj(gains_obj=Gains))
-
     # ------------------------------------------------------------------ operator commands
     def set_gains(self, gains: Gains) -> Gains:
         """Send a PARAM_SET for every gain that differs from the vehicle's value."""

@@ -557,8 +557,8 @@ class OnboardRuntime:
         )
         for ev in decision.events:
             self._event(*ev)
-            if ev[1] == "FC link up":
-                self._request_streams()
+        if decision.request_streams:
+            self._request_streams()
         if decision.output is not Output.NONE and tel is not None:
             self._send_command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised, now)
             sent_at = self.clock.now()

@@ -56,6 +56,7 @@ class Decision:
     request_arm: bool = False
     request_offboard: bool = False
     request_hold: bool = False
+    request_streams: bool = False  # ask PX4 for the state messages at the loop's rates
     events: list[tuple[str, str]] = field(default_factory=list)  # (severity, text)
 
 
@@ -130,6 +131,7 @@ class OffboardStateMachine:
             return d
         if s in (State.LINK_DOWN, State.LINK_LOST):
             self._go(State.WAITING_TARGET, now, d, "info", "FC link up")
+            d.request_streams = True
             s = self.state
         if s is State.FINISHED and self._start_pending:
             s = self.state = State.READY if i.tracking else State.WAITING_TARGET
