@@ -194,15 +194,15 @@ class CameraThread(threading.Thread):
         self.detections = 0
         self.errors = 0
         self.last_frame: Frame | None = None
-        self._stop = threading.Event()
+        self._halt = threading.Event()
 
     def stop(self) -> None:
-        self._stop.set()
+        self._halt.set()
 
     def run(self) -> None:
         source = None
         last_error = ""
-        while not self._stop.is_set():
+        while not self._halt.is_set():
             try:
                 if source is None:
                     source = self.source_factory()
@@ -215,7 +215,7 @@ class CameraThread(threading.Thread):
                 if source is not None:
                     source.close()
                     source = None
-                self._stop.wait(self.retry_s)
+                self._halt.wait(self.retry_s)
                 continue
             last_error = ""
             self.frames += 1

@@ -634,6 +634,8 @@ class OnboardRuntime:
             pass
         finally:
             self.camera.stop()
+            if self.camera.is_alive():
+                self.camera.join(timeout=2.5)  # a blocked read ends by its own timeout
             self._event("info", f"onboard stopping ({self.sm.state.value})")
             self._flush_events()
             if self.config.stats_path is not None:
