@@ -48,6 +48,7 @@ from onboard.link.px4 import (
     real32,
 )
 
+from ..sim.simulation import closest_in_step
 from .scene import SceneState
 from .session import SessionError
 
@@ -162,6 +163,7 @@ class LiveSession:
         self.vehicle_v = [0.0, 0.0, 0.0]
         self.vehicle_q = [1.0, 0.0, 0.0, 0.0]
         self.target_p: list[float] | None = None
+        self.target_v = [0.0, 0.0, 0.0]
         self.target_rx_s: float | None = None
         self.events: deque[dict[str, Any]] = deque(maxlen=50)
         self.acks: dict[int, tuple[float, int]] = {}
@@ -304,9 +306,10 @@ class LiveSession:
         sys_id, comp = m.get_srcSystem(), m.get_srcComponent()
         if sys_id == TARGET_SYSTEM_ID:
             if kind == "LOCAL_POSITION_NED":
-                p = ned_to_enu((m.x, m.y, m.z))
-                if np.all(np.isfinite(p)):
+                p, v = ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz))
+                if np.all(np.isfinite(p)) and np.all(np.isfinite(v)):
                     self.target_p, self.target_rx_s = [float(c) for c in p], now
+                    self.target_v = [float(c) for c in v]
             return
         if sys_id != VEHICLE_SYSTEM_ID:
             return
@@ -401,7 +404,7 @@ class LiveSession:
                 a = (np.array(v) - np.array(self._prev_vel[1])) / dt
                 self.normal_accel_m_s2 = normal_component(a, np.array(v))
             self._prev_vel = (ts, v)
-        self._track_miss()
+        self._track_miss(t, now)
         if self.recorder is not None and self.view is not None and ts is not None:
             self._record(t, ts)
         if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
@@ -410,11 +413,22 @@ class LiveSession:
             if self.target_p is not None:
                 self._trail_target.append([round(c, 3) for c in self.target_p])
 
-    def _track_miss(self) -> None:
-        if self.recorder is None or self.vehicle_p is None or self.target_p is None:
+    def _track_miss(self, t: dict[str, float | None], now: float) -> None:
+        """Closest approach while recording: the vehicle's position at each control tick
+        (50 Hz) against the target's last report moved on by its reported velocity, the
+        relative motion linear between ticks (the simulator's continuous-time test)."""
+        p = [t.get("pos_e_m"), t.get("pos_n_m"), t.get("pos_u_m")]
+        if self.recorder is None or self.target_p is None or None in p:
+            self._rel_prev = None
             return
-        r = float(np.linalg.norm(np.array(self.target_p) - np.array(self.vehicle_p)))
-        self.miss_m = r if self.miss_m is None else min(self.miss_m, r)
+        dt = now - self.target_rx_s
+        rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
+        if self._rel_prev is None:
+            dist = math.sqrt(sum(c * c for c in rel))
+        else:
+            dist = closest_in_step(self._rel_prev, rel)[0]
+        self._rel_prev = rel
+        self.miss_m = dist if self.miss_m is None else min(self.miss_m, dist)
 
     # ------------------------------------------------------------------ recording
     def camera_model(self) -> CameraModel:
