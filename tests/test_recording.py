@@ -5,6 +5,7 @@ import json
 import random
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -145,9 +146,10 @@ def test_never_overwrites(tmp_path):
 
 
 def test_full_disk_ends_recording_not_sortie(tmp_path, monkeypatch):
+    monkeypatch.setenv("PEREGRINE_RECORD_IN_PROCESS", "1")  # to reach the file object
     sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, log_dir=tmp_path)
     rec = sim.recorder
-    real_write = rec._file.write
+    real_write = rec._sink.file.write
     calls = {"n": 0}
 
     def write(data):
@@ -156,10 +158,55 @@ def test_full_disk_ends_recording_not_sortie(tmp_path, monkeypatch):
             raise OSError(28, "No space left on device")
         return real_write(data)
 
-    monkeypatch.setattr(rec._file, "write", write, raising=False)
+    monkeypatch.setattr(rec._sink.file, "write", write, raising=False)
     result = sim.run()
     assert result.outcome == "HIT"  # the sortie flew on
     assert rec.closed and "No space left on device" in rec.error
+
+
+def test_full_disk_in_the_recording_process_ends_recording_not_sortie(tmp_path, monkeypatch):
+    from groundstation.recording import writer
+
+    full = tmp_path / "full.mcap"
+    full.symlink_to("/dev/full")  # every write: ENOSPC
+    monkeypatch.setattr(writer, "open_new_log", lambda *_a: (full, open(full, "wb")))  # noqa: SIM115
+    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, log_dir=tmp_path)
+    rec = sim.recorder
+    assert type(rec._sink).__name__ == "ProcessSink"
+    result = sim.run()
+    assert result.outcome == "HIT"  # the sortie flew on
+    assert rec.closed and "No space left on device" in rec.error
+
+
+def test_a_crashed_sortie_leaves_a_complete_file(tmp_path):
+    """The process flying the sortie dies mid-flight; the recording process finishes the file
+    (summary and index written), marked INCOMPLETE."""
+    code = (
+        "import os, sys\n"
+        "from groundstation.scenario import load_scenario\n"
+        "from groundstation.sim.simulation import Simulation\n"
+        "sim = Simulation(load_scenario('cv-top-to-bottom'), keep_records=False,\n"
+        f"                 log_dir={str(tmp_path)!r})\n"
+        "for _ in range(1200):\n"
+        "    sim.step()\n"
+        "sim.recorder._sink._flush()\n"
+        "os._exit(3)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], timeout=120)
+    assert proc.returncode == 3
+    (path,) = tmp_path.glob("*.mcap")
+    def finished() -> bool:
+        try:
+            return inspect_log(path).status == "ok"
+        except LogError:  # still being written by the recording process
+            return False
+
+    deadline = time.monotonic() + 10.0
+    while not finished() and time.monotonic() < deadline:
+        time.sleep(0.1)  # the recording process finishes the file when its input ends
+    info = inspect_log(path)
+    assert info.status == "ok" and info.outcome == "INCOMPLETE"
+    assert sum(1 for t, _, _ in iter_messages(path) if t == "/control") >= 30
 
 
 def test_replay_cli_json(recorded):

@@ -18,7 +18,6 @@ frame); /gains and /events as they happen.
 from __future__ import annotations
 
 import base64
-import contextlib
 import json
 import math
 import re
@@ -28,26 +27,16 @@ from typing import Any
 
 import cv2
 import numpy as np
-from mcap.writer import CompressionType, Writer
 
 from onboard import __version__ as onboard_version
 from onboard.datatypes import ControlTelemetry, LoopMode
 
 from .. import __version__ as gs_version
-from .schemas import CHANNELS, schema_bytes
+from . import encode as enc
+from .schemas import CHANNELS
+from .sink import open_sink
 
-CHUNK_BYTES = 256 * 1024
 LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
-
-_POSE = (
-    '{"timestamp":{"sec":%d,"nsec":%d},"frame_id":"world","pose":{"position":'
-    '{"x":%.4f,"y":%.4f,"z":%.4f},"orientation":{"x":%.6f,"y":%.6f,"z":%.6f,"w":%.6f}}}'
-)
-_TF = (
-    '{"transforms":[{"timestamp":{"sec":%d,"nsec":%d},"parent_frame_id":"world",'
-    '"child_frame_id":"body","translation":{"x":%.4f,"y":%.4f,"z":%.4f},'
-    '"rotation":{"x":%.6f,"y":%.6f,"z":%.6f,"w":%.6f}},%s]}'
-)
 
 
 def _ns(t_s: float) -> int:
@@ -57,15 +46,6 @@ def _ns(t_s: float) -> int:
 def _stamp(t_s: float) -> dict[str, int]:
     ns = _ns(t_s)
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
-
-
-def _js(x: float | None) -> str:
-    """A number as JSON (null when missing or not finite)."""
-    return "null" if x is None or not math.isfinite(x) else "%.6g" % x
-
-
-def _js2(pair) -> str:
-    return "null" if pair is None else "[%.3f,%.3f]" % (pair[0], pair[1])
 
 
 def log_name(scenario: str, law: str, when: datetime | None = None) -> str:
@@ -96,6 +76,7 @@ class SortieRecorder:
         record_every: int = 5,
         annotate_every: int = 3,
         frame_every: int = 6,
+        mode: str = "auto",
     ) -> None:
         self.sim = sim
         self.record_every = record_every
@@ -109,19 +90,16 @@ class SortieRecorder:
         self._was_tracking = False
         self._was_lost = False
         self._guard_trips = 0
-        self.path, self._file = open_new_log(directory, sim.scenario.name, sim.law)
+        self.path, fileobj = open_new_log(directory, sim.scenario.name, sim.law)
+        self._ch = {topic: i for i, (topic, _) in enumerate(CHANNELS)}
         try:
-            w = Writer(self._file, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
-            w.start(profile="", library=f"peregrine {gs_version}")
-            self._w = w
-            self._ch: dict[str, int] = {}
-            schema_ids: dict[str, int] = {}
-            for topic, schema in CHANNELS:
-                if schema not in schema_ids:
-                    schema_ids[schema] = w.register_schema(
-                        schema, "jsonschema", schema_bytes(schema)
-                    )
-                self._ch[topic] = w.register_channel(topic, "json", schema_ids[schema])
+            self._sink = open_sink(self.path, fileobj, mode)
+        except OSError as exc:
+            self._sink = None
+            fileobj.close()
+            self._fail(exc)
+            return
+        try:
             cam = sim.camera_model
             R = cam.R_BC
             q = _quat_xyzw(R)
@@ -130,7 +108,7 @@ class SortieRecorder:
                 '"child_frame_id":"camera","translation":{"x":0,"y":0,"z":0},'
                 f'"rotation":{{"x":{q[0]:.6f},"y":{q[1]:.6f},"z":{q[2]:.6f},"w":{q[3]:.6f}}}}}'
             )
-            w.add_metadata(
+            self._sink.metadata(
                 "sortie",
                 {
                     "scenario": sim.scenario.name,
@@ -144,8 +122,8 @@ class SortieRecorder:
                     "record_rate_hz": str(sim.scenario.sim.control_rate_hz / record_every),
                 },
             )
-            w.add_attachment(
-                0, 0, "scenario.toml", "application/toml", sim.scenario.text.encode() or b""
+            self._sink.attachment(
+                "scenario.toml", "application/toml", sim.scenario.text.encode() or b""
             )
             self._calibration(0.0)
             self.event(
@@ -154,7 +132,7 @@ class SortieRecorder:
                 f"sortie start: {sim.scenario.name}, law {sim.law}, "
                 f"seed {sim.seed}, camera {sim.camera.mode}",
             )
-            self._file.flush()
+            self._sink.started()
         except OSError as exc:
             self._fail(exc)
 
@@ -162,24 +140,21 @@ class SortieRecorder:
     def _fail(self, exc: BaseException) -> None:
         self.error = f"recording stopped: {type(exc).__name__}: {exc} ({self.path})"
         self.closed = True
-        with contextlib.suppress(OSError):
-            self._file.close()
+        if self._sink is not None:
+            self._sink.abandon()
 
     def _put(self, topic: str, t_s: float, data: bytes) -> None:
         if self.closed:
             return
         try:
-            ns = _ns(t_s)
-            self._w.add_message(self._ch[topic], ns, data, ns)
+            self._sink.add(self._ch[topic], _ns(t_s), data)
         except OSError as exc:
             self._fail(exc)
 
     def _put_many(self, ns: int, items: list[tuple[int, bytes]]) -> None:
         """Several messages at one log time (channel id, data): the record tick's hot path."""
-        add = self._w.add_message
         try:
-            for ch, data in items:
-                add(ch, ns, data, ns)
+            self._sink.add_many(ns, items)
         except OSError as exc:
             self._fail(exc)
 
@@ -254,89 +229,65 @@ class SortieRecorder:
         sec, nsec = divmod(ns, 1_000_000_000)
         ch = self._ch
         p, q = sim.vehicle.p, sim.vehicle.q
-        qx, qy, qz, qw = q[1], q[2], q[3], q[0]
+        pose = (sec, nsec, p[0], p[1], p[2], q[1], q[2], q[3], q[0])
         tp = sim.target.p  # None: a live target that does not report its position
-        items = [
-            (ch["/world/vehicle"], (_POSE % (sec, nsec, *p, qx, qy, qz, qw)).encode()),
-        ]
+        items = [(ch["/world/vehicle"], enc.POSE, pose)]
         half = (self._tick - 1) % (2 * self.record_every) == 0
         if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
             if tp is not None:
-                items.append((ch["/world/target"], (_POSE % (sec, nsec, *tp, 0, 0, 0, 1)).encode()))
-            items.append(
-                (ch["/tf"], (_TF % (sec, nsec, *p, qx, qy, qz, qw, self._tf_camera)).encode())
-            )
-        a = tel.accel_desired_enu_m_s2
-        w = tel.command.body_rates_flu_rad_s
+                items.append(
+                    (ch["/world/target"], enc.POSE, (sec, nsec, tp[0], tp[1], tp[2], 0, 0, 0, 1))
+                )
+            items.append((ch["/tf"], enc.TF, (*pose, self._tf_camera)))
         v = sim.vehicle.v
+        rng = None
         if tp is not None:
             rx, ry, rz = tp[0] - p[0], tp[1] - p[1], tp[2] - p[2]
-            range_js = "%.4f" % math.sqrt(rx * rx + ry * ry + rz * rz)
-        else:
-            range_js = "null"
-        e, er = tel.e_est_px, tel.e_rate_est_px_s
+            rng = math.sqrt(rx * rx + ry * ry + rz * rz)
+        cmd = tel.command
         items.append(
             (
                 ch["/control"],
+                enc.CONTROL,
                 (
-                    '{"t_s":%.6f,"mode":"%s","law":"%s","los_elev_rad":%s,"los_azim_rad":%s,'
-                    '"vel_elev_rad":%s,"vel_azim_rad":%s,"accel_desired_m_s2":[%.4f,%.4f,%.4f],'
-                    '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
-                    '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
-                    '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%.4f,'
-                    '"range_m":%s}'
-                    % (
-                        t_s,
-                        tel.mode.value,
-                        tel.law,
-                        _js(tel.los_elev_rad),
-                        _js(tel.los_azim_rad),
-                        _js(tel.vel_elev_rad),
-                        _js(tel.vel_azim_rad),
-                        a[0],
-                        a[1],
-                        a[2],
-                        _js(tel.accel_normal_desired_m_s2),
-                        _js(normal_accel_m_s2),
-                        w[0],
-                        w[1],
-                        w[2],
-                        tel.command.thrust_normalised,
-                        _js(tel.yaw_rate_cmd_rad_s),
-                        _js2(e),
-                        _js2(er),
-                        math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
-                        range_js,
-                    )
-                ).encode(),
+                    t_s,
+                    tel.mode.value,
+                    tel.law,
+                    tel.los_elev_rad,
+                    tel.los_azim_rad,
+                    tel.vel_elev_rad,
+                    tel.vel_azim_rad,
+                    tel.accel_desired_enu_m_s2.tolist(),
+                    tel.accel_normal_desired_m_s2,
+                    normal_accel_m_s2,
+                    cmd.body_rates_flu_rad_s.tolist(),
+                    cmd.thrust_normalised,
+                    tel.yaw_rate_cmd_rad_s,
+                    tel.e_est_px,
+                    tel.e_rate_est_px_s,
+                    math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
+                    rng,
+                ),
             )
         )
         if half:
-            items.append((ch["/dkf"], self._dkf(t_s, tel)))
+            loop = sim.loop
+            state = loop.dkf.state_vector()
+            st = cov = None
+            if state is not None:
+                st = state[0].tolist() if hasattr(state[0], "tolist") else list(state[0])
+                if state[1] is not None:
+                    cov = state[1].tolist() if hasattr(state[1], "tolist") else list(state[1])
+            items.append(
+                (
+                    ch["/dkf"],
+                    enc.DKF,
+                    (t_s, st, cov, loop.acquired, tel.dkf_lost, tel.dkf_time_since_detection_s),
+                )
+            )
         self._put_many(ns, items)
         if (self._tick - 1) % (self.record_every * 20) == 0 and tp is not None:  # /scene
             self._scene(t_s, p, tp)
-
-    def _dkf(self, t_s: float, tel: ControlTelemetry) -> bytes:
-        loop = self.sim.loop
-        state = loop.dkf.state_vector()
-        if state is None:
-            st = cov = "null"
-        else:
-            st = "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[0])
-            cov = "null" if state[1] is None else "[%.4f,%.4f,%.4f,%.4f]" % tuple(state[1])
-        return (
-            '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,'
-            '"time_since_detection_s":%s}'
-            % (
-                t_s,
-                st,
-                cov,
-                "true" if loop.acquired else "false",
-                "true" if tel.dkf_lost else "false",
-                _js(tel.dkf_time_since_detection_s),
-            )
-        ).encode()
 
     def _scene(self, t_s: float, p, tp) -> None:
         stamp = _stamp(t_s)
@@ -458,17 +409,14 @@ class SortieRecorder:
         else:
             self.event(t_end, "warning", f"sortie stopped early: {reason or 'no outcome'}")
         try:
-            self._w.add_metadata(
-                "outcome",
+            self._sink.finish(
                 {
                     k: json.dumps(v)
                     for k, v in (
                         summary or {"outcome": "INCOMPLETE", "reason": reason or "stopped"}
                     ).items()
-                },
+                }
             )
-            self._w.finish()
-            self._file.close()
             self.closed = True
         except OSError as exc:
             self._fail(exc)
