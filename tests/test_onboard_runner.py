@@ -78,7 +78,7 @@ def test_a_slow_tick_is_reported_as_an_overrun(tmp_path):
 
     rt.tick = slow_tick
     rt.run(duration_s=0.5)
-    assert rt.overruns == 1
+    assert rt.overruns >= 1  # the slow tick (a loaded machine may add another)
     assert any("loop overrun" in line for line in lines)
     assert 40 <= rt.stats()["ticks"] <= 51  # 100 Hz for 0.5 s, less the stall
     for link in (fc, gcs):

@@ -195,6 +195,7 @@ def test_a_crashed_sortie_leaves_a_complete_file(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], timeout=120)
     assert proc.returncode == 3
     (path,) = tmp_path.glob("*.mcap")
+
     def finished() -> bool:
         try:
             return inspect_log(path).status == "ok"

@@ -1,10 +1,15 @@
 """Writes one sortie to ``logs/<UTC time>_<scenario>_<law>.mcap`` while it flies.
 
 Chunked and indexed MCAP (zstd), JSON messages with Foxglove's well-known schemas, log times
-on the sortie's own clock. The file is created exclusively (an existing one is never
-overwritten) and each full chunk goes to disk as it is written, so a crash leaves a readable
-file up to the last chunk. A write error (a full disk) ends the recording with a clear
-message in ``error`` and never the sortie.
+on the sortie's own clock. The file is created here, exclusively (an existing one is never
+overwritten); the sortie's thread gathers each message's numbers and hands them, in batches,
+to the recording process (:mod:`.sink`), which encodes (:mod:`.encode`) and writes them, each
+full chunk reaching disk as it is written. If the sortie's process dies, the recording
+process still writes what it was sent and finishes the file (outcome INCOMPLETE); where no
+recording process can run, the same code writes in this process and a crash leaves a file
+readable up to its last chunk. A write error (a full disk) ends the recording with a clear
+message in ``error`` and never the sortie. :meth:`SortieRecorder.finish` returns once the
+file is complete.
 
 Rates: the vehicle's pose and /control every ``record_every`` control ticks (20 Hz by
 default: recording must cost a sortie at most about a tenth of its simulation time, and
