@@ -88,13 +88,11 @@ class LocalSink:
         return self._f._file
 
     def add(self, ti: int, ns: int, data: bytes) -> None:
-        self._f._w.add_message(self._f.channel_ids[ti], ns, data, ns)
+        self._f.add_many(((ti, ns, RAW, data),))
 
     def add_many(self, ns: int, items) -> None:
         """(channel index, encoder, payload) items at one log time."""
-        add, ids = self._f._w.add_message, self._f.channel_ids
-        for ti, enc, payload in items:
-            add(ids[ti], ns, encode(enc, payload), ns)
+        self._f.add_many((ti, ns, enc, payload) for ti, enc, payload in items)
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         self._f.metadata(name, data)
