@@ -146,3 +146,23 @@ def test_live_start_without_onboard_is_a_clear_error(tmp_path):
             assert c.get("/api/status").json()["live"]["link"] == "never heard"
     finally:
         gs.close()
+
+
+def test_a_signing_key_mismatch_is_named_when_a_command_goes_unanswered():
+    import os
+
+    port = _port()
+    session = LiveSession(f"udpin:127.0.0.1:{port}", signing_key=os.urandom(32))
+    onboard = MavLink(
+        f"udpout:127.0.0.1:{port}", 1, 191, os.urandom(32),
+        unsigned_ok=(mavlink.MAVLINK_MSG_ID_HEARTBEAT,),
+    )  # fmt: skip
+    try:
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+        assert _wait(lambda: session.link_up())
+        with pytest.raises(SessionError, match="signing key"):
+            session.live_abort()
+        assert _wait(lambda: onboard.poll() == [] and onboard.bad_frames >= 1)
+    finally:
+        session.close()
+        onboard.close()

@@ -242,7 +242,10 @@ class LiveSession:
                     break
                 left = sent_at + ACK_TIMEOUT_S - time.monotonic()
                 if left <= 0:
-                    raise SessionError(f"{label}: no acknowledgement from the onboard computer")
+                    hint = " (is the signing key the same on both ends?)" if self.signed else ""
+                    raise SessionError(
+                        f"{label}: no acknowledgement from the onboard computer{hint}"
+                    )
                 self._acked.wait(left)
             result = ack[1]
             self.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
