@@ -80,7 +80,7 @@ def test_telemetry_layout_round_trips():
 def _inputs(t, **kw):
     base = dict(
         now_s=t,
-        fc_heartbeat_age_s=0.1,
+        fc_silence_s=0.1,
         armed=True,
         offboard=False,
         tracking=True,
@@ -106,7 +106,7 @@ def _to_intercept(sm):
 
 def test_never_starts_by_itself_and_refuses_a_start_without_target():
     sm = OffboardStateMachine()
-    assert sm.step(_inputs(0.0, fc_heartbeat_age_s=None)).output is Output.NONE
+    assert sm.step(_inputs(0.0, fc_silence_s=None)).output is Output.NONE
     assert sm.state is State.LINK_DOWN
     assert sm.command_start()[0] is False
     assert sm.step(_inputs(0.1, tracking=False)).request_streams  # once, as the link comes up
@@ -165,10 +165,10 @@ def test_abort_brakes_and_link_loss_stops_all_commands():
     d = sm.step(_inputs(1.0, offboard=True))
     assert sm.state is State.BRAKING and d.output is Output.BRAKE
     assert sm.reason == "aborted by the operator"
-    d = sm.step(_inputs(1.2, offboard=True, fc_heartbeat_age_s=1.5))
+    d = sm.step(_inputs(1.2, offboard=True, fc_silence_s=1.5))
     assert sm.state is State.LINK_LOST and d.output is Output.NONE
     assert any(sev == "critical" for sev, _ in d.events)
-    d = sm.step(_inputs(1.3, offboard=True, fc_heartbeat_age_s=0.05))
+    d = sm.step(_inputs(1.3, offboard=True, fc_silence_s=0.05))
     assert sm.state is State.READY and d.output is Output.NONE  # no automatic resumption
 
 

@@ -176,7 +176,7 @@ class LiveSession:
         self._last_trail = -1.0
         self._params_requested = -1e9
         self._publish_count = 0
-        self._scene_reset = False
+        self._scene_reset = True  # (re)build the 3D scene at the next publish
         self._prev_vel: tuple[float, list[float]] | None = None
         self.normal_accel_m_s2: float | None = None
         self.miss_m: float | None = None
@@ -670,9 +670,9 @@ class LiveSession:
                     None,
                     "",
                 )
-                if self._scene_reset or not getattr(self, "_scene_ready", False):
+                if self._scene_reset:
                     self.scene.reset(self.camera_model(), TARGET_DIAMETER_M, state)
-                    self._scene_ready, self._scene_reset = True, False
+                    self._scene_reset = False
                 self.scene.update(state, self._trail_vehicle[-600:], self._trail_target[-600:])
             except Exception:  # a viewer problem must never stop the link
                 self.scene_errors += 1

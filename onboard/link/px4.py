@@ -17,7 +17,6 @@ import os
 import time
 from collections import Counter, deque
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,7 +50,6 @@ PX4_SUB_AUTO_LOITER = 3
 DEFAULT_SITL_URL = "udpout:127.0.0.1:14540"  # PX4 SITL sends its offboard link to 14540
 DEFAULT_ONBOARD_FC_URL = "udpin:127.0.0.1:14540"
 DEFAULT_GCS_URL = "udpout:127.0.0.1:14550"  # ground stations listen on 14550
-DEFAULT_GROUND_URL = "udpin:127.0.0.1:14550"
 
 
 def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
@@ -117,15 +115,6 @@ class LinkError(RuntimeError):
     """A connection string that cannot be opened."""
 
 
-@dataclass
-class LinkStats:
-    received: Counter
-    bad_frames: int
-    refused_peers: int
-    sent: int
-    send_errors: int
-
-
 class MavLink:
     """A MAVLink 2 endpoint that never raises on what it receives.
 
@@ -183,8 +172,7 @@ class MavLink:
         self._refused: set = set()
         self.refused_peers = 0
         self._rx_times: deque[tuple[float, str]] = deque()
-        self.last_rx_monotonic: float | None = None
-        self._first_rx_s = 0.0
+        self._first_rx_s: float | None = None  # when the first valid frame came
         self.tlog: TlogWriter | None = None
 
     # -------------------------------------------------------------- receive
@@ -196,9 +184,8 @@ class MavLink:
             out = self._poll_stream(max_messages)
         now = time.monotonic()
         for msg in out:
-            if self.last_rx_monotonic is None:
+            if self._first_rx_s is None:
                 self._first_rx_s = now
-            self.last_rx_monotonic = now
             self.received[msg.get_type()] += 1
             self._rx_times.append((now, msg.get_type()))
             if self.tlog is not None:
@@ -295,15 +282,6 @@ class MavLink:
 
     def statustext(self, severity: int, text: str) -> bool:
         return self.send(self.mav.statustext_encode(severity, text.encode("utf-8")[:50]))
-
-    def stats(self) -> LinkStats:
-        return LinkStats(
-            Counter(self.received),
-            self.bad_frames,
-            self.refused_peers,
-            self.sent,
-            self.send_errors,
-        )
 
     def close(self) -> None:
         with contextlib.suppress(Exception):

@@ -541,12 +541,12 @@ class OnboardRuntime:
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
             state = VehicleState(now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, f.rates_flu_rad_s)
             tel = loop.tick(state, brake=self.sm.state is State.BRAKING)
-        hb_age = None if f.heartbeat_rx_s is None else now - max(f.heartbeat_rx_s, f.last_rx_s)
+        silence = None if f.heartbeat_rx_s is None else now - f.last_rx_s
         tracking = tel is not None and tel.mode is LoopMode.TRACKING
         decision = self.sm.step(
             Inputs(
                 now_s=now,
-                fc_heartbeat_age_s=hb_age,
+                fc_silence_s=silence,
                 armed=f.armed,
                 offboard=f.offboard,
                 tracking=tracking,

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 STREAM_BEFORE_OFFBOARD_S = 0.3
 START_TIMEOUT_S = 3.0  # PX4 has not entered offboard by then: give up, back to ready
-LINK_TIMEOUT_S = 1.0  # no heartbeat from the flight controller for this long: link lost
+LINK_TIMEOUT_S = 0.5  # the flight controller silent this long: link lost
 OFFBOARD_EXIT_GRACE_S = 0.3  # PX4 out of offboard for this long while intercepting: finished
 REQUEST_EVERY_S = 0.5  # repeat arm / mode requests this often until PX4 complies
 
@@ -41,7 +41,7 @@ class Output(enum.Enum):
 @dataclass(frozen=True)
 class Inputs:
     now_s: float
-    fc_heartbeat_age_s: float | None  # None: never heard
+    fc_silence_s: float | None  # since the flight controller's last message; None: no heartbeat yet
     armed: bool
     offboard: bool  # PX4 reports offboard mode
     tracking: bool  # the loop has a live target estimate
@@ -111,7 +111,7 @@ class OffboardStateMachine:
     def step(self, i: Inputs) -> Decision:
         now = i.now_s
         d = Decision(Output.NONE)
-        link_ok = i.fc_heartbeat_age_s is not None and i.fc_heartbeat_age_s <= LINK_TIMEOUT_S
+        link_ok = i.fc_silence_s is not None and i.fc_silence_s <= LINK_TIMEOUT_S
         s = self.state
         self._tracking = i.tracking
         if i.tracking:
