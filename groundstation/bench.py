@@ -556,12 +556,13 @@ def run_sitl_bench(seconds: float = 20.0, as_json: bool = False) -> int:
 
     from onboard.link.px4 import MavLink
 
-    def free(kind):
-        with socket.socket(socket.AF_INET, kind) as s:
-            s.bind(("127.0.0.1", 0))
-            return s.getsockname()[1]
-
-    fc, gcs, cam = free(socket.SOCK_DGRAM), free(socket.SOCK_DGRAM), free(socket.SOCK_STREAM)
+    socks = [socket.socket(socket.AF_INET, k) for k in (socket.SOCK_DGRAM,) * 2]
+    socks.append(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+    for sock in socks:  # held together, so the three ports differ
+        sock.bind(("127.0.0.1", 0))
+    fc, gcs, cam = (sock.getsockname()[1] for sock in socks)
+    for sock in socks:
+        sock.close()
     delay_s = load_scenario("cv-top-to-bottom").camera.delay_s
     with tempfile.TemporaryDirectory() as tmp:
         stats_path = Path(tmp) / "stats.json"

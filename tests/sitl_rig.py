@@ -16,9 +16,23 @@ from onboard.link.px4 import CMD_ABORT, CMD_START, MavLink, mavlink, message_tex
 
 
 def free_port(kind=socket.SOCK_DGRAM) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_ports(kind)[0]
+
+
+def free_ports(*kinds) -> list[int]:
+    """Distinct free loopback ports, one per socket kind: all held open while picked, so the
+    kernel cannot hand out the same number twice."""
+    socks = [socket.socket(socket.AF_INET, kind) for kind in kinds]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        ports = [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+    if len(set(ports)) < len(ports):  # a UDP and a TCP port may share a number: pick again
+        return free_ports(*kinds)
+    return ports
 
 
 class Rig:
@@ -33,9 +47,9 @@ class Rig:
         ground: bool = True,
     ) -> None:
         self.tmp = tmp
-        self.fc_port = free_port()
-        self.gcs_port = free_port()
-        self.cam_port = free_port(socket.SOCK_STREAM)
+        self.fc_port, self.gcs_port, self.cam_port = free_ports(
+            socket.SOCK_DGRAM, socket.SOCK_DGRAM, socket.SOCK_STREAM
+        )
         fc = f"udp{'in' if sitl_listens else 'out'}:127.0.0.1:{self.fc_port}"
         onb_fc = f"udp{'out' if sitl_listens else 'in'}:127.0.0.1:{self.fc_port}"
         onb_gcs = f"udp{'in' if onboard_gcs_listens else 'out'}:127.0.0.1:{self.gcs_port}"
