@@ -11,7 +11,13 @@ from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.gains import GainError
 
 from .campaigns.definitions import CampaignError
-from .scenario import ScenarioError, load_scenario, shipped_scenarios
+from .scenario import (
+    ScenarioError,
+    load_scenario,
+    parse_overrides,
+    shipped_scenarios,
+    with_overrides,
+)
 from .sim.camera import CAMERA_MODES
 
 
@@ -19,6 +25,12 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # usage errors: exit 2 without a traceback
         self.print_usage(sys.stderr)
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+_SET_HELP = (
+    "change one scenario value for every sortie (repeatable), e.g. --set camera.delay_s=0 "
+    "--set gains.k_v=100"
+)
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -32,6 +44,7 @@ def _build_parser() -> argparse.ArgumentParser:
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.add_argument("--log", metavar="DIR", default=None, help="record the sortie to DIR (MCAP)")
+    s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
 
     r = sub.add_parser("replay", help="print a recorded sortie's summary")
     r.add_argument("file", help="a sortie log (.mcap)")
@@ -111,6 +124,7 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", default=None, help="output folder (default logs/campaigns/...)")
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
     c.add_argument("--log", metavar="DIR", default=None, help="record every sortie to DIR")
+    c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
@@ -139,7 +153,7 @@ def _build_parser() -> argparse.ArgumentParser:
 def _cmd_sortie(args: argparse.Namespace) -> int:
     from .sim.simulation import Simulation
 
-    scenario = load_scenario(args.scenario)
+    scenario = with_overrides(load_scenario(args.scenario), parse_overrides(args.set))
     sim = Simulation(
         scenario, args.law, args.seed, args.camera, keep_records=False, log_dir=args.log
     )

@@ -8,12 +8,16 @@ Angles are degrees in the file and stay so named (``yaw_deg``); they are convert
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import tomli_w
 
 from onboard.gains import GainError, Gains
 
@@ -269,7 +273,87 @@ def shipped_scenarios() -> list[Path]:
 
 
 def with_changes(scenario: Scenario, **sections: Any) -> Scenario:
-    """A copy with whole sections or top-level values replaced, validated again."""
-    s = dataclasses.replace(scenario, **sections)
+    """A copy with whole sections or top-level values replaced, validated again. The copy is
+    no longer its file, so its TOML (:func:`scenario_toml`) is generated from its values."""
+    s = dataclasses.replace(scenario, text="", **sections)
     _validate(s)
     return s
+
+
+def parse_overrides(items: Sequence[str] | None) -> dict[str, Any]:
+    """``["camera.noise_px=0", "gains.k_v=100"]`` -> ``{"camera.noise_px": 0, ...}``; each
+    value is read as TOML (numbers, strings in quotes, arrays). Only the syntax is checked
+    here; :func:`with_overrides` checks names, types and ranges."""
+    out: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        value = None
+        if sep and text.strip():
+            with contextlib.suppress(tomllib.TOMLDecodeError):
+                value = tomllib.loads(f"v = {text.strip()}")["v"]
+        if not key or value is None:
+            raise ScenarioError(
+                f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. camera.noise_px=0 or gains.k_v=2"
+            )
+        out[key] = value
+    return out
+
+
+def with_overrides(scenario: Scenario, overrides: Mapping[str, Any]) -> Scenario:
+    """A copy with single values replaced: ``section.key`` (``camera``, ``wind``, ...,
+    ``gains``) or a top-level key such as ``duration_s``. Every value is checked as if it had
+    been in the file; an error names the key and changes nothing."""
+    if not overrides:
+        return scenario
+    src = "--set"
+    tables: dict[str, dict[str, Any]] = {}
+    top: dict[str, Any] = {}
+    for key, value in overrides.items():
+        section, dot, name = key.partition(".")
+        if not dot:
+            if key not in ("name", "duration_s", "description"):
+                raise ScenarioError(
+                    f"{src}: unknown key '{key}' (a top-level key is name, duration_s or "
+                    "description; others are SECTION.KEY)"
+                )
+            top[key] = _convert(value, "float" if key == "duration_s" else "str", f"{src} {key}")
+            continue
+        if section != "gains" and section not in _SECTIONS:
+            allowed = ", ".join([*_SECTIONS, "gains"])
+            raise ScenarioError(f"{src}: unknown section '{section}' (allowed: {allowed})")
+        tables.setdefault(section, {})[name] = value
+    changes: dict[str, Any] = dict(top)
+    for section, values in tables.items():
+        if section == "gains":
+            for k, v in values.items():
+                _convert(v, "float", f"{src} gains.{k}")
+            changes["gains"] = {**scenario.gains, **{k: float(v) for k, v in values.items()}}
+        else:
+            merged = {**_as_toml_table(getattr(scenario, section)), **values}
+            changes[section] = _parse_table(merged, _SECTIONS[section], section, src)
+    changed = with_changes(
+        dataclasses.replace(scenario, source=f"--set on {scenario.source}"), **changes
+    )
+    return dataclasses.replace(changed, source=scenario.source)
+
+
+def _as_toml_table(spec: Any) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(spec).items()}
+
+
+def scenario_toml(scenario: Scenario) -> str:
+    """The scenario as TOML: its file as read if it is unchanged, else generated from its
+    values (every key written, so it reads back to an equal scenario)."""
+    if scenario.text:
+        return scenario.text
+    data: dict[str, Any] = {
+        "name": scenario.name,
+        "description": scenario.description,
+        "duration_s": scenario.duration_s,
+    }
+    for section in _SECTIONS:
+        data[section] = _as_toml_table(getattr(scenario, section))
+    if scenario.gains:
+        data["gains"] = dict(scenario.gains)
+    return tomli_w.dumps(data)

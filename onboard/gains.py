@@ -54,7 +54,9 @@ class Gains:
     omega_max: float = _gain(4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)")
     v_min: float = _gain(0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)")
     k_brake: float = _gain(1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)")
-    k_v: float = _gain(1.8, "1/s", 0.2, 20.0, "PG/IBVS baselines: velocity-loop gain (PX4 default)")
+    k_v: float = _gain(
+        1.8, "1/s", 0.2, 200.0, "PG/IBVS baselines: velocity-loop gain (PX4's; 1/dt = eq. 17)"
+    )
     k_ibvs: float = _gain(1.0, "-", 0.0, 10.0, "IBVS baseline: image-error decay per unit closing")
 
     def __post_init__(self) -> None:

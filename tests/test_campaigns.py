@@ -54,6 +54,11 @@ def test_results_identical_whatever_the_worker_count():
         (["campaign", "static", "--laws", "png,zz"], "unknown law(s) zz"),
         (["campaign", "static", "--laws", ""], "--laws needs at least one law"),
         (["campaign", "static", "--n", "0"], "--n must be at least 1"),
+        (["campaign", "static", "--set", "gains.k_v=900"], "k_v = 900.0 is outside its range"),
+        (["campaign", "static", "--set", "gains.kv=1"], "unknown gain(s): kv"),
+        (["campaign", "static", "--set", "camera.noise_px"], "expected SECTION.KEY=VALUE"),
+        (["campaign", "static", "--set", "camera.noise_px=-1"], "must not be negative"),
+        (["campaign", "static", "--set", "camera.nois_px=0"], "unknown key 'camera.nois_px'"),
     ],
 )
 def test_bad_campaign_or_law_is_a_clear_error(args, message, tmp_path):
@@ -129,6 +134,20 @@ def test_static_campaign_png_centimetre_cep_beats_ibvs(tmp_path):
     assert laws["png"]["success_rate"] == 1.0
     for name in ("miss_scatter.png", "targets_image_plane.png", "miss_boxplot.png"):
         assert (tmp_path / "s" / name).exists()
+
+
+def test_override_reaches_every_sortie_and_the_report(tmp_path):
+    # k_v = 1/dt is the proposed law's literal eq. 17 applied to PG: a saturating, limit-cycling
+    # pursuit that lands centimetres off instead of millimetres (README, static targets).
+    kw = dict(n=4, laws=("pg",), seed=0, workers=1, progress=False)
+    base = run_campaign("static", out=tmp_path / "a", **kw)
+    literal = run_campaign("static", out=tmp_path / "b", overrides={"gains.k_v": 100}, **kw)
+    assert literal["meta"]["overrides"] == {"gains.k_v": 100} and base["meta"]["overrides"] == {}
+    assert "--set gains.k_v=100" in literal["meta"]["command"]
+    assert "gains.k_v = 100" in (tmp_path / "b" / "report.md").read_text()
+    miss = {k: r["summary"]["laws"]["pg"]["mean_m"] for k, r in (("a", base), ("b", literal))}
+    assert miss["a"] < 0.01 and miss["b"] > 3 * miss["a"], miss
+    assert literal["outcomes"][0].result["max_normal_accel_m_s2"] > 4.5  # saturates (a_max 5)
 
 
 def test_wind_campaign_png_always_hits_in_still_air(tmp_path):

@@ -241,3 +241,20 @@ def test_sortie_cli_log_flag(tmp_path):
     ).stdout
     log = Path(json.loads(out)["log"])
     assert log.parent == tmp_path and inspect_log(log).status == "ok"
+
+
+def test_a_changed_scenario_is_recorded_as_flown(tmp_path):
+    # campaigns move targets and --set changes values: the recording must carry the scenario
+    # that flew, or re-flying it from the dashboard would fly another sortie
+    from groundstation.recording.reader import scenario_attachment
+    from groundstation.scenario import parse_scenario, with_overrides
+
+    flown = with_overrides(
+        load_scenario("static-ahead-20m"),
+        {"target.position_m": [3.0, 18.0, 11.0], "gains.k_v": 50, "camera.noise_px": 0.5},
+    )
+    sim = Simulation(flown, law="pg", keep_records=False, log_dir=tmp_path)
+    sim.run()
+    back = parse_scenario(scenario_attachment(sim.recorder.path))
+    assert back.target.position_m == (3.0, 18.0, 11.0)
+    assert back.gains["k_v"] == 50.0 and back.camera.noise_px == 0.5

@@ -90,3 +90,56 @@ def test_every_shipped_scenario_loads_and_names_match_files():
 
 def test_shipped_name_lookup():
     assert load_scenario("cv-top-to-bottom").target.motion == "cv"
+
+
+def _values(s):
+    import dataclasses
+
+    d = dataclasses.asdict(s)
+    d.pop("source"), d.pop("text")
+    return d
+
+
+@pytest.mark.parametrize("path", shipped_scenarios(), ids=lambda p: p.stem)
+def test_a_changed_scenario_writes_toml_that_reads_back_equal(path):
+    from groundstation.scenario import scenario_toml, with_overrides
+
+    s = load_scenario(path)
+    assert scenario_toml(s) == s.text  # unchanged: the file as read, comments and all
+    changed = with_overrides(s, {"camera.noise_px": 0, "target.position_m": [1, 2, 3.5]})
+    assert changed.camera.noise_px == 0.0 and changed.target.position_m == (1.0, 2.0, 3.5)
+    assert changed.text == "" and changed.source == s.source
+    again = parse_scenario(scenario_toml(changed))
+    assert _values(again) == _values(changed)
+
+
+def test_overrides_are_checked_like_the_file():
+    from groundstation.scenario import parse_overrides, with_overrides
+
+    s = load_scenario("static-ahead-20m")
+    assert parse_overrides(["camera.delay_s=0", "gains.k_v = 100", 'name="x"']) == {
+        "camera.delay_s": 0,
+        "gains.k_v": 100,
+        "name": "x",
+    }
+    o = with_overrides(s, parse_overrides(["camera.delay_s=0", "gains.k_v=100", "duration_s=9"]))
+    assert (o.camera.delay_s, o.gains["k_v"], o.duration_s) == (0.0, 100.0, 9.0)
+    assert o.camera.noise_px == s.camera.noise_px  # the rest of the section is kept
+    for items, message in (
+        (["camera.delay_s"], "expected SECTION.KEY=VALUE"),
+        (["camera.delay_s=fast"], "expected SECTION.KEY=VALUE"),
+        (["=1"], "expected SECTION.KEY=VALUE"),
+    ):
+        with pytest.raises(ScenarioError, match=message):
+            parse_overrides(items)
+    for overrides, message in (
+        ({"camera.delay_s": "0"}, "camera.delay_s': expected a number"),
+        ({"camera.rate_hz": 7}, "must divide the physics rate"),
+        ({"optics.f": 1}, "unknown section 'optics'"),
+        ({"speed": 1}, "unknown key 'speed'"),
+        ({"target.position_m": [1, 2]}, "expected a list of 3 numbers"),
+        ({"gains.k_a": -1}, "outside its range"),
+        ({"gains.k_a": True}, "expected a number"),
+    ):
+        with pytest.raises(ScenarioError, match=message):
+            with_overrides(s, overrides)

@@ -12,8 +12,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import tomli_w
 from tqdm import tqdm
 
+from ..scenario import parse_overrides, with_overrides
 from ..sim.camera import CAMERA_MODES
 from .definitions import LAWS, CampaignError, build_jobs, get_campaign
 from .report import tables_markdown, write_report
@@ -45,12 +47,19 @@ def run_campaign(
     progress: bool = True,
     command: str | None = None,
     log_dir: Path | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
+    """Run a campaign and write its report; ``overrides`` (``{"camera.delay_s": 0}``, see
+    :func:`with_overrides`) change every sortie's scenario, checked before anything runs."""
     campaign = get_campaign(name)
     if camera not in CAMERA_MODES:
         raise CampaignError(f"unknown camera mode {camera!r}; choose one of {CAMERA_MODES}")
     n = campaign.default_n if n is None else n
     jobs = build_jobs(name, n, laws, camera, seed)
+    if overrides:
+        jobs = [
+            dataclasses.replace(j, scenario=with_overrides(j.scenario, overrides)) for j in jobs
+        ]
     if log_dir is not None:
         jobs = [dataclasses.replace(j, log_dir=str(log_dir)) for j in jobs]
     runner = runner or LocalPoolRunner(workers)
@@ -72,12 +81,14 @@ def run_campaign(
         "campaign": name,
         "command": command
         or f"groundstation campaign {name} --n {n} --laws {','.join(laws)} "
-        f"--camera {camera} --seed {seed}",
+        f"--camera {camera} --seed {seed}"
+        + "".join(f" --set {k}={_toml_value(v)}" for k, v in (overrides or {}).items()),
         "n": n,
         "what_n_counts": campaign.what_n_counts,
         "laws": list(laws),
         "camera": camera,
         "seed": seed,
+        "overrides": dict(overrides or {}),
         "workers": n_workers,
         "sorties": len(outcomes),
         "sim_time_s": sim_s,
@@ -89,10 +100,15 @@ def run_campaign(
     return {"out": str(out), "files": files, "meta": meta, "summary": summary, "outcomes": outcomes}
 
 
+def _toml_value(v: Any) -> str:
+    return tomli_w.dumps({"v": v})[4:].strip()
+
+
 def main_campaign(args) -> int:
     from .definitions import parse_laws
 
     laws = parse_laws(args.laws)
+    overrides = parse_overrides(args.set)
     command = "groundstation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res = run_campaign(
         args.name,
@@ -105,6 +121,7 @@ def main_campaign(args) -> int:
         progress=not args.json,
         command=command,
         log_dir=Path(args.log) if args.log else None,
+        overrides=overrides,
     )
     meta = res["meta"]
     if args.json:

@@ -472,7 +472,9 @@ def write_report(
         "",
         f"Command: `{meta['command']}`  ",
         f"{meta['sorties']} sorties, camera {meta['camera']}, laws {', '.join(meta['laws'])}, "
-        f"seed {meta['seed']}, n = {meta['n']} {meta['what_n_counts']}. "
+        f"seed {meta['seed']}, n = {meta['n']} {meta['what_n_counts']}"
+        + "".join(f", {k} = {v}" for k, v in meta.get("overrides", {}).items())
+        + ". "
         "Regenerate with the command above; the tables come from `results.json`.",
         "",
         tables_markdown(name, summary, outcomes),

@@ -37,6 +37,7 @@ from onboard import __version__ as onboard_version
 from onboard.datatypes import ControlTelemetry, LoopMode
 
 from .. import __version__ as gs_version
+from ..scenario import scenario_toml
 from . import encode as enc
 from .schemas import CHANNELS
 from .sink import open_sink
@@ -128,7 +129,7 @@ class SortieRecorder:
                 },
             )
             self._sink.attachment(
-                "scenario.toml", "application/toml", sim.scenario.text.encode() or b""
+                "scenario.toml", "application/toml", scenario_toml(sim.scenario).encode()
             )
             self._calibration(0.0)
             self.event(
