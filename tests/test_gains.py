@@ -60,4 +60,3 @@ def test_onboard_gains_cli(tmp_path):
     )
     assert r.returncode == 2
     assert "gain k_p = 5 is outside its range" in r.stderr and "Traceback" not in r.stderr
-

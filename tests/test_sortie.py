@@ -116,7 +116,15 @@ def test_scenario_override_on_the_command_line():
     literal = json.loads(_cli_json("static-ahead-20m", "--law", "pg", "--set", "gains.k_v=100"))
     assert default["miss_m"] < 0.02 and literal["miss_m"] > 0.05  # README: PG against k_v
     r = subprocess.run(
-        [sys.executable, "-m", "groundstation", "sortie", "static-ahead-20m", "--set", "gains.k_a=99"],
+        [
+            sys.executable,
+            "-m",
+            "groundstation",
+            "sortie",
+            "static-ahead-20m",
+            "--set",
+            "gains.k_a=99",
+        ],
         capture_output=True,
         text=True,
     )

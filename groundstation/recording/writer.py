@@ -37,7 +37,7 @@ from onboard import __version__ as onboard_version
 from onboard.datatypes import ControlTelemetry, LoopMode
 
 from .. import __version__ as gs_version
-from ..scenario import scenario_toml
+from ..scenario import Scenario, scenario_toml
 from . import encode as enc
 from .schemas import CHANNELS
 from .sink import open_sink
@@ -128,9 +128,9 @@ class SortieRecorder:
                     "record_rate_hz": str(sim.scenario.sim.control_rate_hz / record_every),
                 },
             )
-            self._sink.attachment(
-                "scenario.toml", "application/toml", scenario_toml(sim.scenario).encode()
-            )
+            sc = sim.scenario  # a live sortie has no scenario, only what the recorder reads
+            toml = scenario_toml(sc) if isinstance(sc, Scenario) else sc.text
+            self._sink.attachment("scenario.toml", "application/toml", toml.encode())
             self._calibration(0.0)
             self.event(
                 0.0,
