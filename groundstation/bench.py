@@ -19,6 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from onboard.enums import GuidanceLaw, codes
+
 from .scenario import load_scenario
 from .sim.simulation import Simulation
 
@@ -122,7 +124,7 @@ def run_campaign_bench(as_json: bool = False) -> int:
     if as_json:
         print(json.dumps(figures, indent=2))
         return 0
-    print("Campaign benchmark: static, projected, laws png,pg,ibvs")
+    print("Campaign benchmark: static, projected, laws " + ",".join(codes(GuidanceLaw)))
     for w in (1, 2):
         print(
             f"  n=20 (60 sorties), {w} worker(s): {figures[f'throughput_{w}_workers']:6.1f} "
@@ -302,13 +304,16 @@ def run_recording_bench(as_json: bool = False) -> int:
     from .recording import reader as log_reader
     from .recording import sink
     from .recording.reader import LogIndex
+    from .recording.writer import SortieRecorder as Rec
     from .scenario import with_changes
 
     figures: dict[str, object] = {"cores": len(os.sched_getaffinity(0))}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         # warm up: imports, caches and the recording process
-        Simulation(load_scenario("cv-top-to-bottom"), keep_records=False, log_dir=tmp / "w").run()
+        Simulation(
+            load_scenario("cv-top-to-bottom"), keep_records=False, observers=[Rec(tmp / "w")]
+        ).run()
 
         # 1. what recording adds to a sortie's simulation time: the median, over many pairs
         # run back to back (plain, then recorded, same scenario and seed), of the ratio, so a
@@ -324,7 +329,9 @@ def run_recording_bench(as_json: bool = False) -> int:
                     Simulation(sc, "png", k, mode, keep_records=False).run()
                     plain = time.perf_counter() - t0
                     t0 = time.perf_counter()
-                    Simulation(sc, "png", k, mode, keep_records=False, log_dir=tmp / "o").run()
+                    Simulation(
+                        sc, "png", k, mode, keep_records=False, observers=[Rec(tmp / "o")]
+                    ).run()
                     ratios.append((time.perf_counter() - t0) / plain)
             return statistics.median(ratios) - 1.0, len(ratios)
 
@@ -363,12 +370,13 @@ def run_recording_bench(as_json: bool = False) -> int:
             interceptor=dataclasses.replace(base.interceptor, velocity_m_s=(0.0, 0.0, 0.0)),
         )
         t0 = time.perf_counter()
-        sim = Simulation(long_sc, "png", 0, "rendered", keep_records=False, log_dir=tmp / "l")
+        rec = Rec(tmp / "l")
+        sim = Simulation(long_sc, "png", 0, "rendered", keep_records=False, observers=[rec])
         result = sim.run()
         figures["long_sortie_s"] = result.sim_time_s
         figures["long_sortie_outcome"] = result.outcome
         figures["long_record_wall_s"] = time.perf_counter() - t0
-        path = sim.recorder.path
+        path = rec.path
         size = path.stat().st_size
         player = ReplayPlayer(path)
         counter = [0]

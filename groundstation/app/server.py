@@ -24,6 +24,7 @@ from fastapi.responses import FileResponse, HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
+from onboard import enums
 from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.gains import GAIN_SPECS, GainError
 
@@ -81,6 +82,15 @@ class TelemetryHub:
                 with contextlib.suppress(asyncio.QueueEmpty):
                     q.get_nowait()
             q.put_nowait(full if frames else lean)
+
+
+class Meta(BaseModel):
+    laws: list[str] = Field(description="guidance laws (MAVLink LAW code = index)")
+    loop_modes: list[str] = Field(description="interception loop modes (code = index)")
+    runtime_states: list[str] = Field(description="onboard runtime states (code = index)")
+    outcomes: list[str] = Field(description="simulated sortie outcomes")
+    camera_modes: list[str]
+    speeds: list[str] = Field(description="simulator speeds: multiples of real time, or max")
 
 
 class ReflyRequest(BaseModel):
@@ -242,6 +252,12 @@ def create_app(
             hub.sent.pop(key, None)
 
     # ------------------------------------------------------------------ API
+    @app.get("/api/meta", tags=["meta"])
+    async def get_meta() -> Meta:
+        """The option lists the page offers, from their one declaration (onboard/enums.py,
+        the simulator's camera modes, the session's speeds)."""
+        return Meta(**enums.meta(), camera_modes=list(CAMERA_MODES), speeds=list(SPEEDS))
+
     @app.get("/api/scenarios", tags=["scenarios"])
     async def list_scenarios() -> list[dict[str, str]]:
         out = []

@@ -14,11 +14,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from onboard.enums import GuidanceLaw
+
 from .definitions import WIND_SPEEDS_M_S
 from .runner import SortieOutcome
 
-LAW_COLOURS = {"png": "tab:red", "pg": "tab:blue", "ibvs": "tab:green"}
-LAW_NAMES = {"png": "PNG (proposed)", "pg": "PG", "ibvs": "IBVS"}
+LAW_COLOURS = {
+    GuidanceLaw.PNG.value: "tab:red",
+    GuidanceLaw.PG.value: "tab:blue",
+    GuidanceLaw.IBVS.value: "tab:green",
+}
+LAW_NAMES = {law.value: law.name for law in GuidanceLaw} | {GuidanceLaw.PNG.value: "PNG (proposed)"}
+assert set(LAW_COLOURS) == set(LAW_NAMES)
 
 
 def _fmt(x: Any, digits: int = 3) -> str:

@@ -143,6 +143,9 @@ SCHEMAS: dict[str, dict] = {
         e_rate_px_s=_NUMS,
         speed_m_s=_NUM,
         range_m=_NUM,
+        vel_m_s=_NUMS,
+        e_raw_px=_NUMS,
+        raw_capture_t_s=_NUM,
     ),
     "peregrine.Dkf": _obj(
         "peregrine.Dkf",
