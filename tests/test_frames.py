@@ -3,8 +3,10 @@ recording, and the frames live mode builds from the same ticks sent as the onboa
 component's telemetry (float32 ``DEBUG_FLOAT_ARRAY``) are the same frames, to the precision
 the recording and the telemetry carry; and the one snapshot builder shows them alike."""
 
+import ast
 import math
 import socket
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,8 @@ from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
 from onboard.link import telemetry as tm
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -150,3 +154,29 @@ def test_one_snapshot_builder_shows_the_three_alike(flown):
     assert from_replay["mode"] == from_sim["mode"] == "tracking"
     assert from_replay["image"] == from_sim["image"]
     assert TARGET_DIAMETER_M > 0
+
+
+def _imports(package: Path) -> set[str]:
+    """Absolute names of the modules a package's files import (relative imports resolved)."""
+    out = set()
+    for path in package.rglob("*.py"):
+        mod = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                out.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = mod.split(".")[: len(mod.split(".")) - node.level] if node.level else []
+                out.add(".".join([*base, node.module or ""]).rstrip("."))
+    return out
+
+
+def test_producers_and_consumers_stand_side_by_side():
+    """sim/ and recording/ share only frames.py; onboard never imports the ground station."""
+    sim, recording = (
+        _imports(ROOT / "groundstation" / "sim"),
+        _imports(ROOT / "groundstation" / "recording"),
+    )
+    assert not any(m.startswith("groundstation.recording") for m in sim), sim
+    assert not any(m.startswith("groundstation.sim") for m in recording), recording
+    assert "groundstation.frames" in sim and "groundstation.frames" in recording
+    assert not any(m.startswith("groundstation") for m in _imports(ROOT / "onboard"))
