@@ -4,8 +4,10 @@ component's telemetry (float32 ``DEBUG_FLOAT_ARRAY``) are the same frames, to th
 the recording and the telemetry carry; and the one snapshot builder shows them alike."""
 
 import ast
+import dataclasses
 import math
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -96,12 +98,13 @@ def test_replay_rebuilds_the_simulators_frames(flown):
         assert replayed.normal_accel_m_s2 == pytest.approx(sim_frame.normal_accel_m_s2, 1e-5)
 
 
-def test_live_mode_builds_the_same_frames_from_the_telemetry(flown):
+def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
+    """...and records them: the live recording replays as the simulator's frames too."""
     sim, frames, _ = flown
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    live = LiveSession(f"udpin:127.0.0.1:{port}")
+    live = LiveSession(f"udpin:127.0.0.1:{port}", log_dir=tmp_path)
     cam = sim.camera_model
     # float32 (24-bit mantissa): relative 6e-8, and what the subtractions leave
     tol = {"time": 1e-6, "pos": 1e-6, "quat": 1e-7, "px": 1e-5, "rad": 1e-7, "acc": 1e-6,
@@ -127,16 +130,41 @@ def test_live_mode_builds_the_same_frames_from_the_telemetry(flown):
             with live._lock:
                 live.gains = f.gains  # the vehicle's gain parameters
                 live.target_p = [float(c) for c in np.float32(f.target_p_enu_m)]
+                live.target_rx_s = float(k)  # reported with this tick
+                live.onboard_rx_s = time.monotonic()  # the onboard component is heard
                 live._telemetry(tm.unpack(data), float(k))
                 got = live.frame()
+                if k == 0:  # the operator's start, accepted: recording from here
+                    live.params["LAW"] = float(tm.LAW_CODES.index(tel.law))
+                    live._start_recording()
             assert_same_frame(f, got, tol)
             if got.normal_accel_m_s2 is not None and k > 0:
                 # live differentiates the velocity between ticks: not the instantaneous value
                 n_accel += 1
                 errors += abs(got.normal_accel_m_s2 - f.normal_accel_m_s2) > 1.0
+        with live._lock:
+            live._finish_recording("the test ended")
     finally:
         live.close()
     assert n_accel == len(frames.frames) - 1 and errors <= 0.05 * n_accel
+    (path,) = tmp_path.glob("*_live_png.mcap")
+    player = ReplayPlayer(path)
+    assert len(player.td) >= len(frames.frames) // 2 - 2  # /dkf every second tick
+    tol = {
+        "time": 4e-6,
+        "pos": 7e-5,
+        "quat": 7e-7,
+        "px": 7e-4,
+        "rad": 2e-5,
+        "acc": 7e-5,
+        "cmd": 7e-6,
+        "rel": 6e-6,
+    }  # fmt: skip  (float32, then the recording's JSON)
+    for t in player.td[1:]:  # the first message was before the start
+        sim_frame = min(frames.frames, key=lambda f, t=t: abs(f.time_s - t))
+        replayed = player.frame(t)
+        replayed = dataclasses.replace(replayed, time_s=sim_frame.time_s)  # float32 clock
+        assert_same_frame(sim_frame, replayed, tol)
 
 
 def test_one_snapshot_builder_shows_the_three_alike(flown):

@@ -17,7 +17,6 @@ built from the latest by the builder the simulator and replay use (:mod:`.snapsh
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 import threading
 import time
@@ -53,10 +52,9 @@ from onboard.link.px4 import (
     real32,
 )
 
-from ..frames import Frame, SortieEvent, SortieStart
-from ..recording.writer import SortieRecorder
-from ..sim.simulation import closest_in_step
-from .live_frames import live_frame
+from ..frames import Frame, SortieStart
+from .live_frames import live_frame, pose_from_values
+from .live_recording import LiveRecording
 from .scene import SceneState
 from .session import SessionError
 from .snapshot import frame_snapshot
@@ -123,13 +121,7 @@ class LiveSession:
         self.acks: dict[int, tuple[float, int]] = {}
         self.last_ack: dict[str, Any] | None = None
         self._acked = threading.Condition(self._lock)
-        self.recorder: SortieRecorder | None = None
-        self._rec_law = ""
-        self._rec_t0_s = 0.0
-        self._rec_last_s = 0.0  # onboard time of the last recorded frame
-        self._rec_acquired = False
-        self._rec_events: list[SortieEvent] = []  # heard since the last recorded frame
-        self._last_frame: Frame | None = None
+        self.rec: LiveRecording | None = None  # the sortie being recorded
         self._trail_vehicle: list[list[float]] = []
         self._trail_target: list[list[float]] = []
         self._last_trail = -1.0
@@ -138,8 +130,7 @@ class LiveSession:
         self._scene_reset = True  # (re)build the 3D scene at the next publish
         self._prev_vel: tuple[float, list[float]] | None = None
         self.normal_accel_m_s2: float | None = None
-        self.miss_m: float | None = None
-        self._rel_prev = None
+        self.miss_m: float | None = None  # the last recorded sortie's closest approach
         self.scene_errors = 0
         self.errors = 0
         self.last_error: str | None = None
@@ -218,7 +209,7 @@ class LiveSession:
                 raise SessionError(
                     f"{label} {self.last_ack['result']}" + (f": {why}" if why else "")
                 )
-            if command == CMD_START and self.recorder is None:
+            if command == CMD_START and self.rec is None:
                 self._start_recording()
             return self.last_ack
 
@@ -331,13 +322,13 @@ class LiveSession:
         self.events.append(
             {"t": round(now, 3), "source": source, "text": text, "severity": int(severity)}
         )
-        if self.recorder is not None:
+        if self.rec is not None:
             level = (
                 "error"
                 if severity <= mavlink.MAV_SEVERITY_ERROR
                 else ("warning" if severity == mavlink.MAV_SEVERITY_WARNING else "info")
             )
-            self._rec_events.append(SortieEvent(self._rec_last_s, level, f"{source}: {text}"))
+            self.rec.event(level, f"{source}: {text}")
 
     def _telemetry(self, t: dict[str, float | None], now: float) -> None:
         for key, codes in (
@@ -373,31 +364,13 @@ class LiveSession:
                 a = (np.array(v) - np.array(self._prev_vel[1])) / dt
                 self.normal_accel_m_s2 = normal_component(a, np.array(v))
             self._prev_vel = (ts, v)
-        self._track_miss(t, now)
-        if self.recorder is not None and ts is not None:
-            self._record(t, ts)
+        if self.rec is not None:
+            self._record(t, now)
         if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
             self._last_trail = ts
             self._trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
             if self.target_p is not None:
                 self._trail_target.append([round(c, 3) for c in self.target_p])
-
-    def _track_miss(self, t: dict[str, float | None], now: float) -> None:
-        """Closest approach while recording: the vehicle's position at each control tick
-        (50 Hz) against the target's last report moved on by its reported velocity, the
-        relative motion linear between ticks (the simulator's continuous-time test)."""
-        p = [t.get("pos_e_m"), t.get("pos_n_m"), t.get("pos_u_m")]
-        if self.recorder is None or self.target_p is None or None in p:
-            self._rel_prev = None
-            return
-        dt = now - self.target_rx_s
-        rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
-        if self._rel_prev is None:
-            dist = math.sqrt(sum(c * c for c in rel))
-        else:
-            dist = closest_in_step(self._rel_prev, rel)[0]
-        self._rel_prev = rel
-        self.miss_m = dist if self.miss_m is None else min(self.miss_m, dist)
 
     # ------------------------------------------------------------------ recording
     def camera_model(self) -> CameraModel:
@@ -418,20 +391,13 @@ class LiveSession:
     def _start_recording(self) -> None:
         if self.log_dir is None:
             return
-        law = tm.LAW_CODES[int(self.params.get("LAW", 0))]
-        self._rec_law = law
-        self._rec_t0_s = self._rec_last_s = self.tel.get("t_s") or 0.0
-        self._rec_acquired = False
-        self._rec_events = []
         self.miss_m = None
         self._trail_vehicle, self._trail_target = [], []
-        self.recorder = SortieRecorder(
-            Path(self.log_dir), record_every=1, annotate_every=1, frame_every=1000000
-        )
-        self.recorder.start(
+        self.rec = LiveRecording(
+            Path(self.log_dir),
             SortieStart(
                 scenario="live",
-                law=law,
+                law=tm.LAW_CODES[int(self.params.get("LAW", 0))],
                 seed=0,
                 camera="live",
                 camera_model=self.camera_model(),
@@ -440,8 +406,8 @@ class LiveSession:
                 gains=self.gains,
                 scenario_source="live MAVLink",
                 scenario_toml="",  # a live sortie has no scenario to keep
-                t0_s=self._rec_t0_s,
-            )
+                t0_s=self.tel.get("t_s") or 0.0,
+            ),
         )
         self._scene_reset = True
 
@@ -453,9 +419,7 @@ class LiveSession:
             return None
         return live_frame(
             t,
-            law=self._rec_law
-            if self.recorder is not None
-            else tm.LAW_CODES[int(t.get("law") or 0)],
+            law=self.rec.law if self.rec is not None else tm.LAW_CODES[int(t.get("law") or 0)],
             camera=self.camera_model(),
             gains=self.gains,
             vehicle_p=self.vehicle_p,
@@ -463,15 +427,21 @@ class LiveSession:
             vehicle_q=self.vehicle_q,
             target_p=self.target_p,
             normal_accel_m_s2=self.normal_accel_m_s2,
-            acquired=self._rec_acquired,
+            acquired=self.rec is not None and self.rec.acquired,
         )
 
-    def _record(self, t: dict[str, float | None], ts: float) -> None:
+    def _record(self, t: dict[str, float | None], now: float) -> None:
+        """One telemetry message of the sortie being recorded: its frame, the closest approach
+        (the vehicle's position the tick used against the target's last report moved on by
+        its reported velocity), and the end when the onboard says so."""
+        rec = self.rec
+        if t.get("t_s") is None:
+            return
         frame = self.frame(t)
         if frame is None:  # no pose yet: what the tick used stands in
             frame = live_frame(
                 t,
-                law=self._rec_law,
+                law=rec.law,
                 camera=self.camera_model(),
                 gains=self.gains,
                 vehicle_p=(0.0, 0.0, 0.0),
@@ -479,57 +449,43 @@ class LiveSession:
                 vehicle_q=self.vehicle_q,
                 target_p=self.target_p,
                 normal_accel_m_s2=self.normal_accel_m_s2,
-                acquired=self._rec_acquired,
+                acquired=rec.acquired,
             )
-        frame = dataclasses.replace(frame, events=tuple(self._rec_events))
-        self._rec_events = []
-        self._rec_acquired = frame.acquired
-        self._rec_last_s = ts
-        self._last_frame = frame
-        self.recorder.frame(frame)
-        if int(ts * 50) % 5 == 0:  # annotations at about 10 Hz
-            self.recorder.image(ts, None)
+        p = pose_from_values(t)[0]
+        rel = None
+        if self.target_p is not None and p is not None:
+            dt = now - self.target_rx_s
+            rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
+        rec.track_miss(rel)
+        self.miss_m = rec.miss_m
+        rec.record(frame)
 
     def _maybe_finish(self, now: float) -> None:
-        if self.recorder is None:
+        if self.rec is None:
             return
         if (
             self.onboard_state in FINISHED_STATES
             or not self.link_up()
             or (
                 self.onboard_state in (RuntimeState.READY.value, RuntimeState.WAITING_TARGET.value)
-                and self._rec_last_s - self._rec_t0_s > 1.0
+                and self.rec.elapsed_s > 1.0
             )
         ):
             self._finish_recording(None if self.link_up() else "link to the onboard lost")
 
     def _finish_recording(self, reason: str | None) -> None:
-        rec = self.recorder
-        if rec is None:
+        if self.rec is None:
             return
         why = reason or next(
             (e["text"] for e in reversed(self.events) if e["text"].startswith("finished")),
             self.onboard_state,
         )
-        if self._rec_events and self._last_frame is not None:  # heard after the last frame
-            rec.frame(dataclasses.replace(self._last_frame, events=tuple(self._rec_events)))
-            self._rec_events = []
-        summary = {
-            "outcome": "LIVE_" + self.onboard_state.upper(),
-            "miss_m": self.miss_m,
-            "intercept_time_s": max(self._rec_last_s - self._rec_t0_s, 0.0),
-            "reason": why,
-            "law": self._rec_law,
-        }
-        rec.finish(self._rec_last_s, summary)
-        self.recorder = None
+        self.rec.finish("LIVE_" + self.onboard_state.upper(), why)
+        self.rec = None
 
     @property
     def recording(self) -> dict[str, Any] | None:
-        rec = self.recorder
-        if rec is None:
-            return None
-        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+        return None if self.rec is None else self.rec.status()
 
     # ------------------------------------------------------------------ observations
     def status(self) -> dict[str, Any]:
