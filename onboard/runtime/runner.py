@@ -390,48 +390,13 @@ class OnboardRuntime:
                 f_px=cam.f_px,
                 guard_trips=loop.guard_trips,
             )
-            det = self._last_det
-            if det is not None:
-                e = cam.error_px(*det.center_px)
-                vals.update(e_raw_u_px=e[0], e_raw_v_px=e[1], raw_capture_t_s=det.capture_time_s)
+            vals.update(tm.detection_values(self._last_det, cam))
+            state = loop.dkf.state_vector()
+            if state is not None:
+                vals.update(tm.dkf_values(state[0], state[1]))
         if tel is not None:
-            a, w = tel.accel_desired_enu_m_s2, tel.command.body_rates_flu_rad_s
-            vals.update(
-                loop_mode=tm.LOOP_MODE_CODES.index(tel.mode.value),
-                los_elev_rad=tel.los_elev_rad,
-                los_azim_rad=tel.los_azim_rad,
-                vel_elev_rad=tel.vel_elev_rad,
-                vel_azim_rad=tel.vel_azim_rad,
-                acc_des_e_m_s2=a[0],
-                acc_des_n_m_s2=a[1],
-                acc_des_u_m_s2=a[2],
-                acc_normal_des_m_s2=tel.accel_normal_desired_m_s2,
-                rate_cmd_x_rad_s=w[0],
-                rate_cmd_y_rad_s=w[1],
-                rate_cmd_z_rad_s=w[2],
-                thrust_cmd=tel.command.thrust_normalised,
-                yaw_rate_cmd_rad_s=tel.yaw_rate_cmd_rad_s,
-                dkf_since_det_s=min(tel.dkf_time_since_detection_s, 1e6),
-                dkf_lost=float(tel.dkf_lost),
-            )
-            if tel.e_est_px is not None:
-                vals.update(
-                    e_est_u_px=tel.e_est_px[0],
-                    e_est_v_px=tel.e_est_px[1],
-                    e_rate_u_px_s=tel.e_rate_est_px_s[0],
-                    e_rate_v_px_s=tel.e_rate_est_px_s[1],
-                )
-        if f.pos_enu_m is not None:
-            vals.update(
-                pos_e_m=f.pos_enu_m[0],
-                pos_n_m=f.pos_enu_m[1],
-                pos_u_m=f.pos_enu_m[2],
-                vel_e_m_s=f.vel_enu_m_s[0],
-                vel_n_m_s=f.vel_enu_m_s[1],
-                vel_u_m_s=f.vel_enu_m_s[2],
-            )
-        if f.q_wxyz is not None:
-            vals.update(q_w=f.q_wxyz[0], q_x=f.q_wxyz[1], q_y=f.q_wxyz[2], q_z=f.q_wxyz[3])
+            vals.update(tm.loop_values(tel))
+        vals.update(tm.pose_values(f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz))
         self.gcs.send(
             self.gcs.mav.debug_float_array_encode(
                 int(now * 1e6), tm.ARRAY_NAME.encode(), tm.ARRAY_ID, tm.pack(vals)
