@@ -76,7 +76,7 @@ def test_cli_bad_file_exits_2_without_traceback(tmp_path):
         capture_output=True,
         text=True,
     )
-    assert missing.returncode == 2 and "cannot read scenario file" in missing.stderr
+    assert missing.returncode == 2 and "no such file or shipped scenario" in missing.stderr
 
 
 def test_every_shipped_scenario_loads_and_names_match_files():

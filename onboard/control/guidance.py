@@ -14,6 +14,7 @@ import numpy as np
 
 from ..gains import Gains
 from ..geometry import wrap_pi
+from . import GUIDANCE_LAW_NAMES
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,6 +163,7 @@ GUIDANCE_LAWS: dict[str, GuidanceLaw] = {
     "pg": pursuit_law,
     "ibvs": ibvs_law,
 }
+assert tuple(GUIDANCE_LAWS) == GUIDANCE_LAW_NAMES
 
 
 def los_change(
