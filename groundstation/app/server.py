@@ -20,7 +20,7 @@ import uvicorn
 import viser
 import websockets.asyncio.client
 from fastapi import Body, FastAPI, HTTPException, WebSocket
-from fastapi.responses import FileResponse, HTMLResponse, Response
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
@@ -104,22 +104,20 @@ class StartRequest(BaseModel):
 def _scenario_from(req: StartRequest):
     if (req.scenario is None) == (req.toml is None):
         raise HTTPException(422, "give exactly one of 'scenario' (a name) or 'toml' (file text)")
-    try:
-        if req.toml is not None:
-            scenario = parse_scenario(req.toml, source="uploaded scenario")
-        else:
-            names = {p.stem for p in shipped_scenarios()}
-            if req.scenario not in names:
-                raise HTTPException(422, f"unknown scenario {req.scenario!r}")
-            scenario = load_scenario(req.scenario)
-        if req.wind_mean_m_s is not None or req.gust_m_s is not None:
-            scenario = with_wind(
-                scenario,
-                tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
-                scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
-            )
-    except ScenarioError as exc:
-        raise HTTPException(422, str(exc)) from None
+    # a ScenarioError is answered 422 with every problem (see _declare_errors)
+    if req.toml is not None:
+        scenario = parse_scenario(req.toml, source="uploaded scenario")
+    else:
+        names = {p.stem for p in shipped_scenarios()}
+        if req.scenario not in names:
+            raise HTTPException(422, f"unknown scenario {req.scenario!r}")
+        scenario = load_scenario(req.scenario)
+    if req.wind_mean_m_s is not None or req.gust_m_s is not None:
+        scenario = with_wind(
+            scenario,
+            tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
+            scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
+        )
     return scenario
 
 
@@ -259,10 +257,7 @@ def create_app(
 
     @app.post("/api/scenarios/validate", tags=["scenarios"])
     async def validate_scenario(toml: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
-        try:
-            s = parse_scenario(toml, source="uploaded scenario")
-        except ScenarioError as exc:
-            raise HTTPException(422, str(exc)) from None
+        s = parse_scenario(toml, source="uploaded scenario")  # 422 lists every problem
         return {"ok": True, "name": s.name, "motion": s.target.motion}
 
     @app.get("/api/gains", tags=["gains"])
@@ -495,7 +490,36 @@ def create_app(
         """Send abort (brake and hold) and wait for the COMMAND_ACK."""
         return await _live("abort")
 
+    _declare_errors(app)
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
+
+
+def _declare_errors(app: FastAPI) -> None:
+    """A refused scenario answers 422 with every problem located
+    (:meth:`ScenarioError.to_json_dict`: ``detail``, ``source``, ``problems``), and the OpenAPI
+    document declares the app's 422 shape as sent: ``detail`` is one sentence (or FastAPI's
+    list of field errors)."""
+
+    @app.exception_handler(ScenarioError)
+    async def scenario_error(_request: Any, exc: ScenarioError) -> JSONResponse:
+        return JSONResponse(exc.to_json_dict(), status_code=422)
+
+    make_document = app.openapi
+
+    def document() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            doc = make_document()
+            error = doc.get("components", {}).get("schemas", {}).get("HTTPValidationError")
+            if error is not None:
+                props = error["properties"]
+                props["detail"] = {
+                    "anyOf": [props["detail"], {"type": "string"}],
+                    "title": "Detail",
+                }
+                props["problems"] = {"type": "array", "items": {"type": "object"}}
+        return app.openapi_schema
+
+    app.openapi = document  # type: ignore[method-assign]
 
 
 def free_loopback_port() -> int:
