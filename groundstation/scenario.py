@@ -216,10 +216,10 @@ def _dotted(key: str) -> str:
     return ".".join(part.strip().strip("\"'") for part in key.split("."))
 
 
-def _key_lines(text: str) -> dict[str, int]:
-    """Line (1-based) of each table header and key in TOML text, by dotted name; a light
-    scan that only locates (tomllib has already checked the syntax)."""
-    out: dict[str, int] = {}
+def _key_positions(text: str) -> list[tuple[int, str]]:
+    """(line, dotted name) of each table header and key in TOML text, in order; a light scan
+    that only locates (tomllib checks the syntax)."""
+    out: list[tuple[int, str]] = []
     table = ""
     in_string: str | None = None  # inside a multi-line string: its closing quotes
     for n, line in enumerate(text.splitlines(), 1):
@@ -229,15 +229,23 @@ def _key_lines(text: str) -> dict[str, int]:
             continue
         if m := _HEADER_RE.match(line):
             table = _dotted(m.group(1))
-            out.setdefault(table, n)
+            out.append((n, table))
             continue
         if m := _KEY_RE.match(line):
             key = _dotted(m.group(1))
-            out.setdefault(f"{table}.{key}" if table else key, n)
+            out.append((n, f"{table}.{key}" if table else key))
             rest = line[m.end() :]
             for quotes in ('"""', "'''"):
                 if rest.count(quotes) == 1:
                     in_string = quotes
+    return out
+
+
+def _key_lines(text: str) -> dict[str, int]:
+    """Line (1-based) of each table header and key, by dotted name (the first if repeated)."""
+    out: dict[str, int] = {}
+    for n, key in _key_positions(text):
+        out.setdefault(key, n)
     return out
 
 
@@ -355,16 +363,26 @@ def _validate(s: Scenario, problems: _Problems) -> None:
             problems.add("gains", str(exc))
 
 
-def _syntax_error(exc: Exception, source: str) -> ScenarioError:
-    """tomllib's error as a located problem (it stops at the first syntax error)."""
-    text = str(exc)
-    m = re.search(r"\(at line (\d+), column (\d+)\)", text)
-    if m is None:
-        m = re.search(r"\(at end of document\)", text)
-        line = column = None
-    else:
+def _syntax_error(exc: Exception, source: str, text: str) -> ScenarioError:
+    """tomllib's error as a located problem (it stops at the first syntax error). Where it
+    gives no position (a key defined twice, the end of the document), the scan finds it."""
+    message = str(exc)
+    line = column = None
+    m = re.search(r"\s*\(at line (\d+), column (\d+)\)", message)
+    if m is not None:
         line, column = int(m.group(1)), int(m.group(2))
-    reason = text[: m.start()].strip() if m is not None else text
+    else:
+        m = re.search(r"\s*\(at end of document\)", message)
+        seen: dict[str, int] = {}
+        for n, key in _key_positions(text):
+            if key in seen:  # a key (or table) defined twice: the second one is the error
+                line = n
+                break
+            seen[key] = n
+        if line is None:
+            lines = text.split("\n")
+            line, column = len(lines), len(lines[-1]) + 1
+    reason = message[: m.start()] if m is not None else message
     problem = ScenarioProblem(None, f"not valid TOML: {reason}", line, column)
     return ScenarioError(source=source, problems=[problem])
 
@@ -374,7 +392,7 @@ def parse_scenario(text: str, source: str = "<memory>") -> Scenario:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise _syntax_error(exc, source) from None
+        raise _syntax_error(exc, source, text) from None
     problems = _Problems(source, text)
     top_fields = {"name": "str", "duration_s": "float", "description": "str"}
     for key in data:

@@ -121,14 +121,15 @@ def _stream_scan(path: Path, info: LogInfo) -> bool:
                     _apply_metadata(info, rec.name, rec.metadata)
         except Exception as exc:  # mcap, zstd and lz4 each raise their own types
             ended_early = type(exc).__name__ in ("EndOfFile", "EOFError")
-            at = "" if last is None else f"t = {last / 1e9:.2f} s, "
+            at = "its first message" if last is None else f"t = {last / 1e9:.2f} s"
+            recovered = f"{info.messages} messages recovered"
             if ended_early:
-                info.problem = f"truncated at {at}{info.messages} messages recovered"
+                info.problem = f"truncated at {at}, {recovered}"
             else:
                 why = f"{type(exc).__name__}: {exc}".rstrip(": ")
                 info.problem = (
                     f"damaged near byte {f.tell()} of {info.size_bytes} ({why}): "
-                    f"read up to {at}{info.messages} messages recovered"
+                    f"read up to {at}, {recovered}"
                 )
     if first is not None:
         info.duration_s = (last - first) / 1e9
