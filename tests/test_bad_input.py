@@ -360,3 +360,20 @@ def test_replay_json_metadata_are_values_not_strings(log_file, capsys):
     assert meta["sortie"]["gains"]["k_a"] == 2.0  # an object, not a JSON string
     assert meta["sortie"]["scenario"] == "cv-top-to-bottom"
     assert meta["outcome"]["outcome"] == "HIT" and isinstance(meta["outcome"]["miss_m"], float)
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["run", "--camera", "0", "--rate", "0"], "argument --rate: must be a number of Hz > 0"),
+        (["run", "--camera", "0", "--rate", "nan"], "argument --rate: must be a number of Hz"),
+        (["run", "--camera", "0", "--duration", "-1"], "argument --duration: must be a number"),
+    ],
+)
+def test_onboard_options_are_checked_too(capsys, argv, needle):
+    from onboard.cli import main as onboard_main
+
+    with pytest.raises(SystemExit) as exc:
+        onboard_main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and needle in err and "Traceback" not in err
