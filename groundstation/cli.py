@@ -4,29 +4,117 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from onboard.control.guidance import GUIDANCE_LAWS
+# Only light modules here: `groundstation --help` and `scenarios` must not pay for numpy,
+# filterpy/scipy, OpenCV or viser; each command imports what it needs when it runs.
 from onboard.enums import GuidanceLaw, codes
 from onboard.gains import GainError
 
-from .campaigns.definitions import CampaignError
 from .scenario import (
+    CAMERA_MODES,
+    SCENARIO_DIR,
     ScenarioError,
     load_scenario,
     parse_overrides,
     shipped_scenarios,
     with_overrides,
 )
-from .sim.camera import CAMERA_MODES
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # usage errors: exit 2 without a traceback
         self.print_usage(sys.stderr)
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+# ------------------------------------------------------------------ option checks
+# Each returns an argparse ``type``: a bad value becomes "argument --OPT: <what is allowed>,
+# got X" and exit status 2, before any work starts.
+def _int_at_least(lo: int, hi: int | None = None, note: str = "") -> Callable[[str], int]:
+    allowed = f"an integer >= {lo}" if hi is None else f"an integer from {lo} to {hi}"
+    allowed += note
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
+        if value < lo or (hi is not None and value > hi):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {value}")
+        return value
+
+    return parse
+
+
+def _seconds(minimum: float, inclusive: bool) -> Callable[[str], float]:
+    allowed = f"a number of seconds {'>=' if inclusive else '>'} {minimum:g}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
+        if not math.isfinite(value) or value < minimum or (value == minimum and not inclusive):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
+        return value
+
+    return parse
+
+
+def _existing_file(what: str) -> Callable[[str], str]:
+    def parse(text: str) -> str:
+        p = Path(text)
+        if p.is_dir():
+            raise argparse.ArgumentTypeError(f"{text} is a folder; give {what}")
+        if not p.is_file():
+            raise argparse.ArgumentTypeError(f"{text}: no such file; give {what}")
+        if not os.access(p, os.R_OK):
+            raise argparse.ArgumentTypeError(f"{text}: not readable; give {what}")
+        return text
+
+    return parse
+
+
+def _scenario_arg(text: str) -> str:
+    p = Path(text)
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; give a scenario TOML file or name")
+    if not p.exists() and not (not p.suffix and (SCENARIO_DIR / f"{p.name}.toml").is_file()):
+        names = ", ".join(q.stem for q in shipped_scenarios())
+        raise argparse.ArgumentTypeError(
+            f"{text}: no such file or shipped scenario (shipped: {names})"
+        )
+    return text
+
+
+def _writable_dir(text: str) -> str:
+    """A folder that is, or can be created, writable: the nearest existing ancestor decides."""
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file; give a folder (it is created)")
+    probe = p.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: {probe} is a file; give a folder")
+    try:  # a real write: os.access says yes to root even on /proc or a read-only disk
+        os.rmdir(tempfile.mkdtemp(prefix=".peregrine-probe-", dir=probe))
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{text}: cannot write in {probe} ({exc.strerror or exc}); give a writable folder"
+        ) from None
+    return text
+
+
+_PORT = _int_at_least(0, 65535, " (0: any free port)")
+_SEED = _int_at_least(0)
+_COUNT = _int_at_least(1)
 
 
 _SET_HELP = (
@@ -40,16 +128,20 @@ def _build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     s = sub.add_parser("sortie", help="run one simulated sortie to its outcome")
-    s.add_argument("scenario", help="scenario TOML file, or the name of a shipped scenario")
-    s.add_argument("--law", default=GuidanceLaw.PNG.value, choices=sorted(GUIDANCE_LAWS))
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument(
+        "scenario", type=_scenario_arg, help="scenario TOML file, or the name of a shipped scenario"
+    )
+    s.add_argument("--law", default=GuidanceLaw.PNG.value, choices=codes(GuidanceLaw))
+    s.add_argument("--seed", type=_SEED, default=0)
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
-    s.add_argument("--log", metavar="DIR", default=None, help="record the sortie to DIR (MCAP)")
+    s.add_argument(
+        "--log", metavar="DIR", type=_writable_dir, help="record the sortie to DIR (MCAP)"
+    )
     s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
 
     r = sub.add_parser("replay", help="print a recorded sortie's summary")
-    r.add_argument("file", help="a sortie log (.mcap)")
+    r.add_argument("file", type=_existing_file("a sortie log (.mcap)"), help="a sortie log (.mcap)")
     r.add_argument("--json", action="store_true")
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
@@ -62,14 +154,16 @@ def _build_parser() -> argparse.ArgumentParser:
         help="simulator mode (the default unless --mavlink is given)",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
-    sv.add_argument("--port", type=int, default=8000)
+    sv.add_argument("--port", type=_PORT, default=8000, help="0: any free port")
     sv.add_argument(
         "--no-auth",
         action="store_true",
         help="no access token (refused unless the host is a loopback address)",
     )
     sv.add_argument(
-        "--data-dir", default=None, help="where named gain sets are kept (default ~/.peregrine)"
+        "--data-dir",
+        type=_writable_dir,
+        help="where named gain sets are kept (default ~/.peregrine)",
     )
 
     sv.add_argument(
@@ -78,14 +172,25 @@ def _build_parser() -> argparse.ArgumentParser:
         default=None,
         help="live mode: the onboard computer's ground link (e.g. udpin:127.0.0.1:14550)",
     )
-    sv.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key (live mode)")
-    sv.add_argument("--log-dir", default="logs", help="where sorties are recorded (default logs)")
+    sv.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        type=_existing_file("a file of 64 hex digits"),
+        help="MAVLink 2 signing key (live mode)",
+    )
+    sv.add_argument(
+        "--log-dir",
+        type=_writable_dir,
+        default="logs",
+        help="where sorties are recorded (default logs)",
+    )
 
     st = sub.add_parser("sitl", help="run the simulator as a PX4-like vehicle over MAVLink")
     st.add_argument(
         "scenario",
         nargs="?",
         default="cv-top-to-bottom",
+        type=_scenario_arg,
         help="scenario TOML file or shipped name (default cv-top-to-bottom)",
     )
     st.add_argument(
@@ -96,21 +201,21 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--camera-port",
-        type=int,
+        type=_PORT,
         default=5600,
         help="TCP port of the camera stream on 127.0.0.1 (0: any free port)",
     )
-    st.add_argument("--seed", type=int, default=0)
-    st.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    st.add_argument("--seed", type=_SEED, default=0)
+    st.add_argument("--duration", type=_seconds(0, False), help="stop after this many seconds")
     st.add_argument(
         "--offboard-loss",
-        type=float,
+        type=_seconds(0, False),
         default=1.0,
         help="PX4 COM_OF_LOSS_T: seconds without setpoints before HOLD",
     )
     st.add_argument(
         "--camera-blackout-after",
-        type=float,
+        type=_seconds(0, True),
         default=None,
         metavar="S",
         help="fault injection: no camera frames after S s of sortie time",
@@ -118,20 +223,20 @@ def _build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument("name", help="static | moving | wind | outdoor")
-    c.add_argument("--n", type=int, default=None, help="targets / seeds / tries (see README)")
+    c.add_argument("--n", type=_COUNT, default=None, help="targets / seeds / tries (see README)")
     c.add_argument(
         "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"
     )
     c.add_argument("--camera", default="projected", choices=CAMERA_MODES)
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
-    c.add_argument("--out", default=None, help="output folder (default logs/campaigns/...)")
+    c.add_argument("--seed", type=_SEED, default=0)
+    c.add_argument("--workers", type=_COUNT, default=None, help="processes (default: cores)")
+    c.add_argument("--out", type=_writable_dir, help="output folder (default logs/campaigns/...)")
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
-    c.add_argument("--log", metavar="DIR", default=None, help="record every sortie to DIR")
+    c.add_argument("--log", metavar="DIR", type=_writable_dir, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
-    b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
+    b.add_argument("--repeat", type=_COUNT, default=5, help="sorties per camera mode")
     b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     b.add_argument("--json", action="store_true")
     b.add_argument("--campaigns", action="store_true", help="campaign throughput instead")
@@ -145,7 +250,9 @@ def _build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="onboard run against the SITL vehicle: loop rate, jitter, latency, CPU, memory",
     )
-    b.add_argument("--seconds", type=float, default=20.0, help="--sitl: how long to fly")
+    b.add_argument(
+        "--seconds", type=_seconds(0, False), default=20.0, help="--sitl: how long to fly"
+    )
     b.add_argument(
         "--dashboard",
         action="store_true",
@@ -193,14 +300,11 @@ def _cmd_sortie(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from collections import Counter
-    from pathlib import Path
 
-    from .recording.reader import LogError, inspect_log, iter_messages
+    from .recording.reader import LogError, inspect_log, iter_messages, metadata_values
 
     path = Path(args.file)
     try:
-        if not path.is_file():
-            raise LogError(f"{path}: no such file")
         info = inspect_log(path)
         counts: Counter = Counter()
         events = []
@@ -212,6 +316,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2
     d = info.to_json_dict()
+    d["metadata"] = metadata_values(info.metadata)
     d["topics"] = dict(sorted(counts.items()))
     d["events"] = events
     if args.json:
@@ -230,13 +335,36 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_serve(args: argparse.Namespace) -> int:
-    from pathlib import Path
+def _port_problem(host: str, port: int) -> str | None:
+    """Why ``serve`` could not listen on host:port, or None (checked before anything
+    starts, so a port in use prints no URL)."""
+    import errno
+    import socket
 
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return (
+                    f"argument --port: port {port} on {host} is in use (another ground "
+                    "station?); pick another with --port N, or --port 0 for any free port"
+                )
+            return f"argument --host: cannot listen on {host}:{port}: {exc.strerror or exc}"
+    return None
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
     from onboard.link.px4 import LinkError, load_signing_key
 
     from .app.server import GroundStation
 
+    problem = _port_problem(args.host, args.port)
+    if problem is not None:
+        print(f"groundstation serve: error: {problem}", file=sys.stderr)
+        return 2
     try:
         key = load_signing_key(args.signing_key) if args.signing_key else None
         gs = GroundStation(
@@ -310,9 +438,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "sitl":
             return _cmd_sitl(args)
         if args.command == "campaign":
+            from .campaigns.definitions import CampaignError
             from .campaigns.driver import main_campaign
 
-            return main_campaign(args)
+            try:
+                return main_campaign(args)
+            except CampaignError as exc:
+                print(f"groundstation: error: {exc}", file=sys.stderr)
+                return 2
         if args.command == "bench":
             from .bench import (
                 run_bench,
@@ -331,7 +464,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.campaigns:
                 return run_campaign_bench(as_json=args.json)
             return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)
-    except (ScenarioError, GainError, CampaignError) as exc:
+    except (ScenarioError, GainError) as exc:
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2
     return 2  # pragma: no cover

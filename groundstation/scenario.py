@@ -8,9 +8,9 @@ Angles are degrees in the file and stay so named (``yaw_deg``); they are convert
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,8 +31,56 @@ MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tet
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 
 
+CAMERA_MODES = ("projected", "rendered")  # how the simulated camera sees the target
+
+
+@dataclass(frozen=True)
+class ScenarioProblem:
+    """One thing wrong with a scenario: the dotted key (``target.motion``; ``None`` for a
+    syntax error), what is wrong, and where in the file (1-based line and column, ``None``
+    where the key is not in the file, e.g. a missing key or a ``--set`` value)."""
+
+    key: str | None
+    message: str
+    line: int | None = None
+    column: int | None = None
+
+    def __str__(self) -> str:
+        where = "" if self.line is None else f"line {self.line}: "
+        if self.line is not None and self.column is not None:
+            where = f"line {self.line}, column {self.column}: "
+        return where + self.message
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
 class ScenarioError(ValueError):
-    """A scenario file is malformed; the message names the file and the key."""
+    """A scenario file is malformed. It carries every problem found (:attr:`problems`, each
+    with its key and line); the message has one line per problem, each naming the file."""
+
+    def __init__(
+        self,
+        message: str | None = None,
+        *,
+        source: str = "<memory>",
+        problems: Sequence[ScenarioProblem] = (),
+    ) -> None:
+        self.source = source
+        self.problems: list[ScenarioProblem] = list(problems) or [
+            ScenarioProblem(None, message or "invalid scenario")
+        ]
+        if message is None:
+            message = "\n".join(f"{source}: {p}" for p in self.problems)
+        super().__init__(message)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The structured error the API and the dashboard receive."""
+        return {
+            "detail": str(self),
+            "source": self.source,
+            "problems": [p.to_json_dict() for p in self.problems],
+        }
 
 
 @dataclass(frozen=True)
@@ -126,18 +174,25 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-def _convert(value: Any, annotation: str, where: str) -> Any:
+class _InvalidValueError(Exception):
+    """A value of the wrong type (the message says what was expected)."""
+
+
+_PLACEHOLDER: dict[str, Any] = {"float": 1.0, "int": 1, "str": "", "Vec3": (0.0, 0.0, 1.0)}
+
+
+def _convert(value: Any, annotation: str) -> Any:
     if annotation == "float":
         if not _is_number(value) or not math.isfinite(value):
-            raise ScenarioError(f"{where}: expected a number, got {value!r}")
+            raise _InvalidValueError(f"expected a number, got {value!r}")
         return float(value)
     if annotation == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(f"{where}: expected an integer, got {value!r}")
+            raise _InvalidValueError(f"expected an integer, got {value!r}")
         return value
     if annotation == "str":
         if not isinstance(value, str):
-            raise ScenarioError(f"{where}: expected a string, got {value!r}")
+            raise _InvalidValueError(f"expected a string, got {value!r}")
         return value
     if annotation == "Vec3":
         if (
@@ -145,114 +200,242 @@ def _convert(value: Any, annotation: str, where: str) -> Any:
             or len(value) != 3
             or not all(_is_number(c) and math.isfinite(c) for c in value)
         ):
-            raise ScenarioError(f"{where}: expected a list of 3 numbers, got {value!r}")
+            raise _InvalidValueError(f"expected a list of 3 numbers, got {value!r}")
         return tuple(float(c) for c in value)
     raise AssertionError(annotation)  # pragma: no cover
 
 
-def _parse_table(table: Any, cls: type, section: str, src: str) -> Any:
+_HEADER_RE = re.compile(r"^\s*\[\[?\s*([^\[\]]+?)\s*\]\]?\s*(#.*)?$")
+_KEY_RE = re.compile(
+    r"""^\s*((?:[A-Za-z0-9_-]+|"[^"\n]*"|'[^'\n]*')"""
+    r"""(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"\n]*"|'[^'\n]*'))*)\s*="""
+)
+
+
+def _dotted(key: str) -> str:
+    return ".".join(part.strip().strip("\"'") for part in key.split("."))
+
+
+def _key_positions(text: str) -> list[tuple[int, str]]:
+    """(line, dotted name) of each table header and key in TOML text, in order; a light scan
+    that only locates (tomllib checks the syntax)."""
+    out: list[tuple[int, str]] = []
+    table = ""
+    in_string: str | None = None  # inside a multi-line string: its closing quotes
+    for n, line in enumerate(text.splitlines(), 1):
+        if in_string is not None:
+            if in_string in line:
+                in_string = None
+            continue
+        if m := _HEADER_RE.match(line):
+            table = _dotted(m.group(1))
+            out.append((n, table))
+            continue
+        if m := _KEY_RE.match(line):
+            key = _dotted(m.group(1))
+            out.append((n, f"{table}.{key}" if table else key))
+            rest = line[m.end() :]
+            for quotes in ('"""', "'''"):
+                if rest.count(quotes) == 1:
+                    in_string = quotes
+    return out
+
+
+def _key_lines(text: str) -> dict[str, int]:
+    """Line (1-based) of each table header and key, by dotted name (the first if repeated)."""
+    out: dict[str, int] = {}
+    for n, key in _key_positions(text):
+        out.setdefault(key, n)
+    return out
+
+
+class _Problems:
+    """Collects every problem of one scenario, each located by its key's line."""
+
+    def __init__(self, source: str, text: str = "") -> None:
+        self.source = source
+        self.lines = _key_lines(text) if text else {}
+        self.found: list[ScenarioProblem] = []
+        self.bad_keys: set[str] = set()
+
+    def add(self, key: str | None, message: str) -> None:
+        line = None
+        if key is not None:
+            self.bad_keys.add(key)
+            line = self.lines.get(key, self.lines.get(key.partition(".")[0]))
+        self.found.append(ScenarioProblem(key, message, line))
+
+    def check(self, cond: bool, key: str, message: str) -> None:
+        if key not in self.bad_keys and not cond:
+            self.add(key, f"key '{key}': {message}")
+
+    def raise_if_any(self) -> None:
+        if self.found:
+            raise ScenarioError(source=self.source, problems=self.found)
+
+
+def _parse_table(table: Any, cls: type, section: str, problems: _Problems) -> Any:
+    """The section as its dataclass; a bad value is recorded and replaced by a placeholder
+    (its own checks are skipped) so that every other key is still checked."""
     if not isinstance(table, dict):
-        raise ScenarioError(f"{src}: [{section}] must be a table")
+        problems.add(section, f"[{section}] must be a table")
+        return None
     fields = {f.name: f for f in dataclasses.fields(cls)}
     for key in table:
         if key not in fields:
-            raise ScenarioError(
-                f"{src}: unknown key '{section}.{key}' (allowed: {', '.join(fields)})"
+            problems.add(
+                f"{section}.{key}",
+                f"unknown key '{section}.{key}' (allowed: {', '.join(fields)})",
             )
     kwargs = {}
     for name, f in fields.items():
+        key = f"{section}.{name}"
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
         if name in table:
-            kwargs[name] = _convert(table[name], str(f.type), f"{src}: key '{section}.{name}'")
-        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ScenarioError(f"{src}: missing required key '{section}.{name}'")
+            try:
+                kwargs[name] = _convert(table[name], str(f.type))
+            except _InvalidValueError as exc:
+                problems.add(key, f"key '{key}': {exc}")
+                if required:
+                    kwargs[name] = _PLACEHOLDER[str(f.type)]
+        elif required:
+            problems.add(key, f"missing required key '{key}'")
+            kwargs[name] = _PLACEHOLDER[str(f.type)]
     return cls(**kwargs)
 
 
-def _check(cond: bool, src: str, key: str, msg: str) -> None:
-    if not cond:
-        raise ScenarioError(f"{src}: key '{key}': {msg}")
-
-
-def _validate(s: Scenario) -> None:
-    src, t, c, i, sim = s.source, s.target, s.camera, s.interceptor, s.sim
-    _check(s.duration_s > 0, src, "duration_s", "must be positive")
-    _check(t.motion in MOTIONS, src, "target.motion", f"must be one of {', '.join(MOTIONS)}")
-    _check(t.diameter_m > 0, src, "target.diameter_m", "must be positive")
+def _validate(s: Scenario, problems: _Problems) -> None:
+    t, c, i, sim = s.target, s.camera, s.interceptor, s.sim
+    check = problems.check
+    check(s.duration_s > 0, "duration_s", "must be positive")
+    check(t.motion in MOTIONS, "target.motion", f"must be one of {', '.join(MOTIONS)}")
+    check(t.diameter_m > 0, "target.diameter_m", "must be positive")
     if t.motion == "sinusoid":
-        _check(t.period_s > 0, src, "target.period_s", "sinusoid needs a positive period")
+        check(t.period_s > 0, "target.period_s", "sinusoid needs a positive period")
     if t.motion == "circle":
-        _check(t.radius_m > 0, src, "target.radius_m", "circle needs a positive radius")
-        _check(t.period_s != 0, src, "target.period_s", "circle needs a non-zero period")
+        check(t.radius_m > 0, "target.radius_m", "circle needs a positive radius")
+        check(t.period_s != 0, "target.period_s", "circle needs a non-zero period")
     if t.motion == "escape":
-        _check(t.max_speed_m_s > 0, src, "target.max_speed_m_s", "must be positive")
+        check(t.max_speed_m_s > 0, "target.max_speed_m_s", "must be positive")
     if t.motion == "tethered":
-        _check(t.tether_length_m > 0, src, "target.tether_length_m", "must be positive")
-        _check(t.mass_kg > 0, src, "target.mass_kg", "must be positive")
-        _check(t.net_lift_n > 0, src, "target.net_lift_n", "a tethered balloon must lift")
-    _check(t.start_s >= 0, src, "target.start_s", "must not be negative")
-    _check(i.position_m[2] > 0, src, "interceptor.position_m", "must start above ground (z > 0)")
-    _check(i.size_m > 0, src, "interceptor.size_m", "must be positive")
-    _check(i.mass_kg > 0, src, "interceptor.mass_kg", "must be positive")
-    _check(i.thrust_to_weight > 1, src, "interceptor.thrust_to_weight", "must exceed 1")
-    _check(i.drag_n_s_m >= 0, src, "interceptor.drag_n_s_m", "must not be negative")
-    _check(i.rate_time_constant_s > 0, src, "interceptor.rate_time_constant_s", "must be > 0")
-    _check(i.thrust_time_constant_s > 0, src, "interceptor.thrust_time_constant_s", "must be > 0")
-    _check(i.max_rate_deg_s > 0, src, "interceptor.max_rate_deg_s", "must be positive")
-    _check(c.width_px >= 16 and c.height_px >= 16, src, "camera.width_px", "frame too small")
-    _check(1 <= c.hfov_deg <= 170, src, "camera.hfov_deg", "must be in [1, 170]")
-    _check(c.rate_hz > 0, src, "camera.rate_hz", "must be positive")
-    _check(c.delay_s >= 0 and c.delay_jitter_s >= 0, src, "camera.delay_s", "must be >= 0")
-    _check(c.noise_px >= 0, src, "camera.noise_px", "must not be negative")
-    _check(0 <= c.dropout_probability < 1, src, "camera.dropout_probability", "must be in [0, 1)")
-    _check(s.wind.gust_m_s >= 0, src, "wind.gust_m_s", "must not be negative")
-    _check(s.wind.gust_time_constant_s > 0, src, "wind.gust_time_constant_s", "must be > 0")
-    _check(sim.physics_rate_hz >= 500, src, "sim.physics_rate_hz", "must be at least 500")
+        check(t.tether_length_m > 0, "target.tether_length_m", "must be positive")
+        check(t.mass_kg > 0, "target.mass_kg", "must be positive")
+        check(t.net_lift_n > 0, "target.net_lift_n", "a tethered balloon must lift")
+    check(t.start_s >= 0, "target.start_s", "must not be negative")
+    check(i.position_m[2] > 0, "interceptor.position_m", "must start above ground (z > 0)")
+    check(i.size_m > 0, "interceptor.size_m", "must be positive")
+    check(i.mass_kg > 0, "interceptor.mass_kg", "must be positive")
+    check(i.thrust_to_weight > 1, "interceptor.thrust_to_weight", "must exceed 1")
+    check(i.drag_n_s_m >= 0, "interceptor.drag_n_s_m", "must not be negative")
+    check(i.rate_time_constant_s > 0, "interceptor.rate_time_constant_s", "must be > 0")
+    check(i.thrust_time_constant_s > 0, "interceptor.thrust_time_constant_s", "must be > 0")
+    check(i.max_rate_deg_s > 0, "interceptor.max_rate_deg_s", "must be positive")
+    check(c.width_px >= 16, "camera.width_px", "frame too small (at least 16 px)")
+    check(c.height_px >= 16, "camera.height_px", "frame too small (at least 16 px)")
+    check(1 <= c.hfov_deg <= 170, "camera.hfov_deg", "must be in [1, 170]")
+    check(c.rate_hz > 0, "camera.rate_hz", "must be positive")
+    check(c.delay_s >= 0, "camera.delay_s", "must be >= 0")
+    check(c.delay_jitter_s >= 0, "camera.delay_jitter_s", "must be >= 0")
+    check(c.noise_px >= 0, "camera.noise_px", "must not be negative")
+    check(0 <= c.dropout_probability < 1, "camera.dropout_probability", "must be in [0, 1)")
+    check(s.wind.gust_m_s >= 0, "wind.gust_m_s", "must not be negative")
+    check(s.wind.gust_time_constant_s > 0, "wind.gust_time_constant_s", "must be > 0")
+    check(sim.physics_rate_hz >= 500, "sim.physics_rate_hz", "must be at least 500")
     for key, rate in (("sim.control_rate_hz", sim.control_rate_hz), ("camera.rate_hz", c.rate_hz)):
         ratio = sim.physics_rate_hz / rate if rate > 0 else math.nan
-        _check(
-            abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1,
-            src,
+        check(
+            abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1 if rate > 0 else False,
             key,
             f"{rate} Hz must divide the physics rate {sim.physics_rate_hz} Hz",
         )
-    _check(sim.gyro_noise_rad_s >= 0, src, "sim.gyro_noise_rad_s", "must not be negative")
-    try:
-        s.gains_obj()
-    except GainError as exc:
-        raise ScenarioError(str(exc)) from None
+    check(sim.gyro_noise_rad_s >= 0, "sim.gyro_noise_rad_s", "must not be negative")
+    each_ok = True
+    for k, v in s.gains.items():
+        try:
+            Gains().replace(**{k: v})
+        except GainError as exc:
+            each_ok = False
+            problems.add(f"gains.{k}", f"key 'gains.{k}': {exc}")
+    if each_ok:
+        try:
+            s.gains_obj()
+        except GainError as exc:
+            problems.add("gains", str(exc))
+
+
+def _syntax_error(exc: Exception, source: str, text: str) -> ScenarioError:
+    """tomllib's error as a located problem (it stops at the first syntax error). Where it
+    gives no position (a key defined twice, the end of the document), the scan finds it."""
+    message = str(exc)
+    line = column = None
+    m = re.search(r"\s*\(at line (\d+), column (\d+)\)", message)
+    if m is not None:
+        line, column = int(m.group(1)), int(m.group(2))
+    else:
+        m = re.search(r"\s*\(at end of document\)", message)
+        seen: dict[str, int] = {}
+        for n, key in _key_positions(text):
+            if key in seen:  # a key (or table) defined twice: the second one is the error
+                line = n
+                break
+            seen[key] = n
+        if line is None:
+            lines = text.split("\n")
+            line, column = len(lines), len(lines[-1]) + 1
+    reason = message[: m.start()] if m is not None else message
+    problem = ScenarioProblem(None, f"not valid TOML: {reason}", line, column)
+    return ScenarioError(source=source, problems=[problem])
 
 
 def parse_scenario(text: str, source: str = "<memory>") -> Scenario:
-    """Parse and validate scenario TOML text."""
+    """Parse and validate scenario TOML text; a :class:`ScenarioError` lists every problem."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+        raise _syntax_error(exc, source, text) from None
+    problems = _Problems(source, text)
     top_fields = {"name": "str", "duration_s": "float", "description": "str"}
     for key in data:
         if key not in top_fields and key not in _SECTIONS and key != "gains":
             allowed = ", ".join([*top_fields, *_SECTIONS, "gains"])
-            raise ScenarioError(f"{source}: unknown key '{key}' (allowed: {allowed})")
+            problems.add(key, f"unknown key '{key}' (allowed: {allowed})")
     kwargs: dict[str, Any] = {"source": source, "text": text}
     for key, ann in top_fields.items():
         if key in data:
-            kwargs[key] = _convert(data[key], ann, f"{source}: key '{key}'")
+            try:
+                kwargs[key] = _convert(data[key], ann)
+            except _InvalidValueError as exc:
+                problems.add(key, f"key '{key}': {exc}")
+                kwargs[key] = _PLACEHOLDER[ann]
         elif key != "description":
-            raise ScenarioError(f"{source}: missing required key '{key}'")
+            problems.add(key, f"missing required key '{key}'")
+            kwargs[key] = _PLACEHOLDER[ann]
+    complete = True
     for section, cls in _SECTIONS.items():
         if section in data:
-            kwargs[section] = _parse_table(data[section], cls, section, source)
+            spec = _parse_table(data[section], cls, section, problems)
+            if spec is not None:
+                kwargs[section] = spec
+            elif section in ("interceptor", "target"):
+                complete = False
         elif section in ("interceptor", "target"):
-            raise ScenarioError(f"{source}: missing required table '[{section}]'")
+            problems.add(section, f"missing required table '[{section}]'")
+            complete = False
     if "gains" in data:
         if not isinstance(data["gains"], dict):
-            raise ScenarioError(f"{source}: [gains] must be a table")
-        for k, v in data["gains"].items():
-            if not _is_number(v):
-                raise ScenarioError(f"{source}: key 'gains.{k}': expected a number, got {v!r}")
-        kwargs["gains"] = {k: float(v) for k, v in data["gains"].items()}
-    scenario = Scenario(**kwargs)
-    _validate(scenario)
+            problems.add("gains", "[gains] must be a table")
+        else:
+            gains = {}
+            for k, v in data["gains"].items():
+                if _is_number(v):
+                    gains[k] = float(v)
+                else:
+                    problems.add(f"gains.{k}", f"key 'gains.{k}': expected a number, got {v!r}")
+            kwargs["gains"] = gains
+    if complete:
+        scenario = Scenario(**kwargs)
+        _validate(scenario, problems)
+    problems.raise_if_any()
     return scenario
 
 
@@ -261,10 +444,12 @@ def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
     if not p.exists() and not p.suffix and (SCENARIO_DIR / f"{p.name}.toml").exists():
         p = SCENARIO_DIR / f"{p.name}.toml"
+    if p.is_dir():
+        raise ScenarioError(f"{path}: is a folder, not a scenario file", source=str(path))
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file: {exc}") from None
+        raise ScenarioError(f"{path}: cannot read scenario file: {exc}", source=str(path)) from None
     return parse_scenario(text, source=str(path))
 
 
@@ -276,65 +461,93 @@ def with_changes(scenario: Scenario, **sections: Any) -> Scenario:
     """A copy with whole sections or top-level values replaced, validated again. The copy is
     no longer its file, so its TOML (:func:`scenario_toml`) is generated from its values."""
     s = dataclasses.replace(scenario, text="", **sections)
-    _validate(s)
+    problems = _Problems(s.source)
+    _validate(s, problems)
+    problems.raise_if_any()
     return s
+
+
+_SET_EXAMPLE = "e.g. camera.noise_px=0 or gains.k_v=2"
 
 
 def parse_overrides(items: Sequence[str] | None) -> dict[str, Any]:
     """``["camera.noise_px=0", "gains.k_v=100"]`` -> ``{"camera.noise_px": 0, ...}``; each
     value is read as TOML (numbers, strings in quotes, arrays). Only the syntax is checked
-    here; :func:`with_overrides` checks names, types and ranges."""
+    here; :func:`with_overrides` checks names, types and ranges. Every bad item is listed."""
     out: dict[str, Any] = {}
+    problems = _Problems("--set")
     for item in items or ():
         key, sep, text = item.partition("=")
         key = key.strip()
-        value = None
-        if sep and text.strip():
-            with contextlib.suppress(tomllib.TOMLDecodeError):
-                value = tomllib.loads(f"v = {text.strip()}")["v"]
-        if not key or value is None:
-            raise ScenarioError(
-                f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. camera.noise_px=0 or gains.k_v=2"
+        if not key or not sep:
+            problems.add(None, f"{item!r}: expected SECTION.KEY=VALUE, {_SET_EXAMPLE}")
+            continue
+        if not text.strip():
+            problems.add(key, f"{item!r}: no value after '=' ({_SET_EXAMPLE})")
+            continue
+        try:
+            out[key] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except (tomllib.TOMLDecodeError, KeyError):
+            problems.add(
+                key,
+                f"{key}: {text.strip()!r} is not a value (write a number, true/false, "
+                '"text" in double quotes or [1, 2, 3])',
             )
-        out[key] = value
+    problems.raise_if_any()
     return out
 
 
 def with_overrides(scenario: Scenario, overrides: Mapping[str, Any]) -> Scenario:
     """A copy with single values replaced: ``section.key`` (``camera``, ``wind``, ...,
     ``gains``) or a top-level key such as ``duration_s``. Every value is checked as if it had
-    been in the file; an error names the key and changes nothing."""
+    been in the file; the error lists every bad key and nothing is changed."""
     if not overrides:
         return scenario
-    src = "--set"
+    problems = _Problems("--set")
     tables: dict[str, dict[str, Any]] = {}
     top: dict[str, Any] = {}
     for key, value in overrides.items():
         section, dot, name = key.partition(".")
         if not dot:
             if key not in ("name", "duration_s", "description"):
-                raise ScenarioError(
-                    f"{src}: unknown key '{key}' (a top-level key is name, duration_s or "
-                    "description; others are SECTION.KEY)"
+                problems.add(
+                    key,
+                    f"unknown key '{key}' (a top-level key is name, duration_s or "
+                    "description; others are SECTION.KEY)",
                 )
-            top[key] = _convert(value, "float" if key == "duration_s" else "str", f"{src} {key}")
+                continue
+            try:
+                top[key] = _convert(value, "float" if key == "duration_s" else "str")
+            except _InvalidValueError as exc:
+                problems.add(key, f"key '{key}': {exc}")
             continue
         if section != "gains" and section not in _SECTIONS:
             allowed = ", ".join([*_SECTIONS, "gains"])
-            raise ScenarioError(f"{src}: unknown section '{section}' (allowed: {allowed})")
+            problems.add(key, f"unknown section '{section}' (allowed: {allowed})")
+            continue
         tables.setdefault(section, {})[name] = value
     changes: dict[str, Any] = dict(top)
     for section, values in tables.items():
         if section == "gains":
+            gains = dict(scenario.gains)
             for k, v in values.items():
-                _convert(v, "float", f"{src} gains.{k}")
-            changes["gains"] = {**scenario.gains, **{k: float(v) for k, v in values.items()}}
+                try:
+                    gains[k] = _convert(v, "float")
+                except _InvalidValueError as exc:
+                    problems.add(f"gains.{k}", f"key 'gains.{k}': {exc}")
+            changes["gains"] = gains
         else:
             merged = {**_as_toml_table(getattr(scenario, section)), **values}
-            changes[section] = _parse_table(merged, _SECTIONS[section], section, src)
-    changed = with_changes(
-        dataclasses.replace(scenario, source=f"--set on {scenario.source}"), **changes
+            spec = _parse_table(merged, _SECTIONS[section], section, problems)
+            if spec is not None:
+                changes[section] = spec
+    problems.raise_if_any()
+    changed = dataclasses.replace(
+        scenario, text="", source=f"--set on {scenario.source}", **changes
     )
+    _validate(changed, problems)
+    problems.source = changed.source
+    problems.raise_if_any()
     return dataclasses.replace(changed, source=scenario.source)
 
 

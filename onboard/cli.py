@@ -11,6 +11,24 @@ from pathlib import Path
 from .gains import GAIN_SPECS, GainError, Gains, load_gains_file
 
 
+def _positive(unit: str, maximum: float = float("inf")):
+    """An argparse type: a finite number > 0 (and <= maximum); otherwise exit 2 naming it."""
+    allowed = f"a number of {unit} > 0" + (
+        "" if maximum == float("inf") else f" and <= {maximum:g}"
+    )
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
+        if not 0.0 < value <= maximum:  # NaN fails too
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
+        return value
+
+    return parse
+
+
 def _gains(args) -> int:
     values = Gains().to_dict()
     if args.check:
@@ -94,7 +112,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="FILE",
         help="parameter file (TOML), read at start and rewritten on every change",
     )
-    r.add_argument("--rate", type=float, default=200.0, help="control rate, Hz (default 200)")
+    r.add_argument(
+        "--rate", type=_positive("Hz", 1000.0), default=200.0, help="control rate, Hz (default 200)"
+    )
     r.add_argument(
         "--signing-key",
         metavar="FILE",
@@ -106,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="SITL only: start the intercept as soon as the target is in view",
     )
-    r.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    r.add_argument("--duration", type=_positive("seconds"), help="stop after this many seconds")
     r.add_argument("--stats", metavar="FILE", help="write timing figures (JSON) here at exit")
     r.add_argument(
         "--log",

@@ -53,7 +53,7 @@ def test_results_identical_whatever_the_worker_count():
         (["campaign", "nope"], "unknown campaign 'nope'; choose one of static, moving"),
         (["campaign", "static", "--laws", "png,zz"], "unknown law(s) zz"),
         (["campaign", "static", "--laws", ""], "--laws needs at least one law"),
-        (["campaign", "static", "--n", "0"], "--n must be at least 1"),
+        (["campaign", "static", "--n", "0"], "argument --n: must be an integer >= 1"),
         (["campaign", "static", "--set", "gains.k_v=900"], "k_v = 900.0 is outside its range"),
         (["campaign", "static", "--set", "gains.kv=1"], "unknown gain(s): kv"),
         (["campaign", "static", "--set", "camera.noise_px"], "expected SECTION.KEY=VALUE"),

@@ -76,7 +76,7 @@ def test_cli_bad_file_exits_2_without_traceback(tmp_path):
         capture_output=True,
         text=True,
     )
-    assert missing.returncode == 2 and "cannot read scenario file" in missing.stderr
+    assert missing.returncode == 2 and "no such file or shipped scenario" in missing.stderr
 
 
 def test_every_shipped_scenario_loads_and_names_match_files():
@@ -127,7 +127,8 @@ def test_overrides_are_checked_like_the_file():
     assert o.camera.noise_px == s.camera.noise_px  # the rest of the section is kept
     for items, message in (
         (["camera.delay_s"], "expected SECTION.KEY=VALUE"),
-        (["camera.delay_s=fast"], "expected SECTION.KEY=VALUE"),
+        (["camera.delay_s=fast"], "camera.delay_s: 'fast' is not a value"),
+        (["gains.k_v=abc"], "gains.k_v: 'abc' is not a value"),
         (["=1"], "expected SECTION.KEY=VALUE"),
     ):
         with pytest.raises(ScenarioError, match=message):

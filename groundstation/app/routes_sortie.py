@@ -10,7 +10,7 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException
 
-from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+from ..scenario import load_scenario, parse_scenario, shipped_scenarios
 from .api_models import LiveAck, SpeedRequest, StartRequest, Status
 from .session import SessionError, SortieConfig, with_wind
 
@@ -27,22 +27,20 @@ def command(session: Any, fn: Callable[..., Any], *args: Any) -> dict[str, Any]:
 def scenario_from(req: StartRequest):
     if (req.scenario is None) == (req.toml is None):
         raise HTTPException(422, "give exactly one of 'scenario' (a name) or 'toml' (file text)")
-    try:
-        if req.toml is not None:
-            scenario = parse_scenario(req.toml, source="uploaded scenario")
-        else:
-            names = {p.stem for p in shipped_scenarios()}
-            if req.scenario not in names:
-                raise HTTPException(422, f"unknown scenario {req.scenario!r}")
-            scenario = load_scenario(req.scenario)
-        if req.wind_mean_m_s is not None or req.gust_m_s is not None:
-            scenario = with_wind(
-                scenario,
-                tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
-                scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
-            )
-    except ScenarioError as exc:
-        raise HTTPException(422, str(exc)) from None
+    # a ScenarioError is answered 422 with every problem located (server._declare_errors)
+    if req.toml is not None:
+        scenario = parse_scenario(req.toml, source="uploaded scenario")
+    else:
+        names = {p.stem for p in shipped_scenarios()}
+        if req.scenario not in names:
+            raise HTTPException(422, f"unknown scenario {req.scenario!r}")
+        scenario = load_scenario(req.scenario)
+    if req.wind_mean_m_s is not None or req.gust_m_s is not None:
+        scenario = with_wind(
+            scenario,
+            tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
+            scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
+        )
     return scenario
 
 

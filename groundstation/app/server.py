@@ -29,6 +29,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from ..recording.reader import LogIndex
+from ..scenario import ScenarioError
 from . import routes_gains, routes_logs, routes_scenarios, routes_sortie
 from .auth import TokenAuthMiddleware, is_loopback, new_token
 from .gainsets import GainSetStore, default_data_dir
@@ -218,7 +219,36 @@ def create_app(
     app.include_router(routes_sortie.router(session))
     app.include_router(routes_logs.router(session, logs))
 
+    _declare_errors(app)
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
+
+
+def _declare_errors(app: FastAPI) -> None:
+    """A refused scenario answers 422 with every problem located
+    (:meth:`ScenarioError.to_json_dict`: ``detail``, ``source``, ``problems``), and the OpenAPI
+    document declares the app's 422 shape as sent: ``detail`` is one sentence (or FastAPI's
+    list of field errors)."""
+
+    @app.exception_handler(ScenarioError)
+    async def scenario_error(_request: Any, exc: ScenarioError) -> JSONResponse:
+        return JSONResponse(exc.to_json_dict(), status_code=422)
+
+    make_document = app.openapi
+
+    def document() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            doc = make_document()
+            error = doc.get("components", {}).get("schemas", {}).get("HTTPValidationError")
+            if error is not None:
+                props = error["properties"]
+                props["detail"] = {
+                    "anyOf": [props["detail"], {"type": "string"}],
+                    "title": "Detail",
+                }
+                props["problems"] = {"type": "array", "items": {"type": "object"}}
+        return app.openapi_schema
+
+    app.openapi = document  # type: ignore[method-assign]
 
 
 def free_loopback_port() -> int:

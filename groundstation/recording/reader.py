@@ -11,6 +11,7 @@ A file that is not MCAP at all is refused with :class:`LogError`.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -21,6 +22,7 @@ from mcap.records import Message, Metadata
 from mcap.stream_reader import StreamReader
 
 MAGIC = b"\x89MCAP0\r\n"
+BEING_WRITTEN_S = 5.0  # a truncated file changed this recently is taken as being written
 
 
 class LogError(ValueError):
@@ -49,10 +51,36 @@ class LogInfo:
 
 
 def _check_magic(path: Path) -> None:
+    """Refuse, with what is wrong, a file that is not MCAP: nothing can be recovered from it."""
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
-    if head != MAGIC:
-        raise LogError(f"{path.name}: not an MCAP file")
+    if head == MAGIC:
+        return
+    if not head:
+        raise LogError(f"{path.name}: not an MCAP file: empty (0 bytes), nothing to recover")
+    if MAGIC.startswith(head):
+        raise LogError(
+            f"{path.name}: not an MCAP file: cut after {len(head)} bytes, inside the MCAP "
+            "magic, nothing to recover"
+        )
+    raise LogError(
+        f"{path.name}: not an MCAP file: it starts with {head[:8]!r}, not MCAP's magic "
+        f"{MAGIC!r}; nothing to recover"
+    )
+
+
+def metadata_values(metadata: dict[str, dict[str, str]]) -> dict[str, dict[str, Any]]:
+    """Metadata as values (MCAP stores strings; ours are JSON where they are not text):
+    ``"0"`` -> 0, ``'{"k_a": 2.0}'`` -> a dict, ``"png"`` stays ``"png"``."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, record in metadata.items():
+        out[name] = {}
+        for key, text in record.items():
+            try:
+                out[name][key] = json.loads(text)
+            except ValueError:
+                out[name][key] = text
+    return out
 
 
 def _apply_metadata(info: LogInfo, name: str, data: dict[str, str]) -> None:
@@ -92,8 +120,17 @@ def _stream_scan(path: Path, info: LogInfo) -> bool:
                 elif isinstance(rec, Metadata):
                     _apply_metadata(info, rec.name, rec.metadata)
         except Exception as exc:  # mcap, zstd and lz4 each raise their own types
-            info.problem = f"{type(exc).__name__}: {exc}".rstrip(": ")
             ended_early = type(exc).__name__ in ("EndOfFile", "EOFError")
+            at = "its first message" if last is None else f"t = {last / 1e9:.2f} s"
+            recovered = f"{info.messages} messages recovered"
+            if ended_early:
+                info.problem = f"truncated at {at}, {recovered}"
+            else:
+                why = f"{type(exc).__name__}: {exc}".rstrip(": ")
+                info.problem = (
+                    f"damaged near byte {f.tell()} of {info.size_bytes} ({why}): "
+                    f"read up to {at}, {recovered}"
+                )
     if first is not None:
         info.duration_s = (last - first) / 1e9
     return ended_early
@@ -108,7 +145,11 @@ def inspect_log(path: Path) -> LogInfo:
     if info.problem is not None:
         info.status = "truncated" if ended_early else "damaged"
         if ended_early:
-            info.problem = "the file ends early (a crash or copy cut it): readable up to the cut"
+            age_s = time.time() - path.stat().st_mtime
+            if age_s < BEING_WRITTEN_S:
+                info.problem += f" so far: still being written ({age_s:.1f} s since its last write)"
+            else:
+                info.problem += " (the file ends early: a crash or a copy cut it)"
     return info
 
 
@@ -133,14 +174,17 @@ class LogIndex:
         if not self.directory.is_dir():
             return out
         for path in sorted(self.directory.glob("*.mcap")):
-            st = path.stat()
+            try:
+                st = path.stat()
+            except OSError:  # deleted since the glob
+                continue
             key = (st.st_size, st.st_mtime_ns)
             cached = self._cache.get(path.name)
             if cached is None or cached[0] != key:
                 try:
                     value: LogInfo | str = inspect_log(path)
-                except LogError as exc:
-                    value = str(exc)
+                except (LogError, OSError) as exc:  # one bad file never fails the listing
+                    value = str(exc) if isinstance(exc, LogError) else f"{path.name}: {exc}"
                 self._cache[path.name] = (key, value)
             value = self._cache[path.name][1]
             if isinstance(value, str):
@@ -235,5 +279,6 @@ __all__ = [
     "LogInfo",
     "inspect_log",
     "iter_messages",
+    "metadata_values",
     "scenario_attachment",
 ]

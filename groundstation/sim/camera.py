@@ -17,10 +17,8 @@ from onboard.camera_model import CameraModel
 from onboard.datatypes import Detection
 from onboard.perception import RedBalloonDetector
 
-from ..scenario import CameraSpec
+from ..scenario import CAMERA_MODES, CameraSpec
 from .render import FrameRenderer
-
-CAMERA_MODES = ("projected", "rendered")
 
 
 class SimCamera:

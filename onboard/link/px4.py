@@ -5,8 +5,9 @@ z down); the onboard loop works in ENU and FLU (DESIGN.md §1). Both conversions
 axis permutations, each its own inverse. Quaternions are (w, x, y, z), body -> world.
 
 :class:`MavLink` wraps a pymavlink connection so that nothing arriving on it can raise into
-the caller: garbage and frames with a bad checksum or signature are counted and dropped, and
-a datagram peer that never sent one valid frame is not answered.
+the caller: garbage and frames with a bad checksum or signature are counted and dropped, so
+are duplicated and out-of-order frames, and a datagram peer that never sent one valid frame
+is not answered.
 """
 
 from __future__ import annotations
@@ -171,6 +172,10 @@ class MavLink:
         self._trusted: set = set()
         self._refused: set = set()
         self.refused_peers = 0
+        self.duplicate_frames = 0  # the same frame again (a duplicated sequence number)
+        self.stale_frames = 0  # older than one already received (out of order)
+        self._recent: dict[tuple, deque[bytes]] = {}
+        self._newest_s: dict[tuple, float] = {}
         self._rx_times: deque[tuple[float, str]] = deque()
         self._first_rx_s: float | None = None  # when the first valid frame came
         self.tlog: TlogWriter | None = None
@@ -219,6 +224,7 @@ class MavLink:
             valid = [m for m in msgs if _known(m)]
             if len(valid) < len(msgs) or not msgs:
                 self.bad_frames += max(len(msgs) - len(valid), 1)
+            valid = [m for m in valid if self._in_order(m, addr)]
             if conn.udp_server:
                 if valid:
                     self._trusted.add(addr)
@@ -249,8 +255,32 @@ class MavLink:
             if not _known(msg):
                 self.bad_frames += 1
                 continue
-            out.append(msg)
+            if self._in_order(msg, None):
+                out.append(msg)
         return out
+
+    def _in_order(self, msg, peer) -> bool:
+        """False, and counted, for a frame seen already (a duplicate: same bytes, sequence
+        number included, as one of the sender's last few of that message) or one stamped
+        older than the newest of its kind from its sender by less than a second (out of order;
+        a larger step back is a restarted sender and is accepted)."""
+        key = (peer, msg.get_srcSystem(), msg.get_srcComponent(), msg.get_msgId())
+        frame = bytes(msg.get_msgbuf())
+        recent = self._recent.get(key)
+        if recent is None:
+            recent = self._recent[key] = deque(maxlen=4)
+        elif frame in recent:
+            self.duplicate_frames += 1
+            return False
+        recent.append(frame)
+        t_s = _stamp_s(msg)
+        if t_s is not None:
+            newest = self._newest_s.get(key)
+            if newest is not None and newest - 1.0 <= t_s < newest:
+                self.stale_frames += 1
+                return False
+            self._newest_s[key] = t_s
+        return True
 
     def rates_hz(self) -> dict[str, float]:
         """Messages per second by type over the last two seconds."""
@@ -286,6 +316,17 @@ class MavLink:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.conn.close()
+
+
+def _stamp_s(msg) -> float | None:
+    """The sender's time stamp of a message in seconds, if it carries one."""
+    t = getattr(msg, "time_usec", None)
+    if isinstance(t, int) and t > 0:
+        return t / 1e6
+    t = getattr(msg, "time_boot_ms", None)
+    if isinstance(t, int) and t > 0:
+        return t / 1e3
+    return None
 
 
 def _known(msg) -> bool:
