@@ -23,8 +23,10 @@ import numpy as np
 from ..camera_model import CameraModel
 from ..datatypes import GRAVITY_M_S2, GyroSample, LoopMode, VehicleParams, VehicleState
 from ..estimation.dkf import DkfConfig
+from ..link import ftp
 from ..link import telemetry as tm
-from ..link.params import PARAM_INDEX, PARAM_SPECS, ParamTable
+from ..link.param_meta import FILE_NAMES, component_files
+from ..link.params import PARAM_ID_INDEX, PARAM_INDEX, PARAM_NAMES, PARAM_SPECS, ParamTable
 from ..link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     CMD_ABORT,
@@ -104,6 +106,7 @@ class OnboardRuntime:
         self.log = log or (lambda s: print(s, flush=True))
         self.clock = Clock()
         self.params = ParamTable(config.params_path)
+        self.ftp = ftp.FtpServer(component_files(self.params.get), FILE_NAMES)
         self.fc = MavLink(config.fc_url, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
         self.gcs = (
             MavLink(
@@ -159,6 +162,8 @@ class OnboardRuntime:
         self._last_hb_sent = -1e9
         self._mode_requested = 0
         self.target_size_frac = 0.0
+        for note in self.params.notes:
+            self._event("warning", note)
 
     # ------------------------------------------------------------------ events
     def _event(self, severity: str, text: str) -> None:
@@ -251,13 +256,15 @@ class OnboardRuntime:
                 self._send_param(i)
         elif kind == "PARAM_REQUEST_READ" and self._for_us(msg):
             name = param_id_str(msg.param_id)
-            idx = PARAM_INDEX.get(name, -1) if msg.param_index < 0 else msg.param_index
+            idx = PARAM_ID_INDEX.get(name, -1) if msg.param_index < 0 else msg.param_index
             if 0 <= idx < len(PARAM_SPECS):
                 self._send_param(idx)
         elif kind == "PARAM_SET" and self._for_us(msg):
             self._param_set(param_id_str(msg.param_id), real32(msg.param_value))
         elif kind == "COMMAND_LONG" and self._for_us(msg):
             self._command(msg)
+        elif kind == "FILE_TRANSFER_PROTOCOL":
+            ftp.serve(self.ftp, self.gcs, msg, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
 
     def _for_us(self, msg) -> bool:
         return msg.target_system == VEHICLE_SYSTEM_ID and msg.target_component in (
@@ -269,7 +276,7 @@ class OnboardRuntime:
         spec = PARAM_SPECS[idx]
         self.gcs.send(
             self.gcs.mav.param_value_encode(
-                spec.name.encode("ascii"),
+                spec.param_id.encode("ascii"),
                 self.params.get(spec.name),
                 mavlink.MAV_PARAM_TYPE_REAL32,
                 len(PARAM_SPECS),
@@ -277,13 +284,14 @@ class OnboardRuntime:
             )
         )
 
-    def _param_set(self, name: str, value: float) -> None:
-        if name not in PARAM_INDEX:
-            self._event("warning", f"PARAM_SET {name[:24]}: unknown parameter")
+    def _param_set(self, param_id: str, value: float) -> None:
+        name = PARAM_NAMES.get(param_id)
+        if name is None:
+            self._event("warning", f"PARAM_SET {param_id[:24]}: unknown parameter")
             return
         ok, why = self.params.set(name, value, flying=self.sm.flying)
         if ok:
-            self._event("info", f"param {name} = {self.params.get(name):g}")
+            self._event("info", f"param {param_id} = {self.params.get(name):g}")
             if self.loop is not None:
                 self.loop.set_gains(self.params.gains)
                 self.loop.dkf.config = DkfConfig(lost_timeout_s=self.params.runtime.TGT_LOST_S)
