@@ -101,6 +101,18 @@ def _build_parser() -> argparse.ArgumentParser:
     st.add_argument("--seed", type=int, default=0)
     st.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     st.add_argument(
+        "--on-ground",
+        action="store_true",
+        help="start disarmed and landed below the scenario's start (arm, then takeoff)",
+    )
+    st.add_argument(
+        "--home",
+        metavar="LAT,LON,ALT",
+        default=None,
+        help="home: latitude, longitude (deg), altitude AMSL (m) of local (0, 0, 0) "
+        "(default PX4 SITL's, 47.397742,8.545594,488)",
+    )
+    st.add_argument(
         "--offboard-loss",
         type=float,
         default=1.0,
@@ -252,10 +264,19 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
 
     from onboard.link.px4 import DEFAULT_SITL_URL, LinkError, MavLink
 
+    from .sitl.autopilot import Home
     from .sitl.camera_server import CameraServer
     from .sitl.vehicle import SitlOptions, SitlVehicle
 
     scenario = load_scenario(args.scenario)
+    try:
+        home = Home()
+        if args.home:
+            lat, lon, alt = (float(c) for c in args.home.split(","))
+            home = Home(lat, lon, alt)
+    except ValueError as exc:
+        print(f"groundstation: error: --home {args.home}: {exc}", file=sys.stderr)
+        return 2
     try:
         link = MavLink(args.mavlink or DEFAULT_SITL_URL, 1, 1)
         camera = CameraServer("127.0.0.1", args.camera_port)
@@ -266,7 +287,9 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
         scenario,
         link,
         camera,
-        SitlOptions(args.offboard_loss, args.camera_blackout_after, args.seed),
+        SitlOptions(
+            args.offboard_loss, args.camera_blackout_after, args.seed, home, args.on_ground
+        ),
     )
     signal.signal(signal.SIGTERM, lambda *_: vehicle.stop())
     try:

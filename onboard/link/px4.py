@@ -61,7 +61,9 @@ def px4_mode_name(custom_mode: int) -> str:
     if main == PX4_MAIN_OFFBOARD:
         return "OFFBOARD"
     if main == PX4_MAIN_AUTO:
-        return {PX4_SUB_AUTO_LOITER: "HOLD"}.get(sub, f"AUTO.{sub}")
+        return {PX4_SUB_AUTO_LOITER: "HOLD", 2: "TAKEOFF", 5: "RTL", 6: "LAND"}.get(
+            sub, f"AUTO.{sub}"
+        )
     if main == PX4_MAIN_POSCTL:
         return "POSCTL"
     return f"MODE.{main}"
