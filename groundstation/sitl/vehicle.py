@@ -32,6 +32,7 @@ from __future__ import annotations
 import heapq
 import json
 import math
+import select
 import sys
 import threading
 import time
@@ -784,5 +785,9 @@ class SitlVehicle:
             if not self.vehicle.finite():
                 self._say(mavlink.MAV_SEVERITY_CRITICAL, "vehicle state not finite: stopping")
                 break
-            time.sleep(max(0.0, (self.step_index + 1) * self.dt_s - (time.perf_counter() - t0)))
+            wait = max(0.0, (self.step_index + 1) * self.dt_s - (time.perf_counter() - t0))
+            try:  # woken by an arriving frame, as PX4's receiver thread is (prompt TIMESYNC)
+                select.select([self.link.conn.port], [], [], wait)
+            except (OSError, ValueError, TypeError, AttributeError):
+                time.sleep(wait)
         return self.result

@@ -50,12 +50,14 @@ from ..link.px4 import (
     quat_ned_frd_to_enu_flu,
     real32,
 )
+from ..link.timesync import TimesyncEstimator, on_timesync, send_request
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
+TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
 MAX_RATE_RAD_S = 20.0
 STREAM_RATES_HZ = {
@@ -107,6 +109,8 @@ class OnboardRuntime:
         self.clock = Clock()
         self.params = ParamTable(config.params_path)
         self.ftp = ftp.FtpServer(component_files(self.params.get), FILE_NAMES)
+        self.timesync = TimesyncEstimator()  # PX4's boot clock -> ours
+        self._next_timesync_s = 0.0
         self.fc = MavLink(config.fc_url, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
         self.gcs = (
             MavLink(
@@ -223,7 +227,11 @@ class OnboardRuntime:
         elif kind == "HIGHRES_IMU":
             g = (msg.xgyro, msg.ygyro, msg.zgyro)
             if all_finite(g) and self.loop is not None:
-                self.loop.on_gyro(GyroSample(now, frd_to_flu(g)))
+                self.loop.on_gyro(
+                    GyroSample(self._fc_time(msg.time_usec * 1e-6, now), frd_to_flu(g))
+                )
+        elif kind == "TIMESYNC":
+            on_timesync(self.fc, self.timesync, msg, self._arrival_s(msg, now))
         elif kind == "STATUSTEXT":
             self._forward(msg, now, always=True)
         elif kind == "COMMAND_ACK":
@@ -235,6 +243,16 @@ class OnboardRuntime:
                 self._mode_requested = 0
             if msg.result != mavlink.MAV_RESULT_ACCEPTED:
                 self._event("warning", f"PX4 refused command {msg.command} ({msg.result})")
+
+    def _arrival_s(self, msg, now: float) -> float:
+        """When a frame reached us (the kernel's UDP timestamp when there is one)."""
+        rx = getattr(msg, "rx_monotonic_s", None)
+        return now if rx is None else self.clock.now() - (time.monotonic() - rx)
+
+    def _fc_time(self, t_fc_s: float, now: float) -> float:
+        """A flight-controller sample time in our clock (TIMESYNC), else its arrival."""
+        t = self.timesync.to_companion(t_fc_s)
+        return now if t is None or not now - 0.5 <= t <= now + 0.002 else min(t, now)
 
     def _forward(self, msg, now: float, always: bool = False) -> None:
         """Pass a flight-controller (or target) message through to the ground."""
@@ -513,6 +531,13 @@ class OnboardRuntime:
             "bad_frames_gcs": None if self.gcs is None else self.gcs.bad_frames,
             "state": self.sm.state.value,
             "reason": self.sm.reason,
+            "clock_zero_monotonic_s": time.monotonic() - self.clock.now(),
+            "timesync_offset_s": self.timesync.offset_now_s,
+            "timesync_skew_ppm": 1e6 * self.timesync.skew,
+            "timesync_min_rtt_ms": None
+            if self.timesync.min_rtt_s is None
+            else 1000 * self.timesync.min_rtt_s,
+            "timesync_accepted": self.timesync.accepted,
         }
 
     # ------------------------------------------------------------------ the tick
@@ -595,6 +620,9 @@ class OnboardRuntime:
                 PX4_SUB_AUTO_LOITER,
             )
         self._heartbeats(now)
+        if now >= self._next_timesync_s:
+            self._next_timesync_s = now + TIMESYNC_EVERY_S
+            send_request(self.fc, self.clock.now())
         if self._tick_n % TELEMETRY_EVERY == 0:
             self._telemetry(now, tel)
         self._flush_events()
