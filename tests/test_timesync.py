@@ -66,3 +66,26 @@ def test_nonsense_round_trips_are_refused_and_change_nothing():
     for t1, tc, t4 in ((1.0, 2.0, 0.9), (1.0, 2.0, 1.2), (float("nan"), 2.0, 1.0)):
         assert not est.add(t1, tc, t4)
     assert est.to_companion(5.0) is None and est.refused == 3 and not est.converged
+
+
+def test_the_adapter_answers_px4s_requests_and_takes_answers_to_ours():
+    from types import SimpleNamespace
+
+    from onboard.link.px4 import mavlink
+    from onboard.link.timesync import on_timesync, send_request
+
+    sent = []
+    mav = mavlink.MAVLink(None)
+    link = SimpleNamespace(mav=mav, send=sent.append)
+    est = TimesyncEstimator()
+    on_timesync(link, est, SimpleNamespace(tc1=0, ts1=777), now_s=12.5)  # PX4 asks
+    assert (sent[-1].tc1, sent[-1].ts1) == (12_500_000_000, 777)
+    send_request(link, 20.0)
+    assert (sent[-1].tc1, sent[-1].ts1) == (0, 20_000_000_000)
+    for k in range(10):  # PX4 answers ours: its clock is ours - 7 s, 1 ms each way
+        t1 = 20.0 + 0.1 * k
+        on_timesync(link, est, SimpleNamespace(tc1=round((t1 - 6.999) * 1e9), ts1=round(t1 * 1e9)),
+                    now_s=t1 + 0.002)  # fmt: skip
+    assert est.accepted == 10 and est.to_companion(13.0) == pytest.approx(20.0, abs=1e-6)
+    on_timesync(link, est, SimpleNamespace(tc1=5, ts1=round(3.0 * 1e9)), now_s=21.0)  # not ours
+    assert est.accepted == 10 and est.refused == 0
