@@ -29,6 +29,7 @@ from groundstation.sitl.autopilot import (
     encode_value,
 )
 from onboard.link.px4 import MavLink, mavlink, param_id_str
+from onboard.runtime.px4_params import check
 
 from .sitl_rig import Rig, free_ports
 
@@ -244,14 +245,31 @@ def test_timesync_is_answered_on_the_vehicles_boot_clock(px4):
     assert abs(replies[-1].tc1 / 1e6 - boot_ms) < 300  # the clock of time_boot_ms
 
 
-def test_onboard_timesync_estimate_against_the_sitl_clock(tmp_path):
-    """``onboard run`` keeps a TIMESYNC estimate of the SITL's boot clock; both count from a
-    zero on the same monotonic clock, so the truth is known (``groundstation bench --sitl``
-    prints the same figure)."""
+def test_px4_parameter_checks():
+    assert check("MPC_THR_HOVER", 0.36, 0.33, 12.0) is None
+    assert check("MPC_THR_HOVER", 0.5, 0.33, 12.0) == (
+        "warning",
+        "PX4 MPC_THR_HOVER 0.50 != PRG_HOVER_THR 0.33",
+    )
+    assert check("COM_OF_LOSS_T", 0.8, 0.33, 12.0) is None
+    assert check("COM_OF_LOSS_T", 3.0, 0.33, 12.0)[1] == "PX4 COM_OF_LOSS_T 3 s: advised 0.5-1 s"
+    assert check("MPC_XY_VEL_MAX", 8.0, 0.33, 12.0)[0] == "info"
+    assert check("COM_OF_LOSS_T", math.nan, 0.33, 12.0)[0] == "warning"
+    assert all(len(check(*a)[1]) <= 50 for a in (("MPC_THR_HOVER", 0.95, 0.05, 1.0),))
+
+
+def test_onboard_reads_px4_parameters_and_keeps_a_timesync_estimate(tmp_path):
+    """``onboard run`` against the SITL: PX4's parameters it depends on are read at link-up
+    and a mismatch is said (STATUSTEXT); it keeps a TIMESYNC estimate of the SITL's boot clock,
+    and as both count from a zero on the same monotonic clock, the truth is known
+    (``groundstation bench --sitl`` prints the same figure)."""
     from groundstation.bench import timesync_error
 
-    rig = Rig(tmp_path)
+    (tmp_path / "params.toml").write_text("PRG_HOVER_THR = 0.5\n")
+    rig = Rig(tmp_path, sitl_args=("--offboard-loss", "3"))
     try:
+        rig.wait_text("PX4 MPC_THR_HOVER 0.33 != PRG_HOVER_THR 0.50", 20.0)
+        rig.wait_text("PX4 COM_OF_LOSS_T 3 s: advised 0.5-1 s", 5.0)
         rig.wait_text("loop ready", 20.0)  # both processes up, the camera streaming
         rig.pump(4.0)
         rig.check_alive()

@@ -54,6 +54,7 @@ from ..link.timesync import TimesyncEstimator, on_timesync, send_request
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
+from .px4_params import PX4_PARAMS_READ, check
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
@@ -111,6 +112,7 @@ class OnboardRuntime:
         self.ftp = ftp.FtpServer(component_files(self.params.get), FILE_NAMES)
         self.timesync = TimesyncEstimator()  # PX4's boot clock -> ours
         self._next_timesync_s = 0.0
+        self.px4_params: dict[str, float] = {}  # what PX4 said (px4_params.PX4_PARAMS_READ)
         self.fc = MavLink(config.fc_url, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
         self.gcs = (
             MavLink(
@@ -232,6 +234,12 @@ class OnboardRuntime:
                 )
         elif kind == "TIMESYNC":
             on_timesync(self.fc, self.timesync, msg, self._arrival_s(msg, now))
+        elif kind == "PARAM_VALUE" and param_id_str(msg.param_id) in PX4_PARAMS_READ:
+            name, g = param_id_str(msg.param_id), self.params.gains
+            said = check(name, float(msg.param_value), self.params.runtime.HOVER_THR, g.v_max)
+            self.px4_params[name] = float(msg.param_value)
+            if said is not None:
+                self._event(*said)
         elif kind == "STATUSTEXT":
             self._forward(msg, now, always=True)
         elif kind == "COMMAND_ACK":
@@ -379,6 +387,9 @@ class OnboardRuntime:
         """Ask PX4 for the state at the rates the loop needs (MAV_CMD_SET_MESSAGE_INTERVAL)."""
         for msg_id, hz in STREAM_RATES_HZ.items():
             self._fc_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        for name in PX4_PARAMS_READ:  # and the parameters we depend on (px4_params.py)
+            self.fc.send(self.fc.mav.param_request_read_encode(VEHICLE_SYSTEM_ID,
+                         AUTOPILOT_COMPONENT_ID, name.encode(), -1))  # fmt: skip
 
     def _fc_command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))
