@@ -277,6 +277,10 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"groundstation: error: --home {args.home}: {exc}", file=sys.stderr)
         return 2
+    if not 0.0 <= args.offboard_loss <= 60.0:  # PX4's COM_OF_LOSS_T range
+        print(f"groundstation: error: --offboard-loss {args.offboard_loss}: expected 0 to 60 s",
+              file=sys.stderr)  # fmt: skip
+        return 2
     try:
         link = MavLink(args.mavlink or DEFAULT_SITL_URL, 1, 1)
         camera = CameraServer("127.0.0.1", args.camera_port)

@@ -69,6 +69,18 @@ def test_global_position_battery_and_parameters_units():
         assert decode_value(encode_value(v, PARAM_INT32), PARAM_INT32) == v
 
 
+def test_bad_sitl_options_are_refused_with_a_clear_error(capsys):
+    from groundstation.cli import main
+
+    for argv, needle in (
+        (["--home", "95,0,0"], "not a latitude/longitude"),
+        (["--home", "52,4"], "--home 52,4"),
+        (["--offboard-loss", "100"], "expected 0 to 60 s"),
+    ):
+        assert main(["sitl", "--camera-port", "0", "--duration", "0.1", *argv]) == 2
+        assert needle in capsys.readouterr().err
+
+
 # ---------------------------------------------------------------------- the SITL process
 class Px4Client:
     """A ground station's view of the SITL: the latest message of each type."""
