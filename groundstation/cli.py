@@ -208,6 +208,18 @@ def _build_parser() -> argparse.ArgumentParser:
     st.add_argument("--seed", type=_SEED, default=0)
     st.add_argument("--duration", type=_seconds(0, False), help="stop after this many seconds")
     st.add_argument(
+        "--on-ground",
+        action="store_true",
+        help="start disarmed and landed below the scenario's start (arm, then takeoff)",
+    )
+    st.add_argument(
+        "--home",
+        metavar="LAT,LON,ALT",
+        default=None,
+        help="home: latitude, longitude (deg), altitude AMSL (m) of local (0, 0, 0) "
+        "(default PX4 SITL's, 47.397742,8.545594,488)",
+    )
+    st.add_argument(
         "--offboard-loss",
         type=_seconds(0, False),
         default=1.0,
@@ -390,10 +402,23 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
 
     from onboard.link.px4 import DEFAULT_SITL_URL, LinkError, MavLink
 
+    from .sitl.autopilot import Home
     from .sitl.camera_server import CameraServer
     from .sitl.vehicle import SitlOptions, SitlVehicle
 
     scenario = load_scenario(args.scenario)
+    try:
+        home = Home()
+        if args.home:
+            lat, lon, alt = (float(c) for c in args.home.split(","))
+            home = Home(lat, lon, alt)
+    except ValueError as exc:
+        print(f"groundstation: error: --home {args.home}: {exc}", file=sys.stderr)
+        return 2
+    if not 0.0 <= args.offboard_loss <= 60.0:  # PX4's COM_OF_LOSS_T range
+        print(f"groundstation: error: --offboard-loss {args.offboard_loss}: expected 0 to 60 s",
+              file=sys.stderr)  # fmt: skip
+        return 2
     try:
         link = MavLink(args.mavlink or DEFAULT_SITL_URL, 1, 1)
         camera = CameraServer("127.0.0.1", args.camera_port)
@@ -404,7 +429,9 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
         scenario,
         link,
         camera,
-        SitlOptions(args.offboard_loss, args.camera_blackout_after, args.seed),
+        SitlOptions(
+            args.offboard_loss, args.camera_blackout_after, args.seed, home, args.on_ground
+        ),
     )
     signal.signal(signal.SIGTERM, lambda *_: vehicle.stop())
     try:

@@ -157,13 +157,13 @@ class FakeOnboard:
         import threading
 
         from onboard.gains import Gains
-        from onboard.link.params import PARAM_SPECS
+        from onboard.link.params import PARAM_IDS, PARAM_SPECS
         from onboard.link.px4 import MavLink
 
         self.link = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
-        self.values = {s.name: s.default for s in PARAM_SPECS}
-        self.values.update(Gains().to_dict())
-        self.names = [s.name for s in PARAM_SPECS]
+        self.values = {s.param_id: s.default for s in PARAM_SPECS}
+        self.values.update({PARAM_IDS[k]: v for k, v in Gains().to_dict().items()})
+        self.names = [s.param_id for s in PARAM_SPECS]
         self.state = 2  # ready
         self.commands: list[int] = []
         self._stop = threading.Event()
@@ -188,7 +188,7 @@ class FakeOnboard:
                                                               len(self.names), i))  # fmt: skip
                 elif kind == "PARAM_SET":
                     name = m.param_id
-                    if name == "k_p" and 0.0 <= m.param_value <= 0.2:
+                    if name == "PRG_K_P" and 0.0 <= m.param_value <= 0.2:
                         self.values[name] = m.param_value
                     link.send(link.mav.param_value_encode(
                         name.encode(), self.values[name], 9, len(self.names),
@@ -252,7 +252,7 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
             " && !document.querySelector('#gains-applied').textContent.includes('waiting')",
             timeout=10000,
         )
-        assert fake.values["k_p"] == pytest.approx(0.05)
+        assert fake.values["PRG_K_P"] == pytest.approx(0.05)
         assert gs.session.gains.k_p == 0.05  # the float32 on the wire, read back as 0.05
         page.wait_for_function(  # every gain shown as the decimal it is, not float32 noise
             "[...document.querySelectorAll('#gains input')].every(i => i.value.length < 8)"

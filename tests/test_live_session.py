@@ -13,6 +13,7 @@ from groundstation.app.server import GroundStation
 from groundstation.app.session import SessionError
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
+from onboard.link.params import PARAM_IDS
 from onboard.link.px4 import MavLink, mavlink
 
 
@@ -63,9 +64,9 @@ def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
         junk.close()
         _telemetry(onboard, 1.1, loop_mode=57, state=-3, f_px=math.nan, image_w_px=1e12)
         onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 999, 3)
-        onboard.send(onboard.mav.param_value_encode(b"k_a", math.nan, 9, 22, 0))
+        onboard.send(onboard.mav.param_value_encode(b"PRG_K_A", math.nan, 9, 22, 0))
         onboard.send(onboard.mav.param_value_encode(b"evil", 1.0, 9, 22, 0))
-        onboard.send(onboard.mav.param_value_encode(b"k_a", 50.0, 9, 22, 0))  # out of range
+        onboard.send(onboard.mav.param_value_encode(b"PRG_K_A", 50.0, 9, 22, 0))  # out of range
         fc.send(fc.mav.local_position_ned_encode(0, math.nan, 0, 0, 0, 0, 0))
         time.sleep(0.3)
         st = session.status()
@@ -96,7 +97,8 @@ def test_gain_edits_wait_for_the_vehicles_param_value():
         with pytest.raises(SessionError, match="not read yet"):
             session.set_gains(session.gains.replace(k_a=3.0))
         for i, (name, value) in enumerate(Gains().to_dict().items()):
-            onboard.send(onboard.mav.param_value_encode(name.encode(), value, 9, 22, i))
+            pid = PARAM_IDS[name].encode()
+            onboard.send(onboard.mav.param_value_encode(pid, value, 9, 22, i))
         assert _wait(lambda: len(session.params) == len(GAIN_NAMES))
         session.set_gains(session.gains.replace(k_a=3.0))
         sets = []
@@ -106,15 +108,15 @@ def test_gain_edits_wait_for_the_vehicles_param_value():
             return bool(sets)
 
         assert _wait(got_param_set)
-        assert sets[0].param_id == "k_a" and sets[0].param_value == 3.0
+        assert sets[0].param_id == "PRG_K_A" and sets[0].param_value == 3.0
         st = session.status()
         assert st["gains_pending"] and st["live"]["params_pending"] == {"k_a": 3.0}
         assert session.gains.k_a == 2.0  # not applied until the vehicle says so
-        onboard.send(onboard.mav.param_value_encode(b"k_a", 2.0, 9, 22, 0))  # refused
+        onboard.send(onboard.mav.param_value_encode(b"PRG_K_A", 2.0, 9, 22, 0))  # refused
         assert _wait(lambda: not session.status()["gains_pending"])
         assert session.status()["live"]["params_refused"] == {"k_a": "k_a: vehicle kept 2"}
         session.set_gains(session.gains.replace(k_a=3.0))
-        onboard.send(onboard.mav.param_value_encode(b"k_a", 3.0, 9, 22, 0))
+        onboard.send(onboard.mav.param_value_encode(b"PRG_K_A", 3.0, 9, 22, 0))
         assert _wait(lambda: session.gains.k_a == 3.0 and not session.status()["gains_pending"])
     finally:
         session.close()

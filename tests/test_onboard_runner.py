@@ -93,11 +93,11 @@ def test_parameter_protocol_read_list_and_set(tmp_path):
         time.sleep(0.05)
         gcs.poll()
         gcs.send(gcs.mav.param_request_list_encode(1, 191))
-        gcs.send(gcs.mav.param_request_read_encode(1, 191, b"K_z", -1))
+        gcs.send(gcs.mav.param_request_read_encode(1, 191, b"PRG_K_Z", -1))
         gcs.send(gcs.mav.param_request_read_encode(1, 191, b"", 2))
-        gcs.send(gcs.mav.param_set_encode(1, 191, b"k_brake", 2.5, 9))
-        gcs.send(gcs.mav.param_set_encode(1, 191, b"CAM_HFOV_DEG", 500.0, 9))
-        gcs.send(gcs.mav.param_set_encode(1, 42, b"k_brake", 3.0, 9))  # not for us
+        gcs.send(gcs.mav.param_set_encode(1, 191, b"PRG_K_BRAKE", 2.5, 9))
+        gcs.send(gcs.mav.param_set_encode(1, 191, b"PRG_CAM_HFOV", 500.0, 9))
+        gcs.send(gcs.mav.param_set_encode(1, 42, b"PRG_K_BRAKE", 3.0, 9))  # not for us
         end = time.monotonic() + 1.0
         values = []
         while time.monotonic() < end:
@@ -106,12 +106,12 @@ def test_parameter_protocol_read_list_and_set(tmp_path):
             time.sleep(0.005)
         total = values[0].param_count
         assert total == 22 and {m.param_index for m in values} == set(range(total))
-        assert sum(m.param_id == "K_z" for m in values) == 3  # list, read by name, by index
-        brake = [m.param_value for m in values if m.param_id == "k_brake"]
+        assert sum(m.param_id == "PRG_K_Z" for m in values) == 3  # list, read by name, by index
+        brake = [m.param_value for m in values if m.param_id == "PRG_K_BRAKE"]
         assert brake[-1] == 2.5 and rt.params.gains.k_brake == 2.5
-        hfov = [m.param_value for m in values if m.param_id == "CAM_HFOV_DEG"]
+        hfov = [m.param_value for m in values if m.param_id == "PRG_CAM_HFOV"]
         assert hfov[-1] == 90.0  # out of range: the unchanged value comes back
-        assert "k_brake = 2.5" in (tmp_path / "params.toml").read_text()
+        assert "PRG_K_BRAKE = 2.5" in (tmp_path / "params.toml").read_text()
     finally:
         rt.camera.stop()
         for link in (fc, gcs, rt.fc, rt.gcs):

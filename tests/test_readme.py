@@ -30,4 +30,4 @@ def test_readme_documents_every_telemetry_field_and_parameter():
     for i, (name, _, _) in enumerate(tm.FIELDS):
         assert f"| {i} | `{name}` |" in text, name
     for spec in PARAM_SPECS:
-        assert f"| `{spec.name}` | {spec.default:g} |" in text, spec.name
+        assert f"| `{spec.param_id}` | `{spec.name}` | {spec.default:g} |" in text, spec.name

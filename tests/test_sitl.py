@@ -117,7 +117,7 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
         assert code == 200
         gs.wait(lambda s: not s["gains_pending"], 5.0, "PARAM_VALUE for v_max")
         assert gs.api("GET", "/api/gains")[1]["values"]["v_max"] == 6.0
-        assert "v_max = 6.0" in rig.params.read_text()  # saved on the vehicle
+        assert "PRG_V_MAX = 6.0" in rig.params.read_text()  # saved on the vehicle
         code, body = gs.api("POST", "/api/live/start")
         assert code == 200 and body["ack"]["result"] == "accepted", body
         result = rig.sitl_result(timeout_s=25.0)
@@ -234,9 +234,9 @@ def test_garbage_on_every_port_and_an_out_of_range_param(rig_factory, sitl_liste
     flight controller's port is the SITL's or the onboard's depending on the topology."""
     rig = rig_factory(sitl_listens=sitl_listens, onboard_gcs_listens=True)
     rig.wait_text("target in view")
-    assert rig.param_set("v_max", 99.0) == 12.0  # refused: the unchanged value comes back
-    assert rig.param_set("k_a", float("nan")) == 2.0
-    assert rig.param_set("v_max", 10.0) == 10.0
+    assert rig.param_set("PRG_V_MAX", 99.0) == 12.0  # refused: the unchanged value comes back
+    assert rig.param_set("PRG_K_A", float("nan")) == 2.0
+    assert rig.param_set("PRG_V_MAX", 10.0) == 10.0
     rng = np.random.default_rng(7)
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     nonsense = [

@@ -32,7 +32,7 @@ from onboard.control.guidance import normal_component
 from onboard.enums import RuntimeState
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
-from onboard.link.params import PARAM_INDEX, PARAM_SPECS
+from onboard.link.params import PARAM_IDS, PARAM_INDEX, PARAM_NAMES, PARAM_SPECS
 from onboard.link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     CMD_ABORT,
@@ -174,7 +174,7 @@ class LiveSession:
                         self.link.mav.param_set_encode(
                             VEHICLE_SYSTEM_ID,
                             ONBOARD_COMPONENT_ID,
-                            name.encode("ascii"),
+                            PARAM_IDS[name].encode("ascii"),
                             new,
                             mavlink.MAV_PARAM_TYPE_REAL32,
                         )
@@ -298,7 +298,7 @@ class LiveSession:
         elif kind == "STATUSTEXT":
             self._event(now, "onboard", message_text(m), m.severity)
         elif kind == "PARAM_VALUE":
-            name = param_id_str(m.param_id)
+            name = PARAM_NAMES.get(param_id_str(m.param_id), "")  # MAVLink id -> Python name
             value = real32(m.param_value)
             if name not in PARAM_INDEX or not math.isfinite(value):
                 raise ValueError(f"PARAM_VALUE {name!r} = {value}")

@@ -76,10 +76,13 @@ def run_sitl_bench(seconds: float = 20.0, as_json: bool = False) -> int:
         sitl.wait(10)
         ground.close()
         stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
-        result = None
+        result = sitl_zero = None
         for line in sitl_log.read_text().splitlines():
             if line.startswith("SITL_RESULT "):
                 result = json.loads(line.removeprefix("SITL_RESULT "))
+            elif line.startswith("sitl: boot clock zero at monotonic "):
+                sitl_zero = float(line.split()[-2])
+    timesync_error_ms = timesync_error(stats, sitl_zero)
     cpu_s, wall_s = cpu if cpu else (None, None)
     figures = {
         "seconds": seconds,
@@ -98,6 +101,9 @@ def run_sitl_bench(seconds: float = 20.0, as_json: bool = False) -> int:
         "peak_rss_mb": peak,
         "ground_messages": received,
         "sitl_result": result,
+        "timesync_error_ms": timesync_error_ms,
+        "timesync_min_rtt_ms": stats.get("timesync_min_rtt_ms"),
+        "timesync_samples": stats.get("timesync_accepted"),
     }
     if as_json:
         print(json.dumps(figures, indent=2))
@@ -126,6 +132,20 @@ def run_sitl_bench(seconds: float = 20.0, as_json: bool = False) -> int:
         f"  onboard process: CPU {f(100 * figures['cpu_share_of_one_core'] if cpu_s else None, 0)}"
         f" % of one core, peak memory {f(peak, 0)} MB  target <= 300 MB"
     )
+    print(
+        f"  TIMESYNC offset error {f(timesync_error_ms, 3)} ms (quickest round trip "
+        f"{f(figures['timesync_min_rtt_ms'], 3)} ms, {figures['timesync_samples']} samples)"
+    )
     if result:
         print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")
     return 0
+
+
+def timesync_error(stats: dict, sitl_zero_monotonic_s: float | None) -> float | None:
+    """The onboard TIMESYNC offset estimate minus the true offset, in ms: both processes
+    count from a zero on the same monotonic clock, so the truth is the difference of the
+    zeros (companion time - flight-controller time = SITL zero - onboard zero)."""
+    est, zero = stats.get("timesync_offset_s"), stats.get("clock_zero_monotonic_s")
+    if est is None or zero is None or sitl_zero_monotonic_s is None:
+        return None
+    return 1000.0 * (est - (sitl_zero_monotonic_s - zero))

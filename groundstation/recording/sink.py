@@ -42,7 +42,12 @@ class McapFile:
     def __init__(self, path: Path, fileobj=None) -> None:
         self.path = Path(path)
         self._file = fileobj if fileobj is not None else open(path, "r+b")  # noqa: SIM115
-        self._w = Writer(self._file, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
+        self._w = Writer(
+            self._file,
+            chunk_size=CHUNK_BYTES,
+            compression=CompressionType.ZSTD,
+            enable_data_crcs=True,  # DataEnd carries the CRC of the whole data section
+        )
         self._w.start(profile="", library=f"peregrine {gs_version}")
         schema_ids: dict[str, int] = {}
         self.channel_ids: list[int] = []

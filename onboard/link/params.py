@@ -1,15 +1,23 @@
 """The onboard component's MAVLink parameters: every gain (``onboard/gains.py``, live) and the
-runtime settings below (applied only while not flying). Names are at most 16 characters,
-values REAL32. A value outside its range is refused and the old one stays.
+runtime settings below (applied only while not flying), values REAL32. A value outside its
+range is refused and the old one stays.
 
-The table is saved as ``name = value`` TOML (the same format ``onboard gains --check``
-reads), written to a temporary file and renamed, so a crash never leaves half a file.
+On MAVLink each parameter has a PX4-style id derived from its Python name
+(:func:`mavlink_param_id`: ``k_a`` -> ``PRG_K_A``, ``CAM_HFOV_DEG`` -> ``PRG_CAM_HFOV``):
+upper case, the component's prefix, at most 16 characters, so every ground station (MAVProxy
+upper-cases what it is typed) can show and set them. Inside the code the Python names stay.
+
+The table is saved as ``PARAM_ID = value`` TOML, written to a temporary file and renamed, so a
+crash never leaves half a file; a file with the old (Python) names still loads, with a
+deprecation note per name (:attr:`ParamTable.notes`), and is rewritten with the new ids on the
+next change.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,19 +62,35 @@ class RuntimeParams:
         return LAW_CODES[int(self.LAW)]
 
 
+PARAM_PREFIX = "PRG_"  # the component's parameter group, as PX4's MPC_, COM_, EKF2_
+
+
+def mavlink_param_id(name: str) -> str:
+    """The MAVLink id of a parameter: prefix + upper-cased Python name, a trailing unit suffix
+    (``_DEG``, ``_S``) dropped as in PX4's names (the unit is in the metadata)."""
+    return PARAM_PREFIX + re.sub(r"_(DEG|S)$", "", name.upper())
+
+
 @dataclass(frozen=True)
 class ParamSpec:
-    name: str
+    name: str  # the Python name (gains.py, RuntimeParams)
     default: float
     minimum: float
     maximum: float
     unit: str
     meaning: str
     live: bool  # applied while flying (gains) or only on the ground
+    group: str  # "Gains" or "Runtime", for ground stations' parameter trees
+
+    @property
+    def param_id(self) -> str:
+        """The name on MAVLink and in params files."""
+        return mavlink_param_id(self.name)
 
 
 PARAM_SPECS: tuple[ParamSpec, ...] = tuple(
-    ParamSpec(s.name, s.default, s.minimum, s.maximum, s.unit, s.meaning, True) for s in GAIN_SPECS
+    ParamSpec(s.name, s.default, s.minimum, s.maximum, s.unit, s.meaning, True, "Gains")
+    for s in GAIN_SPECS
 ) + tuple(
     ParamSpec(
         f.name,
@@ -76,12 +100,16 @@ PARAM_SPECS: tuple[ParamSpec, ...] = tuple(
         f.metadata["unit"],
         f.metadata["meaning"],
         False,
+        "Runtime",
     )
     for f in dataclasses.fields(RuntimeParams)
 )
-PARAM_INDEX = {s.name: i for i, s in enumerate(PARAM_SPECS)}
-assert all(len(s.name) <= 16 for s in PARAM_SPECS)
-assert len(PARAM_INDEX) == len(PARAM_SPECS)
+PARAM_INDEX = {s.name: i for i, s in enumerate(PARAM_SPECS)}  # Python name -> index
+PARAM_ID_INDEX = {s.param_id: i for i, s in enumerate(PARAM_SPECS)}  # MAVLink id -> index
+PARAM_IDS = {s.name: s.param_id for s in PARAM_SPECS}  # Python name -> MAVLink id
+PARAM_NAMES = {s.param_id: s.name for s in PARAM_SPECS}  # MAVLink id -> Python name
+assert all(len(s.param_id) <= 16 and s.param_id.isupper() for s in PARAM_SPECS)
+assert len(PARAM_INDEX) == len(PARAM_SPECS) == len(PARAM_ID_INDEX)
 
 
 class ParamTable:
@@ -92,6 +120,7 @@ class ParamTable:
         self.gains = Gains()
         self.runtime = RuntimeParams()
         self.version = 0
+        self.notes: list[str] = []  # deprecation notes from the last load
         if path is not None and path.exists():
             self.load(path)
 
@@ -103,9 +132,14 @@ class ParamTable:
             raise GainError(f"{path}: cannot read: {exc}") from None
         except tomllib.TOMLDecodeError as exc:
             raise GainError(f"{path}: not valid TOML: {exc}") from None
-        unknown = set(data) - set(PARAM_INDEX)
+        unknown = set(data) - set(PARAM_NAMES) - set(PARAM_INDEX)
         if unknown:
             raise GainError(f"{path}: unknown parameter(s): {', '.join(sorted(unknown))}")
+        old = sorted(k for k in data if k in PARAM_INDEX and k not in PARAM_NAMES)
+        renamed = {PARAM_NAMES.get(k, k) for k in data}
+        if len(renamed) < len(data):
+            raise GainError(f"{path}: a parameter is given under its old and its new name")
+        data = {PARAM_NAMES.get(k, k): v for k, v in data.items()}
         gains = {k: v for k, v in data.items() if k in Gains.__dataclass_fields__}
         runtime = {k: v for k, v in data.items() if k in RuntimeParams.__dataclass_fields__}
         try:
@@ -114,12 +148,17 @@ class ParamTable:
         except (GainError, TypeError) as exc:
             raise GainError(f"{path}: {exc}") from None
         self.gains, self.runtime = g, r
+        self.notes = [
+            f"{path}: parameter name {k} is deprecated, use {PARAM_IDS[k]} "
+            "(the file is rewritten with the new names on the next change)"
+            for k in old
+        ]
 
     def save(self) -> None:
         if self.path is None:
             return
         lines = ["# Peregrine onboard parameters (written by onboard run)"]
-        lines += [f"{s.name} = {self.get(s.name)!r}" for s in PARAM_SPECS]
+        lines += [f"{s.param_id} = {self.get(s.name)!r}" for s in PARAM_SPECS]
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
         os.replace(tmp, self.path)

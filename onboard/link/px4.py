@@ -15,6 +15,9 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import socket
+import struct
+import sys
 import time
 from collections import Counter, deque
 from collections.abc import Iterable
@@ -62,7 +65,9 @@ def px4_mode_name(custom_mode: int) -> str:
     if main == PX4_MAIN_OFFBOARD:
         return "OFFBOARD"
     if main == PX4_MAIN_AUTO:
-        return {PX4_SUB_AUTO_LOITER: "HOLD"}.get(sub, f"AUTO.{sub}")
+        return {PX4_SUB_AUTO_LOITER: "HOLD", 2: "TAKEOFF", 5: "RTL", 6: "LAND"}.get(
+            sub, f"AUTO.{sub}"
+        )
     if main == PX4_MAIN_POSCTL:
         return "POSCTL"
     return f"MODE.{main}"
@@ -70,6 +75,9 @@ def px4_mode_name(custom_mode: int) -> str:
 
 MODE_OFFBOARD = px4_custom_mode(PX4_MAIN_OFFBOARD)
 MODE_HOLD = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_LOITER)
+
+# Linux's SO_TIMESTAMPNS (= SCM_TIMESTAMPNS; Python's socket module does not name it)
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform == "linux" else -1)
 
 # ---------------------------------------------------------------------- frames
 _NED_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -154,6 +162,9 @@ class MavLink:
         except Exception as exc:  # pymavlink raises what the OS raised, or ValueError
             raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from None
         self.conn.first_byte = False  # never let a stray 0xFE switch us to MAVLink 1
+        if isinstance(self.conn, mavutil.mavudp):  # the kernel stamps each datagram's arrival
+            with contextlib.suppress(AttributeError, OSError):
+                self.conn.port.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         self.conn.mav.robust_parsing = True
         if signing_key is not None:
             allowed = None if unsigned_ok is None else frozenset(unsigned_ok)
@@ -206,9 +217,10 @@ class MavLink:
         sent at least one valid frame."""
         conn, mav = self.conn, self.mav
         out: list = []
+        realtime_minus_monotonic = time.time() - time.monotonic()
         while len(out) < max_messages:
             try:
-                data, addr = conn.port.recvfrom(65535)
+                data, anc, _flags, addr = conn.port.recvmsg(65535, 64)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:  # ECONNREFUSED from an ICMP error, a closed socket: nothing to read
@@ -222,6 +234,9 @@ class MavLink:
             except Exception:  # pymavlink could not survive this datagram: drop it
                 msgs = []
             valid = [m for m in msgs if _known(m)]
+            rx = _kernel_rx_s(anc, realtime_minus_monotonic)
+            for m in valid:
+                m.rx_monotonic_s = rx  # None where the kernel gave no timestamp
             if len(valid) < len(msgs) or not msgs:
                 self.bad_frames += max(len(msgs) - len(valid), 1)
             valid = [m for m in valid if self._in_order(m, addr)]
@@ -326,6 +341,15 @@ def _stamp_s(msg) -> float | None:
     t = getattr(msg, "time_boot_ms", None)
     if isinstance(t, int) and t > 0:
         return t / 1e3
+    return None
+
+
+def _kernel_rx_s(ancillary, realtime_minus_monotonic: float) -> float | None:
+    """A datagram's SO_TIMESTAMPNS arrival (realtime) on the monotonic clock."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+            sec, nsec = struct.unpack("qq", data[:16])
+            return sec + 1e-9 * nsec - realtime_minus_monotonic
     return None
 
 

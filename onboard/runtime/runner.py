@@ -23,8 +23,10 @@ import numpy as np
 from ..camera_model import CameraModel
 from ..datatypes import GRAVITY_M_S2, GyroSample, LoopMode, VehicleParams, VehicleState
 from ..estimation.dkf import DkfConfig
+from ..link import ftp
 from ..link import telemetry as tm
-from ..link.params import PARAM_INDEX, PARAM_SPECS, ParamTable
+from ..link.param_meta import FILE_NAMES, component_files
+from ..link.params import PARAM_ID_INDEX, PARAM_INDEX, PARAM_NAMES, PARAM_SPECS, ParamTable
 from ..link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     CMD_ABORT,
@@ -48,12 +50,15 @@ from ..link.px4 import (
     quat_ned_frd_to_enu_flu,
     real32,
 )
+from ..link.timesync import TimesyncEstimator, on_timesync, send_request
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
+from .px4_params import PX4_PARAMS_READ, check
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
+TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
 MAX_RATE_RAD_S = 20.0
 STREAM_RATES_HZ = {
@@ -104,6 +109,10 @@ class OnboardRuntime:
         self.log = log or (lambda s: print(s, flush=True))
         self.clock = Clock()
         self.params = ParamTable(config.params_path)
+        self.ftp = ftp.FtpServer(component_files(self.params.get), FILE_NAMES)
+        self.timesync = TimesyncEstimator()  # PX4's boot clock -> ours
+        self._next_timesync_s = 0.0
+        self.px4_params: dict[str, float] = {}  # what PX4 said (px4_params.PX4_PARAMS_READ)
         self.fc = MavLink(config.fc_url, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
         self.gcs = (
             MavLink(
@@ -159,6 +168,8 @@ class OnboardRuntime:
         self._last_hb_sent = -1e9
         self._mode_requested = 0
         self.target_size_frac = 0.0
+        for note in self.params.notes:
+            self._event("warning", note)
 
     # ------------------------------------------------------------------ events
     def _event(self, severity: str, text: str) -> None:
@@ -218,7 +229,17 @@ class OnboardRuntime:
         elif kind == "HIGHRES_IMU":
             g = (msg.xgyro, msg.ygyro, msg.zgyro)
             if all_finite(g) and self.loop is not None:
-                self.loop.on_gyro(GyroSample(now, frd_to_flu(g)))
+                self.loop.on_gyro(
+                    GyroSample(self._fc_time(msg.time_usec * 1e-6, now), frd_to_flu(g))
+                )
+        elif kind == "TIMESYNC":
+            on_timesync(self.fc, self.timesync, msg, self._arrival_s(msg, now))
+        elif kind == "PARAM_VALUE" and param_id_str(msg.param_id) in PX4_PARAMS_READ:
+            name, g = param_id_str(msg.param_id), self.params.gains
+            said = check(name, float(msg.param_value), self.params.runtime.HOVER_THR, g.v_max)
+            self.px4_params[name] = float(msg.param_value)
+            if said is not None:
+                self._event(*said)
         elif kind == "STATUSTEXT":
             self._forward(msg, now, always=True)
         elif kind == "COMMAND_ACK":
@@ -230,6 +251,16 @@ class OnboardRuntime:
                 self._mode_requested = 0
             if msg.result != mavlink.MAV_RESULT_ACCEPTED:
                 self._event("warning", f"PX4 refused command {msg.command} ({msg.result})")
+
+    def _arrival_s(self, msg, now: float) -> float:
+        """When a frame reached us (the kernel's UDP timestamp when there is one)."""
+        rx = getattr(msg, "rx_monotonic_s", None)
+        return now if rx is None else self.clock.now() - (time.monotonic() - rx)
+
+    def _fc_time(self, t_fc_s: float, now: float) -> float:
+        """A flight-controller sample time in our clock (TIMESYNC), else its arrival."""
+        t = self.timesync.to_companion(t_fc_s)
+        return now if t is None or not now - 0.5 <= t <= now + 0.002 else min(t, now)
 
     def _forward(self, msg, now: float, always: bool = False) -> None:
         """Pass a flight-controller (or target) message through to the ground."""
@@ -251,13 +282,15 @@ class OnboardRuntime:
                 self._send_param(i)
         elif kind == "PARAM_REQUEST_READ" and self._for_us(msg):
             name = param_id_str(msg.param_id)
-            idx = PARAM_INDEX.get(name, -1) if msg.param_index < 0 else msg.param_index
+            idx = PARAM_ID_INDEX.get(name, -1) if msg.param_index < 0 else msg.param_index
             if 0 <= idx < len(PARAM_SPECS):
                 self._send_param(idx)
         elif kind == "PARAM_SET" and self._for_us(msg):
             self._param_set(param_id_str(msg.param_id), real32(msg.param_value))
         elif kind == "COMMAND_LONG" and self._for_us(msg):
             self._command(msg)
+        elif kind == "FILE_TRANSFER_PROTOCOL":
+            ftp.serve(self.ftp, self.gcs, msg, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
 
     def _for_us(self, msg) -> bool:
         return msg.target_system == VEHICLE_SYSTEM_ID and msg.target_component in (
@@ -269,7 +302,7 @@ class OnboardRuntime:
         spec = PARAM_SPECS[idx]
         self.gcs.send(
             self.gcs.mav.param_value_encode(
-                spec.name.encode("ascii"),
+                spec.param_id.encode("ascii"),
                 self.params.get(spec.name),
                 mavlink.MAV_PARAM_TYPE_REAL32,
                 len(PARAM_SPECS),
@@ -277,13 +310,14 @@ class OnboardRuntime:
             )
         )
 
-    def _param_set(self, name: str, value: float) -> None:
-        if name not in PARAM_INDEX:
-            self._event("warning", f"PARAM_SET {name[:24]}: unknown parameter")
+    def _param_set(self, param_id: str, value: float) -> None:
+        name = PARAM_NAMES.get(param_id)
+        if name is None:
+            self._event("warning", f"PARAM_SET {param_id[:24]}: unknown parameter")
             return
         ok, why = self.params.set(name, value, flying=self.sm.flying)
         if ok:
-            self._event("info", f"param {name} = {self.params.get(name):g}")
+            self._event("info", f"param {param_id} = {self.params.get(name):g}")
             if self.loop is not None:
                 self.loop.set_gains(self.params.gains)
                 self.loop.dkf.config = DkfConfig(lost_timeout_s=self.params.runtime.TGT_LOST_S)
@@ -353,6 +387,9 @@ class OnboardRuntime:
         """Ask PX4 for the state at the rates the loop needs (MAV_CMD_SET_MESSAGE_INTERVAL)."""
         for msg_id, hz in STREAM_RATES_HZ.items():
             self._fc_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        for name in PX4_PARAMS_READ:  # and the parameters we depend on (px4_params.py)
+            self.fc.send(self.fc.mav.param_request_read_encode(VEHICLE_SYSTEM_ID,
+                         AUTOPILOT_COMPONENT_ID, name.encode(), -1))  # fmt: skip
 
     def _fc_command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))
@@ -470,6 +507,13 @@ class OnboardRuntime:
             "bad_frames_gcs": None if self.gcs is None else self.gcs.bad_frames,
             "state": self.sm.state.value,
             "reason": self.sm.reason,
+            "clock_zero_monotonic_s": time.monotonic() - self.clock.now(),
+            "timesync_offset_s": self.timesync.offset_now_s,
+            "timesync_skew_ppm": 1e6 * self.timesync.skew,
+            "timesync_min_rtt_ms": None
+            if self.timesync.min_rtt_s is None
+            else 1000 * self.timesync.min_rtt_s,
+            "timesync_accepted": self.timesync.accepted,
         }
 
     # ------------------------------------------------------------------ the tick
@@ -552,6 +596,9 @@ class OnboardRuntime:
                 PX4_SUB_AUTO_LOITER,
             )
         self._heartbeats(now)
+        if now >= self._next_timesync_s:
+            self._next_timesync_s = now + TIMESYNC_EVERY_S
+            send_request(self.fc, self.clock.now())
         if self._tick_n % TELEMETRY_EVERY == 0:
             self._telemetry(now, tel)
         self._flush_events()
