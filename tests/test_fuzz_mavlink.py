@@ -287,7 +287,7 @@ def test_onboard_ground_link_survives_hostile_traffic(tmp_path, fuzz_summary):
                 mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0))  # fmt: skip
         if beats["n"] == 2 and not beats.get("set"):
             beats["set"] = True
-            _real(gcs, hostile, gcs.mav.param_set_encode(1, 191, b"k_brake", 2.5, 9))
+            _real(gcs, hostile, gcs.mav.param_set_encode(1, 191, b"PRG_K_BRAKE", 2.5, 9))
 
     try:
         # the onboard telemetry goes out at 25-50 Hz: 10x its rate back at it is 500 frames/s
@@ -300,7 +300,7 @@ def test_onboard_ground_link_survives_hostile_traffic(tmp_path, fuzz_summary):
         ok = rt.params.gains.k_brake == 2.5
         _report(fuzz_summary, "onboard-ground", hostile, ok)
         assert rt.params.gains.k_brake == 2.5  # the real PARAM_SET got through
-        values = [m for m in out if m.get_type() == "PARAM_VALUE" and m.param_id == "k_brake"]
+        values = [m for m in out if m.get_type() == "PARAM_VALUE" and m.param_id == "PRG_K_BRAKE"]
         assert values and values[-1].param_value == 2.5
         telemetry = [m for m in out if m.get_type() == "DEBUG_FLOAT_ARRAY"]
         assert len(telemetry) >= 10 * FLOOD_S  # telemetry kept flowing

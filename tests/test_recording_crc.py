@@ -9,6 +9,7 @@ import zlib
 from mcap.records import DataEnd
 from mcap.stream_reader import StreamReader
 
+from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
 
@@ -18,10 +19,10 @@ FOOTER_LEN = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset 
 
 
 def test_the_data_section_crc_is_written_and_matches(tmp_path):
-    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, log_dir=tmp_path)
-    sim.run()
-    assert sim.recorder.closed and sim.recorder.error is None
-    data = sim.recorder.path.read_bytes()
+    rec = SortieRecorder(tmp_path)
+    Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[rec]).run()
+    assert rec.closed and rec.error is None
+    data = rec.path.read_bytes()
     footer = len(data) - MAGIC_LEN - FOOTER_LEN
     assert data[footer] == 0x02  # the Footer opcode
     (summary_start,) = struct.unpack_from("<Q", data, footer + 9)
@@ -29,5 +30,5 @@ def test_the_data_section_crc_is_written_and_matches(tmp_path):
     assert data[data_end] == 0x0F  # the DataEnd opcode
     (stored,) = struct.unpack_from("<I", data, data_end + 9)
     assert stored != 0 and stored == zlib.crc32(data[:data_end])  # from the magic on (spec)
-    records = list(StreamReader(str(sim.recorder.path), validate_crcs=True).records)
+    records = list(StreamReader(str(rec.path), validate_crcs=True).records)
     assert [r.data_section_crc for r in records if isinstance(r, DataEnd)] == [stored]
