@@ -33,6 +33,13 @@ _SET_HELP = (
 )
 
 
+def _add_backend_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backend", default="process", choices=("process", "ray"), help="sortie runner")
+    p.add_argument(
+        "--ray-address", default=None, help="Ray cluster (default: $RAY_ADDRESS, else a local Ray)"
+    )
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="groundstation", description="Peregrine ground station")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -125,6 +132,7 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
     c.add_argument("--log", metavar="DIR", default=None, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    _add_backend_args(c)
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")

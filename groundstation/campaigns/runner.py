@@ -122,6 +122,21 @@ class LocalPoolRunner:
         self.workers = workers or default_workers()
         if self.workers < 1:
             raise ValueError("workers must be at least 1")
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> LocalPoolRunner:
+        """Keep one pool over several :meth:`run` calls (a tuning study's trials)."""
+        if self.workers > 1 and self._pool is None:
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
     def run(
         self,
@@ -136,13 +151,16 @@ class LocalPoolRunner:
                 if on_done:
                     on_done(out)
         else:
-            ctx = _pool_context()
-            with ProcessPoolExecutor(self.workers, mp_context=ctx) as pool:
+            pool = self._pool or ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+            try:
                 futures = [pool.submit(run_job, job) for job in jobs]
                 for fut in as_completed(futures):
                     out = fut.result()
                     outcomes.append(out)
                     if on_done:
                         on_done(out)
+            finally:
+                if pool is not self._pool:
+                    pool.shutdown()
         outcomes.sort(key=lambda o: o.index)
         return outcomes
