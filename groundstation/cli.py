@@ -11,6 +11,7 @@ from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.gains import GainError
 
 from .campaigns.definitions import CampaignError
+from .campaigns.tune import add_tune_arguments
 from .scenario import (
     ScenarioError,
     load_scenario,
@@ -133,6 +134,10 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--log", metavar="DIR", default=None, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
     _add_backend_args(c)
+
+    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (see README)")
+    add_tune_arguments(t, _SET_HELP)
+    _add_backend_args(t)
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=int, default=5, help="sorties per camera mode")
@@ -311,6 +316,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .campaigns.driver import main_campaign
 
             return main_campaign(args)
+        if args.command == "tune":
+            from .campaigns.tune import main_tune
+
+            return main_tune(args)
         if args.command == "bench":
             from .bench import (
                 run_bench,
