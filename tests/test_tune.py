@@ -22,6 +22,7 @@ from groundstation.campaigns.tune import (
     parse_gain_space,
     score,
 )
+from groundstation.cli import main
 from onboard.gains import GAIN_SPECS, Gains
 
 TARGET = "static-ahead-20m,cv-top-to-bottom"  # two short sorties per seed
@@ -94,21 +95,33 @@ def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():
     assert no_pn.loss > defaults.loss + 0.4
 
 
-def _tune(tmp_path, *extra, trials=2, out="r", check=True, wait=True):
-    args = [sys.executable, "-m", "groundstation", "tune", TARGET, "--gains", "K_y,K_z,k_p"]
-    args += ["--n", "1", "--workers", "1", "--data-dir", str(tmp_path / "data")]
-    args += ["--trials", str(trials), "--out", str(tmp_path / out), "--json", *extra]
-    if not wait:
-        return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    r = subprocess.run(args, capture_output=True, text=True, timeout=300)
+def _args(tmp_path, *extra, trials=2, out="r"):
+    args = ["tune", TARGET, "--gains", "K_y,K_z,k_p", "--n", "1", "--workers", "1"]
+    args += ["--data-dir", str(tmp_path / "data"), "--trials", str(trials)]
+    return [*args, "--out", str(tmp_path / out), "--json", *extra]
+
+
+def _tune(tmp_path, capsys, *extra, trials=2, out="r", check=True):
+    """Run ``groundstation tune`` in this process; its JSON, or (status, stderr)."""
+    capsys.readouterr()
+    try:
+        code = main(_args(tmp_path, *extra, trials=trials, out=out))
+    except SystemExit as exc:  # argparse's usage errors
+        code = exc.code
+    captured = capsys.readouterr()
     if check:
-        assert r.returncode == 0, r.stderr
-        return json.loads(r.stdout)
-    return r
+        assert code == 0, captured.err
+        return json.loads(captured.out)
+    return code, captured.err
+
+
+def _spawn(tmp_path, trials, out):
+    args = [sys.executable, "-m", "groundstation", *_args(tmp_path, trials=trials, out=out)]
+    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def _trials(tmp_path):
-    with sqlite3.connect(tmp_path / "data" / "studies.db") as db:
+    with sqlite3.connect(f"file:{tmp_path / 'data' / 'studies.db'}?mode=ro", uri=True) as db:
         return db.execute("SELECT number, state FROM trials ORDER BY number").fetchall()
 
 
@@ -118,8 +131,8 @@ def _params(tmp_path):
     return sorted(rows)
 
 
-def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path):
-    first = _tune(tmp_path, trials=2)
+def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, capsys):
+    first = _tune(tmp_path, capsys, trials=2)
     meta, figs = first["meta"], first["figures"]
     assert meta["trials_run_now"] == 2 and meta["trials_complete"] == 2
     assert meta["train_sorties_per_trial"] == 2 and meta["held_out_sorties"] == 2
@@ -148,29 +161,27 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path):
     assert loaded.k_R == Gains().k_R  # untuned gains keep the campaign's values
 
     before = _params(tmp_path)
-    again = _tune(tmp_path, trials=4, out="r2")["meta"]
+    again = _tune(tmp_path, capsys, trials=4, out="r2")["meta"]
     assert again["trials_run_now"] == 2 and again["trials_complete"] == 4
     assert _trials(tmp_path) == [(i, "COMPLETE") for i in range(4)]
     assert _params(tmp_path)[: len(before)] == before  # the first trials were not flown again
-    done = _tune(tmp_path, trials=4, out="r3")["meta"]
+    done = _tune(tmp_path, capsys, trials=4, out="r3")["meta"]
     assert done["trials_run_now"] == 0 and len(_trials(tmp_path)) == 4  # nothing left to do
     # the same study with another definition is refused, not mixed
-    r = _tune(tmp_path, "--seed", "5", trials=5, out="r4", check=False)
-    assert (
-        r.returncode == 2
-        and "made with a different definition (differs in holdout_seed, seed)" in r.stderr
-    )
+    code, err = _tune(tmp_path, capsys, "--seed", "5", trials=5, out="r4", check=False)
+    assert code == 2 and "made with a different definition (differs in holdout_seed, seed)" in err
     assert not (tmp_path / "r4").exists()
 
 
 def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
-    p = _tune(tmp_path, trials=8, wait=False)
+    p = _spawn(tmp_path, 8, "r")
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
-        if (tmp_path / "data" / "studies.db").exists() and any(
-            s == "COMPLETE" for _, s in _trials(tmp_path)
-        ):
-            break
+        try:
+            if any(s == "COMPLETE" for _, s in _trials(tmp_path)):
+                break
+        except sqlite3.OperationalError:
+            pass  # not created yet
         time.sleep(0.2)
     p.kill()  # a crash: no clean-up
     p.communicate()
@@ -178,7 +189,7 @@ def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
     n_complete = sum(s == "COMPLETE" for _, s in crashed)
     assert 1 <= n_complete < 8
     # two processes at once on the same study finish it together
-    a, b = (_tune(tmp_path, trials=8, out=f"w{k}", wait=False) for k in range(2))
+    a, b = (_spawn(tmp_path, 8, f"w{k}") for k in range(2))
     for proc in (a, b):
         _, err = proc.communicate(timeout=300)
         assert proc.returncode == 0, err
@@ -210,17 +221,19 @@ def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
         (["--law", "zz"], "invalid choice: 'zz'"),
     ],
 )
-def test_bad_tune_options_are_one_line_and_exit_2(args, message, tmp_path):
-    cmd = [sys.executable, "-m", "groundstation", "tune", "wind", "--gains", "K_y", "--n", "1"]
-    cmd += ["--data-dir", str(tmp_path / "data"), "--out", str(tmp_path / "x")]
-    r = subprocess.run([*cmd, *args], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2, r.stderr
-    assert message in r.stderr and "Traceback" not in r.stderr
+def test_bad_tune_options_are_one_line_and_exit_2(args, message, tmp_path, capsys):
+    cmd = ["tune", "wind", "--gains", "K_y", "--n", "1", "--data-dir", str(tmp_path / "data")]
+    try:
+        code = main([*cmd, "--out", str(tmp_path / "x"), *args])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert message in err.strip().splitlines()[-1] and "Traceback" not in err
     assert not (tmp_path / "x").exists() and not (tmp_path / "data" / "gainsets").exists()
 
 
-def test_unknown_target_is_refused(tmp_path):
-    cmd = [sys.executable, "-m", "groundstation", "tune", "gusty", "--gains", "K_y"]
-    r = subprocess.run([*cmd, "--data-dir", str(tmp_path)], capture_output=True, text=True)
-    assert r.returncode == 2 and "'gusty' is neither a campaign" in r.stderr
+def test_unknown_target_is_refused(tmp_path, capsys):
+    code = main(["tune", "gusty", "--gains", "K_y", "--data-dir", str(tmp_path)])
+    assert code == 2 and "'gusty' is neither a campaign" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []

@@ -470,7 +470,7 @@ def write_tune_report(
             warnings.simplefilter("ignore")
             ax = plot()
         fig = ax.figure if hasattr(ax, "figure") else ax.flat[0].figure
-        fig.set_size_inches(9, 5.5)
+        fig.set_size_inches(13 if name.startswith("parallel") else 9, 6)
         fig.tight_layout()
         fig.savefig(out / name, dpi=100)
         plt.close(fig)
