@@ -160,6 +160,8 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, c
     assert {k: getattr(loaded, k) for k in meta["best_gains"]} == pytest.approx(meta["best_gains"])
     assert loaded.k_R == Gains().k_R  # untuned gains keep the campaign's values
 
+    _dashboard_flies(tmp_path, meta["gainset"], loaded)
+
     before = _params(tmp_path)
     again = _tune(tmp_path, capsys, trials=4, out="r2")["meta"]
     assert again["trials_run_now"] == 2 and again["trials_complete"] == 4
@@ -237,3 +239,23 @@ def test_unknown_target_is_refused(tmp_path, capsys):
     code = main(["tune", "gusty", "--gains", "K_y", "--data-dir", str(tmp_path)])
     assert code == 2 and "'gusty' is neither a campaign" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def _dashboard_flies(tmp_path, name, gains):
+    """The dashboard lists the tuned set, loads it, and the sortie it starts flies it."""
+    from fastapi.testclient import TestClient
+
+    from groundstation.app.server import GroundStation
+
+    gs = GroundStation(port=0, data_dir=tmp_path / "data", log_dir=tmp_path / "logs")
+    try:
+        with TestClient(gs.app, base_url="http://127.0.0.1") as client:
+            client.headers["Authorization"] = f"Bearer {gs.token}"
+            assert name in client.get("/api/gainsets").json()
+            assert client.post(f"/api/gainsets/{name}/load").json()["values"] == gains.to_dict()
+            client.post("/api/sortie/start", json={"scenario": "cv-top-to-bottom", "speed": "1"})
+            client.post("/api/sortie/pause")
+            client.post("/api/sortie/step")
+            assert gs.session.sim.loop.gains == gains
+    finally:
+        gs.close()
