@@ -16,6 +16,7 @@ from pathlib import Path
 from onboard.enums import GuidanceLaw, codes
 from onboard.gains import GainError
 
+from .campaigns.tune_options import add_tune_arguments
 from .scenario import (
     CAMERA_MODES,
     SCENARIO_DIR,
@@ -121,6 +122,13 @@ _SET_HELP = (
     "change one scenario value for every sortie (repeatable), e.g. --set camera.delay_s=0 "
     "--set gains.k_v=100"
 )
+
+
+def _add_backend_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backend", default="process", choices=("process", "ray"), help="sortie runner")
+    p.add_argument(
+        "--ray-address", default=None, help="Ray cluster (default: $RAY_ADDRESS, else a local Ray)"
+    )
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -246,6 +254,11 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
     c.add_argument("--log", metavar="DIR", type=_writable_dir, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    _add_backend_args(c)
+
+    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (see README)")
+    add_tune_arguments(t, _SET_HELP, count=_COUNT, seed=_SEED, out_dir=_writable_dir)
+    _add_backend_args(t)
 
     b = sub.add_parser("bench", help="print speed and memory figures (see README)")
     b.add_argument("--repeat", type=_COUNT, default=5, help="sorties per camera mode")
@@ -471,6 +484,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 return main_campaign(args)
             except CampaignError as exc:
+                print(f"groundstation: error: {exc}", file=sys.stderr)
+                return 2
+        if args.command == "tune":
+            from .campaigns.definitions import CampaignError
+            from .campaigns.tune import main_tune
+
+            try:
+                return main_tune(args)
+            except CampaignError as exc:  # TuneError included
                 print(f"groundstation: error: {exc}", file=sys.stderr)
                 return 2
         if args.command == "bench":

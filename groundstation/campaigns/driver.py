@@ -90,6 +90,7 @@ def run_campaign(
         "seed": seed,
         "overrides": dict(overrides or {}),
         "workers": n_workers,
+        "backend": type(runner).__name__,
         "sorties": len(outcomes),
         "sim_time_s": sim_s,
         "wall_s": wall_s,
@@ -106,23 +107,27 @@ def _toml_value(v: Any) -> str:
 
 def main_campaign(args) -> int:
     from .definitions import parse_laws
+    from .ray_runner import make_runner
 
+    get_campaign(args.name)
     laws = parse_laws(args.laws)
     overrides = parse_overrides(args.set)
     command = "groundstation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    res = run_campaign(
-        args.name,
-        args.n,
-        laws,
-        args.camera,
-        args.seed,
-        args.workers,
-        Path(args.out) if args.out else None,
-        progress=not args.json,
-        command=command,
-        log_dir=Path(args.log) if args.log else None,
-        overrides=overrides,
-    )
+    with make_runner(args.backend, args.workers, args.ray_address) as runner:
+        res = run_campaign(
+            args.name,
+            args.n,
+            laws,
+            args.camera,
+            args.seed,
+            args.workers,
+            Path(args.out) if args.out else None,
+            runner=runner,
+            progress=not args.json,
+            command=command,
+            log_dir=Path(args.log) if args.log else None,
+            overrides=overrides,
+        )
     meta = res["meta"]
     if args.json:
         print(

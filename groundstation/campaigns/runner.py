@@ -45,6 +45,25 @@ class SortieOutcome:
     trace: dict[str, Any] | None = field(default=None, repr=False)
 
 
+def saturated_fraction(sim: Simulation) -> float:
+    """Share of control ticks with a command at a limit: |a_d| at a_max (eq. 17), |omega| at
+    omega_max (eq. 24) or thrust clipped to 0 or full (eq. 23). Needs the sortie's records."""
+    if not sim.records:
+        return 0.0
+    g = sim.loop.gains
+    a_lim, w_lim = 0.999 * g.a_max, 0.999 * g.omega_max
+    n = 0
+    for rec in sim.records:
+        tel = rec.telemetry
+        thrust = tel.command.thrust_normalised
+        n += (
+            float(np.linalg.norm(tel.accel_desired_enu_m_s2)) >= a_lim
+            or float(np.linalg.norm(tel.command.body_rates_flu_rad_s)) >= w_lim
+            or not 0.001 < thrust < 0.999
+        )
+    return n / len(sim.records)
+
+
 def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str, Any]:
     """Time series for plots, as plain lists (picklable, JSON-able)."""
     f = sim.camera_model.f_px
@@ -74,6 +93,7 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
         "closest_rel_m": [round(c, 5) for c in sim.closest_rel_m],
         "closest_vel_m_s": [round(c, 4) for c in sim.closest_vel_m_s],
         "initial_px": None if initial_px is None else [round(c, 2) for c in initial_px],
+        "saturated_fraction": round(saturated_fraction(sim), 5),
     }
 
 
@@ -125,6 +145,21 @@ class LocalPoolRunner:
         self.workers = workers or default_workers()
         if self.workers < 1:
             raise ValueError("workers must be at least 1")
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> LocalPoolRunner:
+        """Keep one pool over several :meth:`run` calls (a tuning study's trials)."""
+        if self.workers > 1 and self._pool is None:
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
     def run(
         self,
@@ -139,13 +174,16 @@ class LocalPoolRunner:
                 if on_done:
                     on_done(out)
         else:
-            ctx = _pool_context()
-            with ProcessPoolExecutor(self.workers, mp_context=ctx) as pool:
+            pool = self._pool or ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+            try:
                 futures = [pool.submit(run_job, job) for job in jobs]
                 for fut in as_completed(futures):
                     out = fut.result()
                     outcomes.append(out)
                     if on_done:
                         on_done(out)
+            finally:
+                if pool is not self._pool:
+                    pool.shutdown()
         outcomes.sort(key=lambda o: o.index)
         return outcomes
