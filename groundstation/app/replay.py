@@ -5,6 +5,7 @@ time through the MCAP index, so scrubbing a long sortie does not read the whole 
 from __future__ import annotations
 
 import bisect
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -15,7 +16,26 @@ from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from .scene import SceneState
 
-OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/events"]
+OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/events", "/gains"]
+PLOT_KEYS = ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px", "range_m")
+
+
+def _unit(az: float, el: float) -> tuple[float, float, float]:
+    return (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el))
+
+
+def normal_vel_m_s(c: dict) -> float | None:
+    """The velocity's component normal to the line of sight (m/s), from a recorded /control
+    message: speed and the velocity and LOS angles (elevation, azimuth) give it as
+    |v| sin(angle between v and LOS)."""
+    try:
+        speed = float(c["speed_m_s"])
+        los = _unit(float(c["los_azim_rad"]), float(c["los_elev_rad"]))
+        vel = _unit(float(c["vel_azim_rad"]), float(c["vel_elev_rad"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+    cos_a = max(-1.0, min(1.0, sum(a * b for a, b in zip(los, vel, strict=True))))
+    return speed * math.sqrt(1.0 - cos_a * cos_a)
 
 
 def _p(msg: dict) -> tuple[float, float, float]:
@@ -35,6 +55,7 @@ class ReplayPlayer:
         self.tc: list[float] = []
         self.ctrl: list[dict] = []
         self.events: list[tuple[float, str]] = []
+        self.gain_changes: list[tuple[float, dict]] = []
         for topic, t, m in iter_messages(self.path, OVERVIEW):
             if topic == "/world/vehicle":
                 o = m["pose"]["orientation"]
@@ -47,6 +68,8 @@ class ReplayPlayer:
             elif topic == "/control":
                 self.tc.append(t)
                 self.ctrl.append(m)
+            elif topic == "/gains":
+                self.gain_changes.append((t, m))
             else:
                 self.events.append((t, m.get("message", "")))
         if not self.tv or not self.tt:
@@ -77,6 +100,45 @@ class ReplayPlayer:
             ranges = [c.get("range_m") or math.inf for c in self.ctrl]
             t_ca = self.tc[ranges.index(min(ranges))] if ranges else self.duration_s
         self.closest_time_s = min(max(t_ca, 0.0), self.duration_s)
+        self.timeline = self._timeline()
+
+    def _timeline(self) -> list[list]:
+        """Markers for the plots' shared timeline: [t_s, kind, text], by time."""
+        out: list[list] = []
+        for t, text in self.events:
+            if text.startswith("gains changed"):
+                continue  # shown below as old -> new
+            low = text.lower()
+            kind = "detection" if ("lost" in low or "acquired" in low) else "event"
+            out.append([round(t, 3), kind, text])
+        for (_, a), (t, b) in zip(self.gain_changes, self.gain_changes[1:], strict=False):
+            for k, v in b.items():
+                if k in a and a[k] != v:
+                    out.append([round(t, 3), "gain", f"{k} {a[k]:g} → {v:g}"])
+        miss = self.info.miss_m
+        out.append(
+            [
+                round(self.closest_time_s, 3),
+                "closest",
+                "closest approach" + ("" if miss is None else f": miss {miss:.3f} m"),
+            ]
+        )
+        return sorted(out, key=lambda e: e[0])
+
+    def describe(self) -> dict[str, Any]:
+        """Who this sortie is, for a legend: file, scenario, law, seed and gains flown."""
+        meta = self.info.metadata.get("sortie", {})
+        try:
+            gains = json.loads(meta.get("gains", "{}"))
+        except ValueError:
+            gains = {}
+        return {
+            "file": self.path.name,
+            "scenario": self.info.scenario,
+            "law": self.info.law,
+            "seed": self.info.seed,
+            "gains": gains,
+        }
 
     @staticmethod
     def _at(times: list[float], t: float) -> int:
@@ -124,7 +186,7 @@ class ReplayPlayer:
             "target": {"p": list(tp), "diameter_m": self.diameter_m},
             "range_m": rng,
             "speed_m_s": c.get("speed_m_s"),
-            "normal_vel_m_s": None,
+            "normal_vel_m_s": normal_vel_m_s(c) if c else None,
             "normal_accel_m_s2": c.get("accel_normal_m_s2"),
             "image": {
                 "w": cam.width_px,
@@ -137,12 +199,40 @@ class ReplayPlayer:
             "mode": c.get("mode"),
         }
 
-    def series(self, every: int = 1) -> dict[str, list]:
-        """The recorded plot series (for overlaying this sortie on another)."""
+    def series(self, every: int = 1) -> dict[str, Any]:
+        """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns and
+        every other numeric /control field (arrays split as ``name.0``, ``name.1``), and the
+        timeline's markers."""
+        rows = self.ctrl[::every]
+        cols: dict[str, list] = {k: [] for k in PLOT_KEYS}
+        extra: dict[str, list] = {}
+        for i, c in enumerate(rows):
+            e = c.get("e_px")
+            cols["normal_accel_m_s2"].append(c.get("accel_normal_m_s2"))
+            cols["speed_m_s"].append(c.get("speed_m_s"))
+            cols["normal_vel_m_s"].append(normal_vel_m_s(c))
+            cols["e_x_px"].append(e[0] if e else None)
+            cols["e_y_px"].append(e[1] if e else None)
+            cols["range_m"].append(c.get("range_m"))
+            for k, v in c.items():
+                items = list(enumerate(v)) if isinstance(v, list) else [(None, v)]
+                for j, x in items:
+                    if isinstance(x, bool) or not isinstance(x, (int, float, type(None))):
+                        continue
+                    name = k if j is None else f"{k}.{j}"
+                    if name == "t_s":
+                        continue
+                    col = extra.setdefault(name, [None] * i)
+                    col.append(x)
+            for col in extra.values():
+                if len(col) < i + 1:
+                    col.append(None)
+        for name in [k for k in extra if f"{k}.0" in extra]:
+            del extra[name]  # an array recorded as None at first: its elements are kept
         return {
             "t_s": self.tc[::every],
-            "normal_accel_m_s2": [c.get("accel_normal_m_s2") for c in self.ctrl[::every]],
-            "speed_m_s": [c.get("speed_m_s") for c in self.ctrl[::every]],
-            "e_px": [c.get("e_px") for c in self.ctrl[::every]],
-            "range_m": [c.get("range_m") for c in self.ctrl[::every]],
+            "columns": cols,
+            "fields": extra,
+            "events": self.timeline,
+            "sortie": self.describe(),
         }

@@ -36,6 +36,23 @@ from .replay import ReplayPlayer
 from .scene import SceneView
 from .session import SPEEDS, SessionError, SimSession, SortieConfig, with_wind
 
+# the gains panel's groups (in this order), like a parameter editor's
+GAIN_GROUPS = {
+    "k_a": "guidance",
+    "K_y": "guidance",
+    "K_z": "guidance",
+    "v_min": "guidance",
+    "k_v": "guidance",
+    "k_ibvs": "guidance",
+    "k_p": "FOV hold",
+    "k_d": "FOV hold",
+    "k_R": "attitude",
+    "v_max": "limits",
+    "a_max": "limits",
+    "omega_max": "limits",
+    "k_brake": "limits",
+}
+_GROUP_ORDER = ["guidance", "FOV hold", "attitude", "limits", "other"]
 VISER_INDEX = Path(viser.__file__).parent / "client" / "build" / "index.html"
 
 
@@ -86,7 +103,7 @@ class TelemetryHub:
 class ReflyRequest(BaseModel):
     law: str = "png"
     seed: int | None = None
-    speed: str = "max"
+    speed: str = "1"
     gains: dict[str, float] | None = None
 
 
@@ -211,6 +228,9 @@ def create_app(
     @app.websocket("/ws/telemetry")
     async def telemetry(ws: WebSocket) -> None:
         await ws.accept()
+        request_frame = getattr(session, "request_frame", None)
+        if request_frame is not None:
+            request_frame()  # a page that (re)loads shows the camera frame at once
         q: asyncio.Queue = asyncio.Queue(maxsize=4)
         hub.queues[q] = True
         key = id(q)
@@ -278,8 +298,11 @@ def create_app(
                     "min": s.minimum,
                     "max": s.maximum,
                     "meaning": s.meaning,
+                    "group": GAIN_GROUPS.get(s.name, "other"),
                 }
-                for s in GAIN_SPECS
+                for s in sorted(
+                    GAIN_SPECS, key=lambda s: _GROUP_ORDER.index(GAIN_GROUPS.get(s.name, "other"))
+                )
             ],
             "applied_time_s": st["gains_applied_time_s"],
             "pending": st["gains_pending"],
@@ -317,6 +340,29 @@ def create_app(
             raise HTTPException(422, str(exc)) from None
         return {"saved": name, "names": gainsets.names()}
 
+    @app.get("/api/gainsets/{name}/file", tags=["gains"])
+    async def download_gainset(name: str) -> Response:
+        try:
+            text = gainsets.text(name)
+        except GainSetError as exc:
+            raise HTTPException(404, str(exc)) from None
+        return Response(
+            text,
+            media_type="application/toml",
+            headers={"Content-Disposition": f'attachment; filename="{name}.toml"'},
+        )
+
+    @app.post("/api/gainsets/upload", tags=["gains"])
+    async def upload_gainset(
+        name: Annotated[str, Body()], toml: Annotated[str, Body()]
+    ) -> dict[str, Any]:
+        """Save an uploaded gain set file (``name = value`` lines) under ``name``."""
+        try:
+            gainsets.save_text(name, toml)
+        except (GainSetError, GainError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        return {"saved": name, "names": gainsets.names()}
+
     @app.post("/api/gainsets/{name}/load", tags=["gains"])
     async def load_gainset(name: str) -> dict[str, Any]:
         try:
@@ -324,7 +370,10 @@ def create_app(
         except (GainSetError, GainError) as exc:
             raise HTTPException(422, str(exc)) from None
         try:
-            await asyncio.to_thread(session.set_gains, gains)
+            if isinstance(session, SimSession):
+                await asyncio.to_thread(session.set_gains, gains, f"gain set {name}")
+            else:
+                await asyncio.to_thread(session.set_gains, gains)
         except SessionError as exc:
             raise HTTPException(409, str(exc)) from None
         return await get_gains()
@@ -416,11 +465,14 @@ def create_app(
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:
             scenario = parse_scenario(text, source=name)
-            if req.gains:
-                scenario = with_changes(scenario, gains={**scenario.gains, **req.gains})
+            # the gains it flew (edits included), so the re-fly flies the same sortie
+            flown = player.describe()["gains"] or scenario.gains
+            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
         except (ScenarioError, GainError) as exc:
             raise HTTPException(422, str(exc)) from None
         camera = player.info.camera if player.info.camera in CAMERA_MODES else "projected"
+        if req.speed not in SPEEDS:
+            raise HTTPException(422, f"speed must be one of {', '.join(SPEEDS)}")
         config = SortieConfig(
             scenario,
             req.law,
@@ -470,6 +522,15 @@ def create_app(
     @app.put("/api/sortie/speed", tags=["sortie"])
     async def speed(speed: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
         return _cmd(session.set_speed, speed)
+
+    @app.get("/api/sortie/series", tags=["sortie"])
+    async def sortie_series() -> dict[str, Any]:
+        """The sortie on screen so far (plot columns and timeline markers), for a page that
+        loads mid-sortie; a recorded sortie's are at /api/logs/{name}/series."""
+        fn = getattr(session, "series", None)
+        if fn is None:
+            return {"t_s": [], "columns": {}, "events": []}
+        return fn()
 
     @app.get("/api/status", tags=["sortie"])
     async def status() -> dict[str, Any]:
