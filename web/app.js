@@ -134,7 +134,7 @@ function makeXY(parent) {
   if (PV.cmp) series.push({ label: "image error · B", stroke: B_COLORS[0], dash: [6, 4], width: 1.5, paths: uPlot.paths.linear(), points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] });
   const u = new uPlot({
     mode: 2, title: "image error: e_x against e_y (px)", width: Math.max(parent.clientWidth / 2 - 10, 300), height: 190, series,
-    scales: { x: { time: false }, y: { dir: -1 } }, legend: { live: false },
+    scales: { x: { time: false, range: padRange }, y: { dir: -1, range: padRange } }, legend: { live: false },
     axes: [{ label: "e_x (px)", labelSize: 16, size: 34 }, { label: "e_y (px, down)", labelSize: 16, size: 52 }],
     hooks: { draw: [(u) => { // the point at the cursor time
       const src = PV.own; if (!src.t_s.length) return;
@@ -147,6 +147,11 @@ function makeXY(parent) {
   }, xyData(), box);
   u.xy = true;
   return u;
+}
+function padRange(u, min, max) { // never an empty range: a still target is one point
+  if (min === null || max === null || !isFinite(min) || !isFinite(max)) return [-1, 1];
+  if (max - min < 1e-6) return [min - 1, max + 1];
+  const pad = 0.05 * (max - min); return [min - pad, max + pad];
 }
 function xyData() {
   const pair = (src) => {

@@ -51,7 +51,7 @@ document.querySelector("#logs tbody").onclick = async (ev) => {
   try {
     if (btn.dataset.act === "open") { await api("POST", "/api/replay/open", { name }); location.href = "/"; }
     else if (btn.dataset.act === "compare") { await api("POST", "/api/replay/compare", { name }); say(`overlaying ${name} in the dashboard`, true); location.href = "/?compare=" + encodeURIComponent(name); }
-    else if (btn.dataset.act === "refly") { await api("POST", `/api/logs/${encodeURIComponent(name)}/refly`, { law: $("refly-law").value }); location.href = "/?compare=" + encodeURIComponent(name); }
+    else if (btn.dataset.act === "refly") { await api("POST", `/api/logs/${encodeURIComponent(name)}/refly`, { law: $("refly-law").value, speed: $("refly-speed").value }); location.href = "/?compare=" + encodeURIComponent(name); }
     else if (btn.dataset.act === "delete") {
       if (!window.confirm(`Delete ${name}? This cannot be undone.`)) return;
       await api("DELETE", `/api/logs/${encodeURIComponent(name)}?confirm=${encodeURIComponent(name)}`);
