@@ -37,10 +37,10 @@ from .replay import ReplayPlayer
 from .scene import SceneState
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
-PUBLISH_HZ = 25.0
-SCENE_EVERY = 5  # update the 3D scene with every 5th snapshot (5 Hz): every scene change
+PUBLISH_HZ = 40.0  # telemetry snapshots per second (each viewer shows >= 30 of them)
+SCENE_EVERY = 8  # update the 3D scene with every 8th snapshot (5 Hz): every scene change
 # costs each viewer a WebGL render, which software GL on a laptop without GPU cannot afford
-FRAME_EVERY = 3  # publish a camera frame with every 3rd snapshot (rendered mode)
+FRAME_EVERY = 5  # publish a camera frame with every 5th snapshot (8 Hz, rendered mode)
 TRAIL_EVERY_S = 0.1
 HISTORY_EVERY_S = 0.02  # the sortie's plot series kept for a page that (re)loads mid-sortie
 MAX_EVENTS = 200
