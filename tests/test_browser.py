@@ -109,7 +109,7 @@ def test_viser_scene_connects_through_the_proxy(station, browser):
     page = browser.new_page()
     page.goto(station.url())
     frame = page.frame_locator("#viser")
-    frame.locator("text=Follow vehicle").wait_for(timeout=20000)  # GUI from the server
+    frame.locator("text=View").first.wait_for(timeout=20000)  # per-viewer GUI from the server
     page.close()
 
 

@@ -99,6 +99,15 @@ def api(station, method, path, body=None):
         return json.loads(r.read())
 
 
+# ---------------------------------------------------------------------- B14: sorties page
+def test_sorties_page_says_when_there_is_nothing_to_show(station, page):
+    page.goto(station.url())
+    page.goto(base(station) + "sorties")
+    page.wait_for_selector("#empty:not([hidden])")
+    assert page.text_content("#empty").startswith("No recorded sorties yet.")
+    assert page.text_content("#count") == "0 of 0 sorties"
+
+
 # ---------------------------------------------------------------------- A1: gains at Start
 def test_gain_edited_between_sorties_is_flown_at_start(station, page):
     station.session.reset()
@@ -230,7 +239,16 @@ def test_refly_runs_at_1x_with_the_old_sortie_overlaid_and_a_legend(station, pag
     b_range = page.evaluate("window.peregrine.plots[3].data[2].filter(v => v !== null).length")
     assert b_range > 50
     assert st["compare"]["file"] in page.text_content("#cmp-legend")
+    reflown = station.session.recording["file"]
     station.session.reset()
+    # B14: the Sorties page shows the lineage and the columns an operator sorts by
+    page.goto(base(station) + "sorties")
+    row = page.locator(f'#logs tbody tr[data-name="{reflown}"]')
+    assert f"re-flown from {name}" in row.text_content()
+    cells = row.locator("td").all_text_contents()
+    assert cells[1:5] == ["cv-top-to-bottom", "pg", "projected", "0"]
+    page.fill("#filter", "no-such-sortie")
+    assert page.text_content("#empty") == 'No sortie matches "no-such-sortie".'
 
 
 def test_compare_named_in_the_url_is_overlaid(station, page):

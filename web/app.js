@@ -291,6 +291,9 @@ function drawImagePlane(s) {
   // cause, dq = atan(k_a / g) -> de_y = c_v tan(dq) / tan(vfov / 2) (eq. 16)
   ctx.setLineDash([6, 4]); ctx.strokeStyle = "#b14ad8"; ctx.lineWidth = 1.5;
   ctx.beginPath(); ctx.moveTo(cu, 0); ctx.lineTo(cu, im.h); ctx.stroke();
+  // the band is fixed to the image: centred on the sortie's first estimate, not the latest
+  const ey0 = (PV.own.columns && PV.own.columns.e_y_px || []).find((v) => v !== null && v !== undefined);
+  if (ey0 !== undefined) img.eyStart = ey0;
   if (img.eyStart !== null) {
     const dq = Math.atan((s.k_a || 2) / 9.81);
     const dey = (cv * Math.tan(dq)) / Math.tan(((im.vfov_deg || 73.7) * Math.PI) / 360);
@@ -306,15 +309,41 @@ function drawImagePlane(s) {
     img.track.forEach(([x, y], k) => (k ? ctx.lineTo(cu + x, cv + y) : ctx.moveTo(cu + x, cv + y)));
     ctx.stroke();
   }
-  if (s.e_raw_px) {
-    ctx.strokeStyle = "#ff9f1c"; ctx.lineWidth = 2;
-    ctx.strokeRect(cu + s.e_raw_px[0] - 7, cv + s.e_raw_px[1] - 7, 14, 14);
+  // markers are outlines drawn clear of the balloon: sized from its apparent diameter
+  const dpx = s.range_m && s.target && s.target.diameter_m ? (im.f * s.target.diameter_m) / s.range_m : 0;
+  const r = Math.max(9, dpx / 2 + 6);
+  if (s.e_raw_px) { // corner brackets: the balloon shows between them
+    const x = cu + s.e_raw_px[0], y = cv + s.e_raw_px[1], a = r + 3, l = Math.max(5, a / 2);
+    ctx.strokeStyle = "#ff9f1c"; ctx.lineWidth = 2; ctx.beginPath();
+    for (const [sx, sy] of [[-1, -1], [1, -1], [1, 1], [-1, 1]]) {
+      ctx.moveTo(x + sx * a, y + sy * (a - l)); ctx.lineTo(x + sx * a, y + sy * a); ctx.lineTo(x + sx * (a - l), y + sy * a);
+    }
+    ctx.stroke();
   }
+  W.edgeArrow = null;
   if (s.e_est_px) {
-    ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
-    ctx.beginPath(); ctx.arc(cu + s.e_est_px[0], cv + s.e_est_px[1], 9, 0, 2 * Math.PI); ctx.stroke();
+    const x = cu + s.e_est_px[0], y = cv + s.e_est_px[1];
+    if (x >= 0 && x <= im.w && y >= 0 && y <= im.h) {
+      ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
+      ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke();
+    } else drawEdgeArrow(ctx, im, cu, cv, x, y);
   }
   ctx.lineWidth = 1;
+}
+
+// An estimate outside the image: an arrow on the edge pointing at it, with its distance.
+function drawEdgeArrow(ctx, im, cu, cv, x, y) {
+  const dx = x - cu, dy = y - cv, m = 18;
+  const k = Math.min(Math.abs((cu - m) / (dx || 1e-9)), Math.abs((cv - m) / (dy || 1e-9)));
+  const ex = cu + dx * k, ey = cv + dy * k, ang = Math.atan2(dy, dx);
+  ctx.save(); ctx.translate(ex, ey); ctx.rotate(ang);
+  ctx.fillStyle = "#19c15b"; ctx.strokeStyle = "#0b5e2c"; ctx.lineWidth = 1.5;
+  ctx.beginPath(); ctx.moveTo(14, 0); ctx.lineTo(-8, -10); ctx.lineTo(-8, 10); ctx.closePath(); ctx.fill(); ctx.stroke();
+  ctx.restore();
+  const off = Math.hypot(dx, dy) - Math.hypot(ex - cu, ey - cv);
+  ctx.fillStyle = "#0b5e2c"; ctx.font = "bold 12px sans-serif";
+  ctx.fillText(`estimate ${off.toFixed(0)} px outside`, Math.min(Math.max(ex - 60, 4), im.w - 150), Math.min(Math.max(ey + (ey > cv ? -16 : 24), 14), im.h - 6));
+  W.edgeArrow = { x: ex, y: ey };
 }
 
 // ------------------------------------------------------------------ status
@@ -686,6 +715,15 @@ function syncSceneToVisibility() {
   if (!visible && frame.dataset.live === "1") { frame.src = "about:blank"; frame.dataset.live = "0"; }
 }
 document.addEventListener("visibilitychange", syncSceneToVisibility);
+// viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
+// corner, where they cover neither the engagement nor the outcome label
+$("viser").addEventListener("load", () => {
+  let doc = null; try { doc = $("viser").contentDocument; } catch (e) { return; }
+  if (!doc || !doc.head || doc.getElementById("peregrine-notices")) return;
+  const st = doc.createElement("style"); st.id = "peregrine-notices";
+  st.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
+  doc.head.appendChild(st);
+});
 syncSceneToVisibility();
 
 loadScenarios().then(loadGains).then(compareFromUrl).catch((e) => msg($("sim-msg"), e.message, false));
