@@ -229,7 +229,7 @@ def test_refly_runs_at_1x_with_the_old_sortie_overlaid_and_a_legend(station, pag
     page.wait_for_selector("#cmp-legend:not([hidden])")
     legend = page.text_content("#cmp-legend")
     assert "A (solid)" in legend and "· pg" in legend
-    assert f"B (dashed): {name}" in legend and "png" in legend and "K_y 3" in legend
+    assert f"B (dashed): {name}" in legend and "png" in legend and "gains: same as A" in legend
     # every time plot carries both sorties, B in colours of its own
     labels = page.evaluate("window.peregrine.plots.map(u => u.series.map(s => s.label))")
     for lab in labels[:4]:

@@ -76,6 +76,17 @@ function plotData(def) {
   return uPlot.join([own, cmp]);
 }
 
+// the legend's value at the cursor: the sample there, else the series' nearest within 0.1 s
+// (two sorties are sampled at different times; nothing is interpolated)
+function legendVal(u, v, si, idx) {
+  if ((v === null || v === undefined) && idx !== null && idx !== undefined) {
+    const xs = u.data[0], ys = u.data[si], t = xs[idx];
+    for (let d = 1; d < 40; d++) {
+      for (const j of [idx - d, idx + d]) if (j >= 0 && j < xs.length && ys[j] !== null && ys[j] !== undefined && Math.abs(xs[j] - t) <= 0.1) return fmtVal(ys[j]);
+    }
+  }
+  return fmtVal(v);
+}
 function fmtVal(v) { return v === null || v === undefined ? "—" : Math.abs(v) >= 100 ? v.toFixed(1) : Math.abs(v) >= 1 ? v.toFixed(2) : v.toFixed(3); }
 
 function markerHook(u) {
@@ -96,8 +107,8 @@ function markerHook(u) {
 
 function makePlot(def, parent) {
   const series = [{ label: "t (s)", value: (u, v) => (v === null || v === undefined ? "—" : v.toFixed(2)) }];
-  def.series.forEach((s) => series.push({ label: PV.cmp ? `${s.label} · A` : s.label, stroke: s.color, width: 1.5, spanGaps: true, value: (u, v) => fmtVal(v) }));
-  if (PV.cmp) def.series.forEach((s, i) => series.push({ label: `${s.label} · B`, stroke: B_COLORS[(PLOT_DEFS.indexOf(def) + i) % B_COLORS.length], width: 1.5, dash: [6, 4], spanGaps: true, value: (u, v) => fmtVal(v) }));
+  def.series.forEach((s) => series.push({ label: PV.cmp ? `${s.label} · A` : s.label, stroke: s.color, width: 1.5, spanGaps: true, value: legendVal }));
+  if (PV.cmp) def.series.forEach((s, i) => series.push({ label: `${s.label} · B`, stroke: B_COLORS[(PLOT_DEFS.indexOf(def) + i) % B_COLORS.length], width: 1.5, dash: [6, 4], spanGaps: true, value: legendVal }));
   const box = document.createElement("div"); box.className = "plot"; parent.appendChild(box);
   const width = Math.max(parent.clientWidth / 2 - 10, 300);
   const u = new uPlot({
@@ -206,16 +217,29 @@ $("timeline").onclick = (ev) => {
   replay("seek", { t_s: parseFloat(m.dataset.t) });
 };
 
-function sortieLabel(info) {
+function sortieLabel(info, other) {
   if (!info) return "this sortie";
-  const g = info.gains && Object.keys(info.gains).length ? " · " + Object.entries(info.gains).map(([k, v]) => `${k} ${v}`).join(" ") : "";
-  return `${info.file || "live: " + info.scenario} · ${info.scenario} · ${info.law}${info.seed !== undefined && info.seed !== null ? " · seed " + info.seed : ""}${g}`;
+  const head = `${info.file || "this sortie"} · ${info.scenario} · ${info.law}${info.seed !== undefined && info.seed !== null ? " · seed " + info.seed : ""}`;
+  const g = info.gains || {};
+  let gains;
+  if (!other) gains = info.gainsText || (Object.keys(g).length ? Object.entries(g).map(([k, v]) => `${k} ${v}`).join(" ") : "");
+  else { // B: only the gains that differ from A's
+    const og = other.gains || {};
+    const diff = Object.entries(g).filter(([k, v]) => k in og && og[k] !== v).map(([k, v]) => `${k} ${v} (A: ${og[k]})`);
+    gains = Object.keys(g).length && Object.keys(og).length ? (diff.length ? diff.join(", ") : "same as A") : "";
+  }
+  return head + (gains ? ` · gains: ${gains}` : "");
 }
 function showCompareLegend() {
   const el = $("cmp-legend");
   el.hidden = !PV.cmp;
   if (!PV.cmp) { el.innerHTML = ""; return; }
-  el.innerHTML = `<div class="lg-a"><b>A</b> (solid): ${esc(sortieLabel(PV.ownInfo))}</div><div class="lg-b"><b>B</b> (dashed): ${esc(sortieLabel(PV.cmpInfo))}</div>`;
+  if (PV.ownInfo && !PV.ownInfo.file) { // a sortie flying now: the gains in force
+    PV.ownInfo.gains = gainValues;
+    const st = W.snap && W.snap.status;
+    PV.ownInfo.gainsText = st && st.gains_source ? st.gains_source + (Object.keys(st.gains_edited || {}).length ? " with edits" : "") : "";
+  }
+  el.innerHTML = `<div class="lg-a"><b>A</b> (solid): ${esc(sortieLabel(PV.ownInfo))}</div><div class="lg-b"><b>B</b> (dashed): ${esc(sortieLabel(PV.cmpInfo, PV.ownInfo))}</div>`;
 }
 
 // Fetch what the plots show for the sortie on screen (status tells which).

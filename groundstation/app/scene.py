@@ -74,6 +74,7 @@ class SceneView:
         self._trail_time_s = -1.0
         self._closest_shown = False
         self._handles: list = []  # every node a sortie added, children before parents
+        self._labels: list = []
 
     def _add_view_control(self, client: Any) -> None:
         """Each viewer picks its own view: one operator following the vehicle does not move
@@ -98,7 +99,7 @@ class SceneView:
         size = float(max(np.max(hi - lo), 5.0))
         with client.atomic():
             if preset == "fit engagement":
-                client.camera.position = centre + np.array([-1.1 * size, -0.35 * size, 0.6 * size])
+                client.camera.position = centre + np.array([-0.6 * size, -0.2 * size, 0.3 * size])
                 client.camera.look_at = centre
             elif preset == "top":
                 client.camera.position = centre + np.array([0.0, -0.01, 1.6 * size])
@@ -148,6 +149,7 @@ class SceneView:
             s.add_label("/vehicle/label", "interceptor", position=(0.0, 0.0, 0.8)),
             s.add_label("/target/label", "target", position=(0.0, 0.0, -0.6)),
         ]
+        self._labels = labels
         # lines are created once and then only their points change: re-adding a node would
         # rebuild its geometry in every viewer
         vp, tp = np.array(state.vehicle_p, np.float32), np.array(state.target_p, np.float32)
@@ -225,6 +227,8 @@ class SceneView:
                     receive_shadow=False,
                 )
                 self._handles = [label, marker, *self._handles]
+                for name_label in self._labels:  # they meet there: one label, the outcome
+                    name_label.visible = False
                 clients = self.server.get_clients()
                 for cid, dd in list(self._views.items()):  # the whole engagement, now known
                     if cid in clients and dd.value in ("fit engagement", "top"):
