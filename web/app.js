@@ -739,11 +739,31 @@ function syncSceneToVisibility() {
   if (!visible && frame.dataset.live === "1") { frame.src = "about:blank"; frame.dataset.live = "0"; }
 }
 document.addEventListener("visibilitychange", syncSceneToVisibility);
+// The 3D view shares this page's thread (same origin). Rendered in software, drawing it at the
+// display's rate would starve the telemetry views; the scene changes 5 times a second, so it
+// is drawn at most SCENE_IDLE_FPS times a second, and at full rate while the operator moves
+// the camera (pointer or wheel in the view, for 1.5 s after the last such event).
+const SCENE_IDLE_FPS = 8;
+function throttleSceneFrames(win, doc) {
+  if (!win || win.__peregrineThrottled) return;
+  win.__peregrineThrottled = true;
+  const raf = win.requestAnimationFrame.bind(win);
+  let activeUntil = 0, last = 0;
+  const poke = () => { activeUntil = performance.now() + 1500; };
+  for (const ev of ["pointerdown", "pointermove", "wheel", "keydown", "touchstart"]) doc.addEventListener(ev, poke, { capture: true, passive: true });
+  win.requestAnimationFrame = (cb) => {
+    const now = performance.now();
+    if (now < activeUntil) return raf(cb);
+    const wait = Math.max(0, last + 1000 / SCENE_IDLE_FPS - now);
+    return win.setTimeout(() => raf((ts) => { last = performance.now(); cb(ts); }), wait);
+  };
+}
 // viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
 // corner, where they cover neither the engagement nor the outcome label
 $("viser").addEventListener("load", () => {
   let doc = null; try { doc = $("viser").contentDocument; } catch (e) { return; }
   if (!doc || !doc.head || doc.getElementById("peregrine-notices")) return;
+  throttleSceneFrames($("viser").contentWindow, doc);
   const st = doc.createElement("style"); st.id = "peregrine-notices";
   st.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
   doc.head.appendChild(st);
