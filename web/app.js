@@ -371,9 +371,14 @@ function drawEdgeArrow(ctx, im, cu, cv, x, y) {
 }
 
 // ------------------------------------------------------------------ status
+// DOM writes only when something changed: a redraw that rewrites unchanged text still costs
+// style and layout work, 40 times a second in every viewer
+function setText(el, text) { if (el.textContent !== text) el.textContent = text; }
 function setBadge(id, text, cls) {
-  const el = $(id); el.textContent = text; el.className = "badge" + (cls ? " " + cls : "");
+  const el = $(id), c = "badge" + (cls ? " " + cls : "");
+  setText(el, text); if (el.className !== c) el.className = c;
 }
+let lastStatusParts = "";
 
 function showStatus(st) {
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
@@ -387,19 +392,24 @@ function showStatus(st) {
     setBadge("st-dkf", txt, st.dkf.lost && st.dkf.acquired ? "bad" : st.dkf.acquired ? "ok" : "");
   } else setBadge("st-dkf", "DKF —");
   setBadge("st-rate", st.state === "running" ? `loop ${st.loop_rate_hz} Hz` : "loop — Hz");
-  $("btn-pause").textContent = st.state === "paused" ? "Resume" : "Pause";
+  setText($("btn-pause"), st.state === "paused" ? "Resume" : "Pause");
   showLive(st.live);
   showReplay(st.replay);
-  showRecording(st.recording);
-  showGainsInForce(st);
-  markGains();
   syncControls(st);
   showStateChange(st);
   syncPlotSources(st);
-  $("gains-applied").textContent = "";
+  const parts = JSON.stringify([st.recording, st.gains_source, st.gains_edited, st.gains_note]);
+  if (parts !== lastStatusParts) { // rarely changes: not redone every frame
+    lastStatusParts = parts;
+    showRecording(st.recording);
+    showGainsInForce(st);
+    markGains();
+  }
+  let applied = "";
   if (st.gains_applied_time_s !== null && st.gains_applied_time_s !== undefined)
-    $("gains-applied").textContent = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
-  if (st.gains_pending) $("gains-applied").textContent = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
+    applied = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
+  if (st.gains_pending) applied = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
+  setText($("gains-applied"), applied);
 }
 
 // The recording of the sortie on screen: its file, and any error as a banner that stays.
@@ -533,11 +543,11 @@ let scrubbing = false, lastSeek = 0, seekTimer = null;
 function showReplay(rp) {
   $("replay-panel").hidden = !rp;
   if (!rp) return;
-  $("rp-file").textContent = `${rp.file}${rp.status !== "ok" ? " (" + rp.status + ": replayed up to the damage)" : ""}${rp.compare ? " · compared with " + rp.compare : ""}`;
+  setText($("rp-file"), `${rp.file}${rp.status !== "ok" ? " (" + rp.status + ": replayed up to the damage)" : ""}${rp.compare ? " · compared with " + rp.compare : ""}`);
   const scrub = $("rp-scrub");
   scrub.max = rp.duration_s;
   if (!scrubbing) scrub.value = rp.t_s;
-  $("rp-time").textContent = `${Number(rp.t_s).toFixed(2)} / ${Number(rp.duration_s).toFixed(2)} s · ${rp.speed_x}×`;
+  setText($("rp-time"), `${Number(rp.t_s).toFixed(2)} / ${Number(rp.duration_s).toFixed(2)} s · ${rp.speed_x}×`);
   $("rp-play").textContent = rp.playing ? "Pause" : "Play";
 }
 async function replay(action, body) {
