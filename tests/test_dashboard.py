@@ -441,3 +441,27 @@ def test_gains_panel_refusal_reverts_and_gain_sets_round_trip(station, page, tmp
                             ".filter(r => !r.hidden).map(r => r.dataset.gain)")  # fmt: skip
     assert visible == ["k_p", "k_d"]
     station.session.set_gains(load_scenario("cv-top-to-bottom").gains_obj(), "defaults")
+
+
+# ---------------------------------------------------------------------- B13: image plane
+def test_image_plane_markers_leave_the_balloon_visible_and_an_outside_estimate_is_an_arrow(
+    station, page
+):
+    station.session.reset()
+    goto(page, station)
+    snap = {"t": 1.0, "range_m": 3.0, "target": {"diameter_m": 0.3},
+            "image": {"w": 640, "h": 480, "f": 320, "vfov_deg": 73.7},
+            "e_raw_px": [40, 20], "e_est_px": [40, 20], "k_a": 2}  # fmt: skip
+    px = page.evaluate(  # in one go: a telemetry redraw could come between two calls
+        "(s) => { drawImagePlane(s); const at = (x, y) => [...img.ctx.getImageData(x, y, 1, 1)"
+        ".data].slice(0, 3);"
+        " return [at(360, 260), at(360 + 22, 260), window.peregrine.edgeArrow]; }",
+        snap,
+    )
+    # the balloon (32 px across at 3 m) is not painted over: no marker colour at its centre
+    assert px[0] not in ([25, 193, 91], [255, 159, 28])
+    assert px[1][1] > 150 and px[1][0] < 80  # the estimate's circle runs outside its edge
+    assert px[2] is None
+    snap["e_est_px"] = [0, -400]  # 160 px above the top edge
+    arrow = page.evaluate("(s) => { drawImagePlane(s); return window.peregrine.edgeArrow; }", snap)
+    assert arrow["x"] == pytest.approx(320, abs=1) and arrow["y"] == pytest.approx(18, abs=1)
