@@ -6,8 +6,10 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from onboard.control.guidance import GUIDANCE_LAWS
+from onboard.enums import GuidanceLaw, codes
 from onboard.gains import GainError
 
 from .campaigns.definitions import CampaignError
@@ -39,7 +41,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("sortie", help="run one simulated sortie to its outcome")
     s.add_argument("scenario", help="scenario TOML file, or the name of a shipped scenario")
-    s.add_argument("--law", default="png", choices=sorted(GUIDANCE_LAWS))
+    s.add_argument("--law", default=GuidanceLaw.PNG.value, choices=sorted(GUIDANCE_LAWS))
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
@@ -117,7 +119,9 @@ def _build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument("name", help="static | moving | wind | outdoor")
     c.add_argument("--n", type=int, default=None, help="targets / seeds / tries (see README)")
-    c.add_argument("--laws", default="png,pg,ibvs", help="comma-separated guidance laws")
+    c.add_argument(
+        "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"
+    )
     c.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
@@ -151,14 +155,20 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_sortie(args: argparse.Namespace) -> int:
+    from .recording.writer import SortieRecorder
     from .sim.simulation import Simulation
 
     scenario = with_overrides(load_scenario(args.scenario), parse_overrides(args.set))
+    rec = None if args.log is None else SortieRecorder(Path(args.log))
     sim = Simulation(
-        scenario, args.law, args.seed, args.camera, keep_records=False, log_dir=args.log
+        scenario,
+        args.law,
+        args.seed,
+        args.camera,
+        keep_records=False,
+        observers=[rec] if rec else (),
     )
     result = sim.run()
-    rec = sim.recorder
     if rec is not None and rec.error:
         print(f"groundstation: warning: {rec.error}", file=sys.stderr)
     if args.json:

@@ -8,23 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .gains import GAIN_SPECS, GainError, Gains
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-
-def load_gains_file(path: str | Path) -> Gains:
-    """Gains from a TOML file of ``name = value`` lines; errors name the gain and the file."""
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise GainError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise GainError(f"{path}: not valid TOML: {exc}") from None
-    return Gains.from_mapping(data, source=str(path))
+from .gains import GAIN_SPECS, GainError, Gains, load_gains_file
 
 
 def _gains(args) -> int:

@@ -6,10 +6,11 @@ one clock: simulated time in the simulator, vehicle time in flight.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 import numpy as np
+
+from .enums import LoopMode  # declared there, imported from here too
 
 GRAVITY_M_S2 = 9.81
 GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
@@ -62,13 +63,6 @@ class RateThrustCommand:
     time_s: float
     body_rates_flu_rad_s: np.ndarray
     thrust_normalised: float
-
-
-class LoopMode(enum.Enum):
-    WAITING = "waiting"  # no target estimate yet: hold position
-    TRACKING = "tracking"  # guidance law active
-    LOST = "lost"  # estimate lost: brake and hold
-    BRAKE = "brake"  # told to brake and hold (operator abort), estimate still running
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,9 +8,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 
 class GainError(ValueError):
@@ -104,3 +111,14 @@ GAIN_SPECS: tuple[GainSpec, ...] = tuple(
 )
 GAIN_NAMES: tuple[str, ...] = tuple(s.name for s in GAIN_SPECS)
 assert all(len(n) <= 16 for n in GAIN_NAMES)
+
+
+def load_gains_file(path: str | Path) -> Gains:
+    """Gains from a TOML file of ``name = value`` lines; errors name the gain and the file."""
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise GainError(f"{path}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise GainError(f"{path}: not valid TOML: {exc}") from None
+    return Gains.from_mapping(data, source=str(path))

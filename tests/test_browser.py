@@ -282,3 +282,33 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
         page.close()
         fake.close()
         gs.stop()
+
+
+def test_option_lists_come_from_the_api_and_the_chosen_law_flies(station, browser):
+    page = browser.new_page(viewport={"width": 1500, "height": 1000})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(station.url())
+    page.wait_for_selector("text=telemetry: live", timeout=15000)
+    meta = page.evaluate("window.peregrineMeta")
+    for sel, key in (("#law", "laws"), ("#camera", "camera_modes"), ("#speed", "speeds")):
+        shown = page.eval_on_selector(sel, "s => [...s.options].map(o => o.value)")
+        assert shown == meta[key], (sel, shown)
+    assert page.eval_on_selector("#speed", "s => s.value") == "1"  # the first speed, as before
+    page.select_option("#scenario", "static-ahead-20m")
+    page.select_option("#law", "pg")
+    page.select_option("#speed", "max")
+    page.click("#btn-start")
+    page.wait_for_function(  # this sortie's outcome, not the replay's left on screen
+        "window.peregrine.snap.status.state === 'finished'"
+        " && document.querySelector('#st-outcome').textContent.includes('miss')",
+        timeout=30000,
+    )
+    assert station.session.sim.law == "pg"  # what flew is what was chosen
+    assert station.session.status()["law"] == "pg"
+    page.goto(station.url().split("?")[0] + "sorties")
+    page.wait_for_function("document.querySelector('#refly-law').options.length > 0")
+    refly = page.eval_on_selector("#refly-law", "s => [...s.options].map(o => o.value)")
+    assert refly == meta["laws"]
+    assert not errors, errors
+    page.close()

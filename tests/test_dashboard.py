@@ -310,7 +310,7 @@ def test_recording_file_and_write_error_show_as_a_banner(station, page):
     assert rec["file"] in page.text_content("#rec-banner")
 
     def disk_full():
-        station.session.sim.recorder._fail(OSError(28, "No space left on device"))
+        station.session.recorder._fail(OSError(28, "No space left on device"))
 
     station.session.submit(disk_full)
     page.wait_for_selector("#rec-banner.err", timeout=5000)

@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 
 from groundstation.recording.reader import LogError, LogIndex, inspect_log, iter_messages
 from groundstation.recording.schemas import CHANNELS
-from groundstation.recording.writer import open_new_log
+from groundstation.recording.writer import SortieRecorder, open_new_log
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
 
@@ -21,12 +21,14 @@ from groundstation.sim.simulation import Simulation
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     d = tmp_path_factory.mktemp("logs")
+    rec = SortieRecorder(d)
     sim = Simulation(
-        load_scenario("cv-top-to-bottom"), camera_mode="rendered", keep_records=False, log_dir=d
-    )
+        load_scenario("cv-top-to-bottom"), camera_mode="rendered", keep_records=False,
+        observers=[rec],
+    )  # fmt: skip
     result = sim.run()
-    assert sim.recorder.closed and sim.recorder.error is None
-    return sim.recorder.path, result
+    assert rec.closed and rec.error is None
+    return rec.path, result
 
 
 def test_round_trip_every_channel_schema_and_metadata(recorded):
@@ -147,8 +149,8 @@ def test_never_overwrites(tmp_path):
 
 def test_full_disk_ends_recording_not_sortie(tmp_path, monkeypatch):
     monkeypatch.setenv("PEREGRINE_RECORD_IN_PROCESS", "1")  # to reach the file object
-    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, log_dir=tmp_path)
-    rec = sim.recorder
+    rec = SortieRecorder(tmp_path)
+    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[rec])
     real_write = rec._sink.file.write
     calls = {"n": 0}
 
@@ -170,8 +172,8 @@ def test_full_disk_in_the_recording_process_ends_recording_not_sortie(tmp_path, 
     full = tmp_path / "full.mcap"
     full.symlink_to("/dev/full")  # every write: ENOSPC
     monkeypatch.setattr(writer, "open_new_log", lambda *_a: (full, open(full, "wb")))  # noqa: SIM115
-    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, log_dir=tmp_path)
-    rec = sim.recorder
+    rec = SortieRecorder(tmp_path)
+    sim = Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[rec])
     assert type(rec._sink).__name__ == "ProcessSink"
     result = sim.run()
     assert result.outcome == "HIT"  # the sortie flew on
@@ -185,11 +187,13 @@ def test_a_crashed_sortie_leaves_a_complete_file(tmp_path):
         "import os, sys\n"
         "from groundstation.scenario import load_scenario\n"
         "from groundstation.sim.simulation import Simulation\n"
+        "from groundstation.recording.writer import SortieRecorder\n"
+        f"rec = SortieRecorder({str(tmp_path)!r})\n"
         "sim = Simulation(load_scenario('cv-top-to-bottom'), keep_records=False,\n"
-        f"                 log_dir={str(tmp_path)!r})\n"
+        "                 observers=[rec])\n"
         "for _ in range(1200):\n"
         "    sim.step()\n"
-        "sim.recorder._sink._flush()\n"
+        "rec._sink._flush()\n"
         "os._exit(3)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], timeout=120)
@@ -253,8 +257,8 @@ def test_a_changed_scenario_is_recorded_as_flown(tmp_path):
         load_scenario("static-ahead-20m"),
         {"target.position_m": [3.0, 18.0, 11.0], "gains.k_v": 50, "camera.noise_px": 0.5},
     )
-    sim = Simulation(flown, law="pg", keep_records=False, log_dir=tmp_path)
-    sim.run()
-    back = parse_scenario(scenario_attachment(sim.recorder.path))
+    rec = SortieRecorder(tmp_path)
+    Simulation(flown, law="pg", keep_records=False, observers=[rec]).run()
+    back = parse_scenario(scenario_attachment(rec.path))
     assert back.target.position_m == (3.0, 18.0, 11.0)
     assert back.gains["k_v"] == 50.0 and back.camera.noise_px == 0.5

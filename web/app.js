@@ -780,5 +780,9 @@ $("viser").addEventListener("load", () => {
 });
 syncSceneToVisibility();
 
-loadScenarios().then(loadGains).then(compareFromUrl).catch((e) => msg($("sim-msg"), e.message, false));
-connect();
+// the option lists (laws, cameras, speeds) come from GET /api/meta first: the controls can
+// then show what is in force
+window.peregrineMeta.catch((e) => msg($("sim-msg"), e.message, false)).then(() => {
+  loadScenarios().then(loadGains).then(compareFromUrl).catch((e) => msg($("sim-msg"), e.message, false));
+  connect();
+});

@@ -9,8 +9,7 @@ from pathlib import Path
 
 import tomllib
 
-from onboard.cli import load_gains_file
-from onboard.gains import Gains
+from onboard.gains import Gains, load_gains_file
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,47}$")
 

@@ -8,6 +8,10 @@ Gain edits go out as ``PARAM_SET`` and count as applied only when the matching
 ``PARAM_VALUE`` comes back; start and abort are ``COMMAND_LONG`` answered by
 ``COMMAND_ACK``. A sortie is recorded to MCAP from the accepted start until the onboard
 component reports it finished (or the link is lost).
+
+Each telemetry message becomes a :class:`~groundstation.frames.Frame`
+(:mod:`.live_frames`): the recorder observes those frames, and the dashboard's snapshot is
+built from the latest by the builder the simulator and replay use (:mod:`.snapshot`).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.control.guidance import normal_component
-from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.enums import RuntimeState
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
 from onboard.link.params import PARAM_INDEX, PARAM_SPECS
@@ -48,16 +52,19 @@ from onboard.link.px4 import (
     real32,
 )
 
-from ..sim.simulation import closest_in_step
+from ..frames import Frame, SortieStart
+from .live_frames import live_frame, pose_from_values
+from .live_recording import LiveRecording
 from .scene import SceneState
 from .session import SessionError
+from .snapshot import frame_snapshot
 
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
 LINK_TIMEOUT_S = 2.0
 ACK_TIMEOUT_S = 2.0
 TARGET_DIAMETER_M = 0.3  # drawn size of a cooperative target (its telemetry has no size)
-FINISHED_STATES = ("finished", "link_lost")
+FINISHED_STATES = (RuntimeState.FINISHED.value, RuntimeState.LINK_LOST.value)
 ACK_NAMES = {
     mavlink.MAV_RESULT_ACCEPTED: "accepted",
     mavlink.MAV_RESULT_DENIED: "denied",
@@ -65,62 +72,6 @@ ACK_NAMES = {
     mavlink.MAV_RESULT_FAILED: "failed",
     mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
 }
-
-
-# ---------------------------------------------------------------------- recorder adapter
-class _LiveScenario:
-    """What the recorder reads of a scenario, for a live sortie."""
-
-    def __init__(self, control_rate_hz: float) -> None:
-        self.name = "live"
-        self.source = "live MAVLink"
-        self.text = ""
-        self.sim = type("SimSpec", (), {"control_rate_hz": control_rate_hz})()
-        self.target = type("TargetSpec", (), {"diameter_m": TARGET_DIAMETER_M})()
-
-
-class _Obj:
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
-
-
-class _DkfView:
-    def __init__(self, session: LiveSession) -> None:
-        self.s = session
-
-    def state_vector(self):
-        t = self.s.tel
-        if t.get("e_est_u_px") is None:
-            return None
-        return (
-            [
-                t["e_est_u_px"],
-                t["e_est_v_px"],
-                t["e_rate_u_px_s"] or 0.0,
-                t["e_rate_v_px_s"] or 0.0,
-            ],
-            None,
-        )
-
-
-class LiveSortieView:
-    """The attributes :class:`~groundstation.recording.writer.SortieRecorder` reads of a
-    simulation, from live telemetry (times relative to the accepted start)."""
-
-    def __init__(self, session: LiveSession, law: str, t0_s: float) -> None:
-        self.s = session
-        self.law = law
-        self.seed = 0
-        self.t0_s = t0_s
-        self.scenario = _LiveScenario(50.0)
-        self.camera = _Obj(mode="live")
-        self.camera_model = session.camera_model()
-        self.loop = _Obj(gains=session.gains, acquired=False, guard_trips=0, dkf=_DkfView(session))
-        self.vehicle = _Obj(p=[0.0, 0.0, 0.0], q=[1.0, 0.0, 0.0, 0.0], v=[0.0, 0.0, 0.0])
-        self.target = _Obj(p=None)
-        self.last_telemetry: ControlTelemetry | None = None
-        self.last_detection: Detection | None = None
-        self.time_s = 0.0
 
 
 # ---------------------------------------------------------------------- the session
@@ -151,6 +102,7 @@ class LiveSession:
         self.pending: dict[str, float] = {}  # PARAM_SET sent, PARAM_VALUE not yet back
         self.refused: dict[str, str] = {}
         self.gains = Gains()
+        self.initial_gains: Gains | None = None  # the vehicle's, first read in full
         self.gains_applied_time_s: float | None = None
         self.tel: dict[str, float | None] = {}
         self.tel_rx_s: float | None = None
@@ -169,8 +121,7 @@ class LiveSession:
         self.acks: dict[int, tuple[float, int]] = {}
         self.last_ack: dict[str, Any] | None = None
         self._acked = threading.Condition(self._lock)
-        self.recorder = None
-        self.view: LiveSortieView | None = None
+        self.rec: LiveRecording | None = None  # the sortie being recorded
         self._trail_vehicle: list[list[float]] = []
         self._trail_target: list[list[float]] = []
         self._last_trail = -1.0
@@ -179,8 +130,7 @@ class LiveSession:
         self._scene_reset = True  # (re)build the 3D scene at the next publish
         self._prev_vel: tuple[float, list[float]] | None = None
         self.normal_accel_m_s2: float | None = None
-        self.miss_m: float | None = None
-        self._rel_prev = None
+        self.miss_m: float | None = None  # the last recorded sortie's closest approach
         self.scene_errors = 0
         self.errors = 0
         self.last_error: str | None = None
@@ -195,7 +145,12 @@ class LiveSession:
     open_replay = compare_with = replay_command = _not_live
 
     def default_gains(self) -> Gains:
-        return Gains()
+        """What "reset gains" restores: the gains the sortie started from. Live, that is the
+        vehicle's own gain parameters as first read in full (its parameter file)."""
+        with self._lock:
+            if self.initial_gains is None:
+                raise SessionError("the vehicle's parameters are not read yet: nothing to reset to")
+            return self.initial_gains
 
     # ------------------------------------------------------------------ operator commands
     def set_gains(self, gains: Gains) -> Gains:
@@ -254,7 +209,7 @@ class LiveSession:
                 raise SessionError(
                     f"{label} {self.last_ack['result']}" + (f": {why}" if why else "")
                 )
-            if command == CMD_START and self.recorder is None:
+            if command == CMD_START and self.rec is None:
                 self._start_recording()
             return self.last_ack
 
@@ -357,6 +312,8 @@ class LiveSession:
             if name in GAIN_NAMES:
                 with contextlib.suppress(ValueError):
                     self.gains = self.gains.replace(**{name: value})
+                if self.initial_gains is None and all(n in self.params for n in GAIN_NAMES):
+                    self.initial_gains = self.gains
         elif kind == "COMMAND_ACK" and m.target_component in (0, GCS_COMPONENT_ID):
             self.acks[int(m.command)] = (now, int(m.result))
             self._acked.notify_all()
@@ -365,13 +322,13 @@ class LiveSession:
         self.events.append(
             {"t": round(now, 3), "source": source, "text": text, "severity": int(severity)}
         )
-        if self.recorder is not None and self.view is not None:
+        if self.rec is not None:
             level = (
                 "error"
                 if severity <= mavlink.MAV_SEVERITY_ERROR
                 else ("warning" if severity == mavlink.MAV_SEVERITY_WARNING else "info")
             )
-            self.recorder.event(self.view.time_s, level, f"{source}: {text}")
+            self.rec.event(level, f"{source}: {text}")
 
     def _telemetry(self, t: dict[str, float | None], now: float) -> None:
         for key, codes in (
@@ -407,37 +364,26 @@ class LiveSession:
                 a = (np.array(v) - np.array(self._prev_vel[1])) / dt
                 self.normal_accel_m_s2 = normal_component(a, np.array(v))
             self._prev_vel = (ts, v)
-        self._track_miss(t, now)
-        if self.recorder is not None and self.view is not None and ts is not None:
-            self._record(t, ts)
+        if self.rec is not None:
+            self._record(t, now)
         if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
             self._last_trail = ts
             self._trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
             if self.target_p is not None:
                 self._trail_target.append([round(c, 3) for c in self.target_p])
 
-    def _track_miss(self, t: dict[str, float | None], now: float) -> None:
-        """Closest approach while recording: the vehicle's position at each control tick
-        (50 Hz) against the target's last report moved on by its reported velocity, the
-        relative motion linear between ticks (the simulator's continuous-time test)."""
-        p = [t.get("pos_e_m"), t.get("pos_n_m"), t.get("pos_u_m")]
-        if self.recorder is None or self.target_p is None or None in p:
-            self._rel_prev = None
-            return
-        dt = now - self.target_rx_s
-        rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
-        if self._rel_prev is None:
-            dist = math.sqrt(sum(c * c for c in rel))
-        else:
-            dist = closest_in_step(self._rel_prev, rel)[0]
-        self._rel_prev = rel
-        self.miss_m = dist if self.miss_m is None else min(self.miss_m, dist)
-
     # ------------------------------------------------------------------ recording
     def camera_model(self) -> CameraModel:
+        """The onboard camera: image size and focal length as the telemetry reports them (the
+        field of view parameter when it does not), mount angles from the parameters."""
         t = self.tel
         w, h = int(t.get("image_w_px") or 640), int(t.get("image_h_px") or 480)
-        hfov = self.params.get("CAM_HFOV_DEG", 90.0)
+        f = t.get("f_px")
+        hfov = (
+            math.degrees(2.0 * math.atan(w / 2.0 / f))
+            if f
+            else self.params.get("CAM_HFOV_DEG", 90.0)
+        )
         return CameraModel(
             w, h, hfov, self.params.get("CAM_PITCH_DEG", 0.0), self.params.get("CAM_ROLL_DEG", 0.0)
         )
@@ -445,113 +391,101 @@ class LiveSession:
     def _start_recording(self) -> None:
         if self.log_dir is None:
             return
-        from ..recording.writer import SortieRecorder
-
-        law = tm.LAW_CODES[int(self.params.get("LAW", 0))]
-        self.view = LiveSortieView(self, law, self.tel.get("t_s") or 0.0)
         self.miss_m = None
         self._trail_vehicle, self._trail_target = [], []
-        self.recorder = SortieRecorder(
-            Path(self.log_dir), self.view, record_every=1, annotate_every=1, frame_every=1000000
+        self.rec = LiveRecording(
+            Path(self.log_dir),
+            SortieStart(
+                scenario="live",
+                law=tm.LAW_CODES[int(self.params.get("LAW", 0))],
+                seed=0,
+                camera="live",
+                camera_model=self.camera_model(),
+                target_diameter_m=TARGET_DIAMETER_M,
+                control_rate_hz=50.0,
+                gains=self.gains,
+                scenario_source="live MAVLink",
+                scenario_toml="",  # a live sortie has no scenario to keep
+                t0_s=self.tel.get("t_s") or 0.0,
+            ),
         )
         self._scene_reset = True
 
-    def _record(self, t: dict[str, float | None], ts: float) -> None:
-        view = self.view
-        view.time_s = max(ts - view.t0_s, 0.0)
-        view.vehicle.p, view.vehicle.v, view.vehicle.q = (
-            list(self.vehicle_p or [0.0, 0.0, 0.0]),
-            list(self.vehicle_v),
-            list(self.vehicle_q),
+    def frame(self, t: dict[str, float | None] | None = None) -> Frame | None:
+        """The sortie as the link reports it now (``t``: a telemetry message, the latest by
+        default); None before the first telemetry and pose."""
+        t = self.tel if t is None else t
+        if not t or self.vehicle_p is None:
+            return None
+        return live_frame(
+            t,
+            law=self.rec.law if self.rec is not None else tm.LAW_CODES[int(t.get("law") or 0)],
+            camera=self.camera_model(),
+            gains=self.gains,
+            vehicle_p=self.vehicle_p,
+            vehicle_v=self.vehicle_v,
+            vehicle_q=self.vehicle_q,
+            target_p=self.target_p,
+            normal_accel_m_s2=self.normal_accel_m_s2,
+            acquired=self.rec is not None and self.rec.acquired,
         )
-        view.target.p = None if self.target_p is None else list(self.target_p)
-        view.loop.gains = self.gains
-        mode = LoopMode(tm.LOOP_MODE_CODES[int(t.get("loop_mode") or 0)])
-        view.loop.acquired = view.loop.acquired or mode is LoopMode.TRACKING
-        view.loop.guard_trips = int(t.get("guard_trips") or 0)
 
-        def pair(a, b):
-            return None if t.get(a) is None or t.get(b) is None else (t[a], t[b])
-
-        nan = math.nan
-        tel = ControlTelemetry(
-            time_s=view.time_s,
-            mode=mode,
-            law=view.law,
-            e_est_px=pair("e_est_u_px", "e_est_v_px"),
-            e_rate_est_px_s=pair("e_rate_u_px_s", "e_rate_v_px_s"),
-            los_elev_rad=t.get("los_elev_rad") or nan,
-            los_azim_rad=t.get("los_azim_rad") or nan,
-            vel_elev_rad=t.get("vel_elev_rad") or nan,
-            vel_azim_rad=t.get("vel_azim_rad") or nan,
-            accel_desired_enu_m_s2=np.array(
-                [
-                    t.get("acc_des_e_m_s2") or 0.0,
-                    t.get("acc_des_n_m_s2") or 0.0,
-                    t.get("acc_des_u_m_s2") or 0.0,
-                ]
-            ),
-            accel_normal_desired_m_s2=t.get("acc_normal_des_m_s2") or 0.0,
-            yaw_rate_cmd_rad_s=t.get("yaw_rate_cmd_rad_s") or 0.0,
-            command=RateThrustCommand(
-                view.time_s,
-                np.array(
-                    [
-                        t.get("rate_cmd_x_rad_s") or 0.0,
-                        t.get("rate_cmd_y_rad_s") or 0.0,
-                        t.get("rate_cmd_z_rad_s") or 0.0,
-                    ]
-                ),
-                t.get("thrust_cmd") or 0.0,
-            ),
-            dkf_time_since_detection_s=t.get("dkf_since_det_s") or math.inf,
-            dkf_lost=bool(t.get("dkf_lost")),
-            guard_tripped=False,
-        )
-        view.last_telemetry = tel
-        raw = pair("e_raw_u_px", "e_raw_v_px")
-        if raw is not None:
-            cam = view.camera_model
-            u, v = cam.cu_px + raw[0], cam.cv_px + raw[1]
-            view.last_detection = Detection(view.time_s, (u, v), (u - 5, v - 5, 10, 10), 100.0)
-        self.recorder.on_tick(view.time_s, tel, self.normal_accel_m_s2 or 0.0)
-        if int(ts * 50) % 5 == 0:  # annotations at about 10 Hz
-            self.recorder.on_frame(view.time_s, None)
+    def _record(self, t: dict[str, float | None], now: float) -> None:
+        """One telemetry message of the sortie being recorded: its frame, the closest approach
+        (the vehicle's position the tick used against the target's last report moved on by
+        its reported velocity), and the end when the onboard says so."""
+        rec = self.rec
+        if t.get("t_s") is None:
+            return
+        frame = self.frame(t)
+        if frame is None:  # no pose yet: what the tick used stands in
+            frame = live_frame(
+                t,
+                law=rec.law,
+                camera=self.camera_model(),
+                gains=self.gains,
+                vehicle_p=(0.0, 0.0, 0.0),
+                vehicle_v=self.vehicle_v,
+                vehicle_q=self.vehicle_q,
+                target_p=self.target_p,
+                normal_accel_m_s2=self.normal_accel_m_s2,
+                acquired=rec.acquired,
+            )
+        p = pose_from_values(t)[0]
+        rel = None
+        if self.target_p is not None and p is not None:
+            dt = now - self.target_rx_s
+            rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
+        rec.track_miss(rel)
+        self.miss_m = rec.miss_m
+        rec.record(frame)
 
     def _maybe_finish(self, now: float) -> None:
-        if self.recorder is None:
+        if self.rec is None:
             return
         if (
             self.onboard_state in FINISHED_STATES
             or not self.link_up()
-            or (self.onboard_state in ("ready", "waiting_target") and self.view.time_s > 1.0)
+            or (
+                self.onboard_state in (RuntimeState.READY.value, RuntimeState.WAITING_TARGET.value)
+                and self.rec.elapsed_s > 1.0
+            )
         ):
             self._finish_recording(None if self.link_up() else "link to the onboard lost")
 
     def _finish_recording(self, reason: str | None) -> None:
-        rec, view = self.recorder, self.view
-        if rec is None:
+        if self.rec is None:
             return
         why = reason or next(
             (e["text"] for e in reversed(self.events) if e["text"].startswith("finished")),
             self.onboard_state,
         )
-        summary = {
-            "outcome": "LIVE_" + self.onboard_state.upper(),
-            "miss_m": self.miss_m,
-            "intercept_time_s": view.time_s,
-            "reason": why,
-            "law": view.law,
-        }
-        rec.finish(summary)
-        self.recorder = None
+        self.rec.finish("LIVE_" + self.onboard_state.upper(), why)
+        self.rec = None
 
     @property
     def recording(self) -> dict[str, Any] | None:
-        rec = self.recorder
-        if rec is None:
-            return None
-        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+        return None if self.rec is None else self.rec.status()
 
     # ------------------------------------------------------------------ observations
     def status(self) -> dict[str, Any]:
@@ -614,43 +548,9 @@ class LiveSession:
         self._publish_count += 1
         snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
         with self._lock:
-            t = self.tel
-            if not t or self.vehicle_p is None:
-                return snap
-            vp = np.array(self.vehicle_p)
-            v = np.array(self.vehicle_v)
-            tp = self.target_p
-            rng = None if tp is None else float(np.linalg.norm(np.array(tp) - vp))
-            w, h, f = t.get("image_w_px") or 640, t.get("image_h_px") or 480, t.get("f_px")
-            f = f or 320.0
-
-            def pair(a, b):
-                return None if t.get(a) is None or t.get(b) is None else [t[a], t[b]]
-
-            snap.update(
-                {
-                    "t": round(t.get("t_s") or 0.0, 4),
-                    "vehicle": {"p": list(vp), "v": list(v), "q": list(self.vehicle_q)},
-                    "target": None if tp is None else {"p": tp, "diameter_m": TARGET_DIAMETER_M},
-                    "range_m": rng,
-                    "speed_m_s": float(np.linalg.norm(v)),
-                    "normal_vel_m_s": None
-                    if tp is None
-                    else normal_component(v, np.array(tp) - vp),
-                    "normal_accel_m_s2": self.normal_accel_m_s2,
-                    "image": {
-                        "w": w,
-                        "h": h,
-                        "f": f,
-                        "vfov_deg": math.degrees(2 * math.atan(h / 2 / f)),
-                    },
-                    "e_est_px": pair("e_est_u_px", "e_est_v_px"),
-                    "e_raw_px": pair("e_raw_u_px", "e_raw_v_px"),
-                    "raw_capture_t": t.get("raw_capture_t_s"),
-                    "mode": tm.LOOP_MODE_CODES[int(t.get("loop_mode") or 0)],
-                    "k_a": self.gains.k_a,
-                }
-            )
+            frame = self.frame()
+            if frame is not None:
+                snap.update(frame_snapshot(frame, self.camera_model(), TARGET_DIAMETER_M))
         return snap
 
     def _publish(self) -> None:

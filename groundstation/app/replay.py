@@ -1,6 +1,9 @@
 """Replaying a recorded sortie through the dashboard's views: the overview (poses, control,
-events) is read once when the log is opened; each seek fetches the camera frame near that
-time through the MCAP index, so scrubbing a long sortie does not read the whole file."""
+DKF, gains, events) is read once when the log is opened; :meth:`ReplayPlayer.frame` rebuilds
+the sortie's :class:`~groundstation.frames.Frame` at any time from it (the same frame the
+simulator or live mode produced, to the recording's precision); each seek fetches the camera
+frame near that time through the MCAP index, so scrubbing a long sortie does not read the
+whole file."""
 
 from __future__ import annotations
 
@@ -10,32 +13,20 @@ import math
 from pathlib import Path
 from typing import Any
 
-from onboard.camera_model import CameraModel
+import numpy as np
 
+from onboard.camera_model import CameraModel
+from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.gains import GainError, Gains
+
+from ..frames import Frame
 from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from .scene import SceneState
+from .snapshot import frame_snapshot
 
-OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/events", "/gains"]
+OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/dkf", "/gains", "/events"]
 PLOT_KEYS = ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px", "range_m")
-
-
-def _unit(az: float, el: float) -> tuple[float, float, float]:
-    return (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el))
-
-
-def normal_vel_m_s(c: dict) -> float | None:
-    """The velocity's component normal to the line of sight (m/s), from a recorded /control
-    message: speed and the velocity and LOS angles (elevation, azimuth) give it as
-    |v| sin(angle between v and LOS)."""
-    try:
-        speed = float(c["speed_m_s"])
-        los = _unit(float(c["los_azim_rad"]), float(c["los_elev_rad"]))
-        vel = _unit(float(c["vel_azim_rad"]), float(c["vel_elev_rad"]))
-    except (KeyError, TypeError, ValueError):
-        return None
-    cos_a = max(-1.0, min(1.0, sum(a * b for a, b in zip(los, vel, strict=True))))
-    return speed * math.sqrt(1.0 - cos_a * cos_a)
 
 
 def _p(msg: dict) -> tuple[float, float, float]:
@@ -55,7 +46,10 @@ class ReplayPlayer:
         self.tc: list[float] = []
         self.ctrl: list[dict] = []
         self.events: list[tuple[float, str]] = []
-        self.gain_changes: list[tuple[float, dict]] = []
+        self.td: list[float] = []
+        self.dkf: list[dict] = []
+        self.tg: list[float] = []
+        self.gains: list[Gains] = []
         for topic, t, m in iter_messages(self.path, OVERVIEW):
             if topic == "/world/vehicle":
                 o = m["pose"]["orientation"]
@@ -68,8 +62,16 @@ class ReplayPlayer:
             elif topic == "/control":
                 self.tc.append(t)
                 self.ctrl.append(m)
+            elif topic == "/dkf":
+                self.td.append(t)
+                self.dkf.append(m)
             elif topic == "/gains":
-                self.gain_changes.append((t, m))
+                try:
+                    g = Gains().replace(**{k: float(v) for k, v in m.items()})
+                except (GainError, TypeError, ValueError):
+                    continue  # gains this version does not know: the page shows defaults
+                self.tg.append(t)
+                self.gains.append(g)
             else:
                 self.events.append((t, m.get("message", "")))
         if not self.tv or not self.tt:
@@ -111,10 +113,11 @@ class ReplayPlayer:
             low = text.lower()
             kind = "detection" if ("lost" in low or "acquired" in low) else "event"
             out.append([round(t, 3), kind, text])
-        for (_, a), (t, b) in zip(self.gain_changes, self.gain_changes[1:], strict=False):
-            for k, v in b.items():
-                if k in a and a[k] != v:
-                    out.append([round(t, 3), "gain", f"{k} {a[k]:g} → {v:g}"])
+        for a, b, t in zip(self.gains, self.gains[1:], self.tg[1:], strict=False):
+            old, new = a.to_dict(), b.to_dict()
+            for k, v in new.items():
+                if old[k] != v:
+                    out.append([round(t, 3), "gain", f"{k} {old[k]:g} → {v:g}"])
         miss = self.info.miss_m
         out.append(
             [
@@ -174,46 +177,67 @@ class ReplayPlayer:
             last = m
         return None if last is None else last.get("data")
 
-    def snapshot(self, t: float) -> dict[str, Any]:
-        st = self.scene_state(t)
-        c = self.ctrl[self._at(self.tc, t)] if self.ctrl else {}
-        vp, tp = st.vehicle_p, st.target_p
-        rng = math.dist(vp, tp)
-        cam = self.camera
-        return {
-            "t": round(t, 4),
-            "vehicle": {"p": list(vp), "q": list(st.vehicle_q)},
-            "target": {"p": list(tp), "diameter_m": self.diameter_m},
-            "range_m": rng,
-            "speed_m_s": c.get("speed_m_s"),
-            "normal_vel_m_s": normal_vel_m_s(c) if c else None,
-            "normal_accel_m_s2": c.get("accel_normal_m_s2"),
-            "image": {
-                "w": cam.width_px,
-                "h": cam.height_px,
-                "f": cam.f_px,
-                "vfov_deg": cam.vfov_deg,
-            },
-            "e_est_px": c.get("e_px"),
-            "e_raw_px": None,
-            "mode": c.get("mode"),
-        }
+    def _velocity(self, i: int, c: dict) -> tuple[float, float, float] | None:
+        """The recorded velocity; a recording made before it was recorded: the poses'
+        finite difference."""
+        v = c.get("vel_m_s")
+        if v is not None:
+            return (v[0], v[1], v[2])
+        if len(self.tv) < 2:
+            return None
+        a, b = (i - 1, i) if i > 0 else (0, 1)
+        dt = self.tv[b] - self.tv[a]
+        if dt <= 0:
+            return None
+        pa, pb = self.vp[a], self.vp[b]
+        return tuple((pb[k] - pa[k]) / dt for k in range(3))
+
+    def frame(self, t: float) -> Frame:
+        """The sortie at time ``t``: the last recorded vehicle pose, target pose, control, DKF
+        state and gains at or before ``t`` (the recording's clock)."""
+        i, j = self._at(self.tv, t), self._at(self.tt, t)
+        c = self.ctrl[self._at(self.tc, t)] if self.ctrl else None
+        d = self.dkf[self._at(self.td, t)] if self.dkf else {}
+        gains = self.gains[self._at(self.tg, t)] if self.gains else Gains()
+        tel = det = None
+        if c is not None:
+            tel = _telemetry(c, d)
+            raw, raw_t = c.get("e_raw_px"), c.get("raw_capture_t_s")
+            if raw is not None and raw_t is not None:
+                u, v = self.camera.cu_px + raw[0], self.camera.cv_px + raw[1]
+                det = Detection(raw_t, (u, v), (u - 5, v - 5, 10, 10), 100.0)
+        state, cov = d.get("state"), d.get("cov_diag")
+        return Frame(
+            time_s=t,
+            vehicle_p_enu_m=self.vp[i],
+            vehicle_q_wxyz=self.vq[i],
+            vehicle_v_enu_m_s=self._velocity(i, c or {}),
+            target_p_enu_m=self.tp[j],
+            telemetry=tel,
+            normal_accel_m_s2=None if c is None else c.get("accel_normal_m_s2"),
+            detection=det,
+            dkf_state_px=None if state is None else tuple(state),
+            dkf_cov_diag=None if cov is None else tuple(cov),
+            acquired=bool(d.get("acquired", tel is not None and tel.mode is LoopMode.TRACKING)),
+            gains=gains,
+            guard_trips=0,
+        )
 
     def series(self, every: int = 1) -> dict[str, Any]:
         """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns and
         every other numeric /control field (arrays split as ``name.0``, ``name.1``), and the
         timeline's markers."""
+        # through the one snapshot builder: the plots show what the page shows live
         rows = self.ctrl[::every]
         cols: dict[str, list] = {k: [] for k in PLOT_KEYS}
         extra: dict[str, list] = {}
-        for i, c in enumerate(rows):
-            e = c.get("e_px")
-            cols["normal_accel_m_s2"].append(c.get("accel_normal_m_s2"))
-            cols["speed_m_s"].append(c.get("speed_m_s"))
-            cols["normal_vel_m_s"].append(normal_vel_m_s(c))
+        for i, (t, c) in enumerate(zip(self.tc[::every], rows, strict=True)):
+            snap = frame_snapshot(self.frame(t), self.camera, self.diameter_m)
+            e = snap["e_est_px"]
+            for k in ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "range_m"):
+                cols[k].append(snap[k])
             cols["e_x_px"].append(e[0] if e else None)
             cols["e_y_px"].append(e[1] if e else None)
-            cols["range_m"].append(c.get("range_m"))
             for k, v in c.items():
                 items = list(enumerate(v)) if isinstance(v, list) else [(None, v)]
                 for j, x in items:
@@ -236,3 +260,36 @@ class ReplayPlayer:
             "events": self.timeline,
             "sortie": self.describe(),
         }
+
+
+def _num(x: float | None, missing: float = math.nan) -> float:
+    return missing if x is None else float(x)
+
+
+def _telemetry(c: dict, d: dict) -> ControlTelemetry | None:
+    """A recorded /control message (and the /dkf one before it) as the loop's telemetry."""
+    try:
+        mode = LoopMode(c.get("mode"))
+    except ValueError:
+        return None
+    e, e_rate = c.get("e_px"), c.get("e_rate_px_s")
+    w = c.get("body_rates_cmd_rad_s") or (0.0, 0.0, 0.0)
+    t_s = _num(c.get("t_s"))
+    return ControlTelemetry(
+        time_s=t_s,
+        mode=mode,
+        law=c.get("law", ""),
+        e_est_px=None if e is None else (e[0], e[1]),
+        e_rate_est_px_s=None if e_rate is None else (e_rate[0], e_rate[1]),
+        los_elev_rad=_num(c.get("los_elev_rad")),
+        los_azim_rad=_num(c.get("los_azim_rad")),
+        vel_elev_rad=_num(c.get("vel_elev_rad")),
+        vel_azim_rad=_num(c.get("vel_azim_rad")),
+        accel_desired_enu_m_s2=np.array(c.get("accel_desired_m_s2") or (0.0, 0.0, 0.0)),
+        accel_normal_desired_m_s2=_num(c.get("accel_normal_desired_m_s2")),
+        yaw_rate_cmd_rad_s=_num(c.get("yaw_rate_cmd_rad_s")),
+        command=RateThrustCommand(t_s, np.array(w), _num(c.get("thrust_cmd"))),
+        dkf_time_since_detection_s=_num(d.get("time_since_detection_s"), math.inf),
+        dkf_lost=bool(d.get("lost", False)),
+        guard_tripped=False,
+    )

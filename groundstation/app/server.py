@@ -1,6 +1,10 @@
 """``groundstation serve``: FastAPI serves the dashboard page, the REST API (OpenAPI at /docs),
 the telemetry websocket and viser's client, and proxies viser's websocket, so the operator
-reaches everything through one address and one token check. viser listens on loopback only."""
+reaches everything through one address and one token check. viser listens on loopback only.
+
+The REST API is one router per concern: meta and scenarios (routes_scenarios.py), gains
+(routes_gains.py), the sortie and the live vehicle (routes_sortie.py), recorded sorties and
+replay (routes_logs.py); their request and response models are in api_models.py."""
 
 from __future__ import annotations
 
@@ -9,50 +13,28 @@ import contextlib
 import importlib.util
 import io
 import json
-import math
 import socket
 import threading
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import uvicorn
 import viser
 import websockets.asyncio.client
-from fastapi import Body, FastAPI, HTTPException, WebSocket
-from fastapi.responses import FileResponse, HTMLResponse, Response
+from fastapi import FastAPI, WebSocket
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, Field
 
-from onboard.control.guidance import GUIDANCE_LAWS
-from onboard.gains import GAIN_SPECS, GainError
-
-from ..recording.reader import LogError, LogIndex, scenario_attachment
-from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios, with_changes
-from ..sim.camera import CAMERA_MODES
+from ..recording.reader import LogIndex
+from . import routes_gains, routes_logs, routes_scenarios, routes_sortie
 from .auth import TokenAuthMiddleware, is_loopback, new_token
-from .gainsets import GainSetError, GainSetStore, default_data_dir
-from .replay import ReplayPlayer
+from .gainsets import GainSetStore, default_data_dir
 from .scene import SceneView
-from .session import SPEEDS, SessionError, SimSession, SortieConfig, with_wind
+from .session import SimSession
 
-# the gains panel's groups (in this order), like a parameter editor's
-GAIN_GROUPS = {
-    "k_a": "guidance",
-    "K_y": "guidance",
-    "K_z": "guidance",
-    "v_min": "guidance",
-    "k_v": "guidance",
-    "k_ibvs": "guidance",
-    "k_p": "FOV hold",
-    "k_d": "FOV hold",
-    "k_R": "attitude",
-    "v_max": "limits",
-    "a_max": "limits",
-    "omega_max": "limits",
-    "k_brake": "limits",
-}
-_GROUP_ORDER = ["guidance", "FOV hold", "attitude", "limits", "other"]
 VISER_INDEX = Path(viser.__file__).parent / "client" / "build" / "index.html"
 
 
@@ -100,46 +82,6 @@ class TelemetryHub:
             q.put_nowait(full if frames else lean)
 
 
-class ReflyRequest(BaseModel):
-    law: str = "png"
-    seed: int | None = None
-    speed: str = "1"
-    gains: dict[str, float] | None = None
-
-
-class StartRequest(BaseModel):
-    scenario: str | None = Field(None, description="name of a shipped scenario")
-    toml: str | None = Field(None, description="scenario file text (instead of a name)")
-    law: str = "png"
-    seed: int = 0
-    camera: str = "projected"
-    speed: str = "1"
-    wind_mean_m_s: list[float] | None = Field(None, min_length=3, max_length=3)
-    gust_m_s: float | None = Field(None, ge=0.0)
-
-
-def _scenario_from(req: StartRequest):
-    if (req.scenario is None) == (req.toml is None):
-        raise HTTPException(422, "give exactly one of 'scenario' (a name) or 'toml' (file text)")
-    try:
-        if req.toml is not None:
-            scenario = parse_scenario(req.toml, source="uploaded scenario")
-        else:
-            names = {p.stem for p in shipped_scenarios()}
-            if req.scenario not in names:
-                raise HTTPException(422, f"unknown scenario {req.scenario!r}")
-            scenario = load_scenario(req.scenario)
-        if req.wind_mean_m_s is not None or req.gust_m_s is not None:
-            scenario = with_wind(
-                scenario,
-                tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
-                scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
-            )
-    except ScenarioError as exc:
-        raise HTTPException(422, str(exc)) from None
-    return scenario
-
-
 def create_app(
     session: SimSession,
     hub: TelemetryHub,
@@ -161,6 +103,18 @@ def create_app(
         lifespan=lifespan,
         description="Simulator control, gains and telemetry for the Peregrine interceptor.",
     )
+
+    @app.exception_handler(RequestValidationError)
+    async def readable_422(_request, exc: RequestValidationError) -> JSONResponse:
+        """A refused request says why in one line the page can show (the field and pydantic's
+        message, which lists a Literal's choices), the structured errors beside it."""
+        why = "; ".join(
+            ".".join(str(p) for p in e["loc"] if p != "body") + ": " + e["msg"]
+            for e in exc.errors()
+        )
+        return JSONResponse(
+            status_code=422, content={"detail": why, "errors": jsonable_encoder(exc.errors())}
+        )
 
     # ------------------------------------------------------------------ pages
     @app.get("/", include_in_schema=False)
@@ -261,300 +215,11 @@ def create_app(
             hub.queues.pop(q, None)
             hub.sent.pop(key, None)
 
-    # ------------------------------------------------------------------ API
-    @app.get("/api/scenarios", tags=["scenarios"])
-    async def list_scenarios() -> list[dict[str, str]]:
-        out = []
-        for p in shipped_scenarios():
-            s = load_scenario(p)
-            out.append({"name": s.name, "motion": s.target.motion, "description": s.description})
-        return out
-
-    @app.get("/api/scenarios/{name}", tags=["scenarios"])
-    async def get_scenario(name: str) -> dict[str, str]:
-        names = {p.stem: p for p in shipped_scenarios()}
-        if name not in names:
-            raise HTTPException(404, f"unknown scenario {name!r}")
-        return {"name": name, "toml": names[name].read_text(encoding="utf-8")}
-
-    @app.post("/api/scenarios/validate", tags=["scenarios"])
-    async def validate_scenario(toml: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
-        try:
-            s = parse_scenario(toml, source="uploaded scenario")
-        except ScenarioError as exc:
-            raise HTTPException(422, str(exc)) from None
-        return {"ok": True, "name": s.name, "motion": s.target.motion}
-
-    @app.get("/api/gains", tags=["gains"])
-    async def get_gains() -> dict[str, Any]:
-        st = session.status()
-        return {
-            "values": session.gains.to_dict(),
-            "specs": [
-                {
-                    "name": s.name,
-                    "default": s.default,
-                    "unit": s.unit,
-                    "min": s.minimum,
-                    "max": s.maximum,
-                    "meaning": s.meaning,
-                    "group": GAIN_GROUPS.get(s.name, "other"),
-                }
-                for s in sorted(
-                    GAIN_SPECS, key=lambda s: _GROUP_ORDER.index(GAIN_GROUPS.get(s.name, "other"))
-                )
-            ],
-            "applied_time_s": st["gains_applied_time_s"],
-            "pending": st["gains_pending"],
-        }
-
-    @app.put("/api/gains", tags=["gains"])
-    async def put_gains(changes: Annotated[dict[str, Any], Body()]) -> dict[str, Any]:
-        try:
-            new = session.gains.replace(**changes)
-        except (GainError, TypeError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        try:
-            await asyncio.to_thread(session.set_gains, new)
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return await get_gains()
-
-    @app.post("/api/gains/reset", tags=["gains"])
-    async def reset_gains() -> dict[str, Any]:
-        try:
-            await asyncio.to_thread(session.set_gains, session.default_gains())
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return await get_gains()
-
-    @app.get("/api/gainsets", tags=["gains"])
-    async def list_gainsets() -> list[str]:
-        return gainsets.names()
-
-    @app.put("/api/gainsets/{name}", tags=["gains"])
-    async def save_gainset(name: str) -> dict[str, Any]:
-        try:
-            gainsets.save(name, session.gains)
-        except GainSetError as exc:
-            raise HTTPException(422, str(exc)) from None
-        return {"saved": name, "names": gainsets.names()}
-
-    @app.get("/api/gainsets/{name}/file", tags=["gains"])
-    async def download_gainset(name: str) -> Response:
-        try:
-            text = gainsets.text(name)
-        except GainSetError as exc:
-            raise HTTPException(404, str(exc)) from None
-        return Response(
-            text,
-            media_type="application/toml",
-            headers={"Content-Disposition": f'attachment; filename="{name}.toml"'},
-        )
-
-    @app.post("/api/gainsets/upload", tags=["gains"])
-    async def upload_gainset(
-        name: Annotated[str, Body()], toml: Annotated[str, Body()]
-    ) -> dict[str, Any]:
-        """Save an uploaded gain set file (``name = value`` lines) under ``name``."""
-        try:
-            gainsets.save_text(name, toml)
-        except (GainSetError, GainError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        return {"saved": name, "names": gainsets.names()}
-
-    @app.post("/api/gainsets/{name}/load", tags=["gains"])
-    async def load_gainset(name: str) -> dict[str, Any]:
-        try:
-            gains = gainsets.load(name)
-        except (GainSetError, GainError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        try:
-            if isinstance(session, SimSession):
-                await asyncio.to_thread(session.set_gains, gains, f"gain set {name}")
-            else:
-                await asyncio.to_thread(session.set_gains, gains)
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return await get_gains()
-
-    # ------------------------------------------------------------------ recorded sorties
-    def _log_path(name: str) -> Path:
-        try:
-            path = logs.resolve(name)
-        except LogError as exc:
-            raise HTTPException(400, str(exc)) from None
-        if not path.is_file():
-            raise HTTPException(404, f"no recorded sortie named {name!r}")
-        return path
-
-    def _player(name: str) -> ReplayPlayer:
-        try:
-            return ReplayPlayer(_log_path(name))
-        except (LogError, ValueError) as exc:
-            raise HTTPException(422, str(exc)) from None
-
-    @app.get("/api/logs", tags=["logs"])
-    async def list_logs() -> list[dict[str, Any]]:
-        return await asyncio.to_thread(logs.list)
-
-    @app.get("/api/logs/{name}", tags=["logs"])
-    async def log_info(name: str) -> dict[str, Any]:
-        try:
-            return logs.info(_log_path(name).name).to_json_dict()
-        except LogError as exc:
-            raise HTTPException(422, str(exc)) from None
-
-    @app.get("/api/logs/{name}/series", tags=["logs"])
-    async def log_series(name: str) -> dict[str, Any]:
-        return (await asyncio.to_thread(_player, name)).series()
-
-    @app.get("/api/logs/{name}/file", tags=["logs"])
-    async def download_log(name: str) -> FileResponse:
-        path = _log_path(name)
-        return FileResponse(path, media_type="application/octet-stream", filename=path.name)
-
-    @app.delete("/api/logs/{name}", tags=["logs"])
-    async def delete_log(name: str, confirm: str = "") -> dict[str, Any]:
-        path = _log_path(name)
-        if confirm != name:
-            raise HTTPException(400, "to delete, repeat the file name in ?confirm=")
-        rec = session.recording
-        if rec is not None and rec["file"] == name and not rec["closed"]:
-            raise HTTPException(409, "this sortie is still being recorded")
-        path.unlink()
-        return {"deleted": name}
-
-    @app.post("/api/replay/open", tags=["replay"])
-    async def replay_open(name: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
-        path = _log_path(name)
-        try:
-            await asyncio.to_thread(session.open_replay, path)
-        except (LogError, ValueError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        return session.status()
-
-    @app.post("/api/replay/compare", tags=["replay"])
-    async def replay_compare(name: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
-        path = _log_path(name)
-        try:
-            await asyncio.to_thread(session.compare_with, path)
-        except (LogError, ValueError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return session.status()
-
-    @app.post("/api/replay/{action}", tags=["replay"])
-    async def replay_action(
-        action: str, t_s: Annotated[float | None, Body(embed=True)] = None
-    ) -> dict[str, Any]:
-        if action not in ("play", "pause", "seek", "closest"):
-            raise HTTPException(404, f"unknown replay action {action!r}")
-        if action == "seek" and (t_s is None or not math.isfinite(t_s)):
-            raise HTTPException(422, "seek needs a finite t_s")
-        return _cmd(session.replay_command, action, t_s)
-
-    @app.post("/api/logs/{name}/refly", tags=["logs"])
-    async def refly(name: str, req: ReflyRequest) -> dict[str, Any]:
-        if req.law not in GUIDANCE_LAWS:
-            raise HTTPException(422, f"unknown law {req.law!r}")
-        player = await asyncio.to_thread(_player, name)
-        text = scenario_attachment(player.path)
-        if not text:
-            raise HTTPException(422, f"{name}: no scenario recorded with it")
-        try:
-            scenario = parse_scenario(text, source=name)
-            # the gains it flew (edits included), so the re-fly flies the same sortie
-            flown = player.describe()["gains"] or scenario.gains
-            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
-        except (ScenarioError, GainError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        camera = player.info.camera if player.info.camera in CAMERA_MODES else "projected"
-        if req.speed not in SPEEDS:
-            raise HTTPException(422, f"speed must be one of {', '.join(SPEEDS)}")
-        config = SortieConfig(
-            scenario,
-            req.law,
-            req.seed if req.seed is not None else (player.info.seed or 0),
-            camera,
-            req.speed,
-        )
-        _cmd(session.start, config, (player.tt, player.tp))
-        return _cmd(session.compare_with, player.path)
-
-    def _cmd(fn, *args):
-        try:
-            fn(*args)
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return session.status()
-
-    @app.post("/api/sortie/start", tags=["sortie"])
-    async def start(req: StartRequest) -> dict[str, Any]:
-        if req.law not in GUIDANCE_LAWS:
-            raise HTTPException(
-                422, f"unknown law {req.law!r}; choose one of {', '.join(sorted(GUIDANCE_LAWS))}"
-            )
-        if req.camera not in CAMERA_MODES:
-            raise HTTPException(422, f"camera must be one of {', '.join(CAMERA_MODES)}")
-        if req.speed not in SPEEDS:
-            raise HTTPException(422, f"speed must be one of {', '.join(SPEEDS)}")
-        scenario = _scenario_from(req)
-        return _cmd(session.start, SortieConfig(scenario, req.law, req.seed, req.camera, req.speed))
-
-    @app.post("/api/sortie/pause", tags=["sortie"])
-    async def pause() -> dict[str, Any]:
-        return _cmd(session.pause)
-
-    @app.post("/api/sortie/resume", tags=["sortie"])
-    async def resume() -> dict[str, Any]:
-        return _cmd(session.resume)
-
-    @app.post("/api/sortie/step", tags=["sortie"])
-    async def step() -> dict[str, Any]:
-        return _cmd(session.step)
-
-    @app.post("/api/sortie/reset", tags=["sortie"])
-    async def reset() -> dict[str, Any]:
-        return _cmd(session.reset)
-
-    @app.put("/api/sortie/speed", tags=["sortie"])
-    async def speed(speed: Annotated[str, Body(embed=True)]) -> dict[str, Any]:
-        return _cmd(session.set_speed, speed)
-
-    @app.get("/api/sortie/series", tags=["sortie"])
-    async def sortie_series() -> dict[str, Any]:
-        """The sortie on screen so far (plot columns and timeline markers), for a page that
-        loads mid-sortie; a recorded sortie's are at /api/logs/{name}/series."""
-        fn = getattr(session, "series", None)
-        if fn is None:
-            return {"t_s": [], "columns": {}, "events": []}
-        return fn()
-
-    @app.get("/api/status", tags=["sortie"])
-    async def status() -> dict[str, Any]:
-        return session.status()
-
-    async def _live(action: str) -> dict[str, Any]:
-        fn = getattr(session, f"live_{action}", None)
-        if fn is None:
-            raise HTTPException(409, "simulator mode: there is no live vehicle")
-        try:
-            ack = await asyncio.to_thread(fn)
-        except SessionError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return {"ack": ack, "status": session.status()}
-
-    @app.post("/api/live/start", tags=["live"])
-    async def live_start() -> dict[str, Any]:
-        """Send the start command to the onboard computer and wait for its COMMAND_ACK."""
-        return await _live("start")
-
-    @app.post("/api/live/abort", tags=["live"])
-    async def live_abort() -> dict[str, Any]:
-        """Send abort (brake and hold) and wait for the COMMAND_ACK."""
-        return await _live("abort")
+    # ------------------------------------------------------------------ API, by concern
+    app.include_router(routes_scenarios.router())
+    app.include_router(routes_gains.router(session, gainsets))
+    app.include_router(routes_sortie.router(session))
+    app.include_router(routes_logs.router(session, logs))
 
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
 

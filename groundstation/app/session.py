@@ -26,15 +26,15 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
 
-from onboard.control.guidance import normal_component
 from onboard.gains import Gains
 
+from ..recording.writer import SortieRecorder
 from ..scenario import Scenario, WindSpec, load_scenario, with_changes
 from ..sim.simulation import Simulation
 from .replay import ReplayPlayer
 from .scene import SceneState
+from .snapshot import frame_snapshot
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 PUBLISH_HZ = 40.0  # telemetry snapshots per second (each viewer shows >= 30 of them)
@@ -92,6 +92,7 @@ class SimSession:
         self._last_mode: str | None = None
         self._last_lost = False
         self.sim: Simulation | None = None
+        self.recorder: SortieRecorder | None = None  # observes the sortie on screen
         self.state = "idle"  # idle | running | paused | finished
         self.speed = 1.0
         self._anchor_wall = 0.0
@@ -149,6 +150,7 @@ class SimSession:
                 gains = self.gains
                 self.gains_note = None
             self._close_current("the operator started another sortie")
+            self.recorder = None if self.log_dir is None else SortieRecorder(self.log_dir)
             self.sim = Simulation(
                 config.scenario,
                 config.law,
@@ -156,7 +158,7 @@ class SimSession:
                 config.camera,
                 gains,
                 keep_records=False,
-                log_dir=self.log_dir,
+                observers=() if self.recorder is None else (self.recorder,),
                 target_track=target_track,
             )
             self.config = config
@@ -297,13 +299,13 @@ class SimSession:
         """End the recording of the sortie on screen (an unfinished one is kept, marked
         INCOMPLETE with the reason: nothing recorded is ever lost)."""
         if self.sim is not None:
-            self.sim.close_recording(reason)
+            self.sim.close(reason)
         self.replay = self.compare = None
 
     @property
     def recording(self) -> dict[str, Any] | None:
-        rec = None if self.sim is None else self.sim.recorder
-        if rec is None:
+        rec = None if self.sim is None else self.recorder
+        if rec is None or rec.path is None:
             return None
         return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
 
@@ -402,19 +404,18 @@ class SimSession:
             self._trail_target.append([round(c, 3) for c in sim.target.p])
 
     def _record_history(self) -> None:
+        """One row of the plots' series, from the frame through the one snapshot builder."""
         sim = self.sim
-        rel = np.array(sim.target.p) - np.array(sim.vehicle.p)
-        v = np.array(sim.vehicle.v)
-        tel = sim.last_telemetry
-        e = None if tel is None else tel.e_est_px
+        snap = frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m)
+        e = snap["e_est_px"]
         row = {
-            "t_s": round(sim.time_s, 4),
-            "normal_accel_m_s2": None if tel is None else sim.normal_accel_m_s2,
-            "speed_m_s": float(np.linalg.norm(v)),
-            "normal_vel_m_s": normal_component(v, rel),
+            "t_s": snap["t"],
+            "normal_accel_m_s2": snap["normal_accel_m_s2"],
+            "speed_m_s": snap["speed_m_s"],
+            "normal_vel_m_s": snap["normal_vel_m_s"],
             "e_x_px": None if e is None else float(e[0]),
             "e_y_px": None if e is None else float(e[1]),
-            "range_m": float(np.linalg.norm(rel)),
+            "range_m": snap["range_m"],
         }
         with self._lock:
             for k, val in row.items():
@@ -587,8 +588,9 @@ class SimSession:
         snap["events"] = self.events if self.replay is None else self.replay.timeline
         if self.replay is not None:
             rp = self.replay
-            snap.update(rp.snapshot(self.replay_t))
-            snap["k_a"] = self.gains.k_a
+            snap.update(
+                frame_snapshot(rp.frame(self.replay_t), rp.camera, rp.diameter_m, t_s=self.replay_t)
+            )
             if self._force_frame or (
                 self.replay_playing and self._publish_count % FRAME_EVERY == 0
             ):
@@ -600,44 +602,7 @@ class SimSession:
         sim = self.sim
         if sim is None:
             return snap
-        cam = sim.camera_model
-        veh, tgt = sim.vehicle, sim.target
-        rel = np.array(tgt.p) - np.array(veh.p)
-        rng = float(np.linalg.norm(rel))
-        v = np.array(veh.v)
-        speed = float(np.linalg.norm(v))
-        v_n = normal_component(v, rel)  # velocity normal to the line of sight
-        tel = sim.last_telemetry
-        det = sim.last_detection
-        snap.update(
-            {
-                "t": round(sim.time_s, 4),
-                "vehicle": {"p": veh.p, "v": veh.v, "q": veh.q},
-                "target": {"p": tgt.p, "diameter_m": sim.scenario.target.diameter_m},
-                "range_m": rng,
-                "speed_m_s": speed,
-                "normal_vel_m_s": v_n,
-                "normal_accel_m_s2": None,
-                "image": {
-                    "w": cam.width_px,
-                    "h": cam.height_px,
-                    "f": cam.f_px,
-                    "vfov_deg": cam.vfov_deg,
-                },
-                "e_est_px": None,
-                "e_raw_px": None,
-                "raw_capture_t": None,
-                "mode": None,
-                "k_a": self.gains.k_a,
-            }
-        )
-        if tel is not None:
-            snap["mode"] = tel.mode.value
-            snap["e_est_px"] = tel.e_est_px
-            snap["normal_accel_m_s2"] = sim.normal_accel_m_s2
-        if det is not None:
-            snap["e_raw_px"] = cam.error_px(*det.center_px)
-            snap["raw_capture_t"] = det.capture_time_s
+        snap.update(frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m))
         frame = sim.camera.last_frame
         if frame is not None and (self._force_frame or self._publish_count % FRAME_EVERY == 0):
             self._force_frame = False

@@ -13,12 +13,13 @@ from typing import Any
 import numpy as np
 
 from onboard.control.guidance import GUIDANCE_LAWS
+from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import load_scenario, with_changes
 from .aggregate import median_iqr, miss_stats, success_rate
 from .runner import SortieJob, SortieOutcome
 
-LAWS = ("png", "pg", "ibvs")
+LAWS = codes(GuidanceLaw)
 assert set(LAWS) <= set(GUIDANCE_LAWS)
 
 

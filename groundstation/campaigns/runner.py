@@ -11,12 +11,14 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from onboard.control.guidance import normal_component
 
+from ..recording.writer import SortieRecorder
 from ..scenario import Scenario
 from ..sim.simulation import Simulation
 
@@ -49,12 +51,12 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
     t, veh, tgt, vel, a_n, v_n, e = [], [], [], [], [], [], []
     for rec in sim.records[::TRACE_EVERY_TICKS]:
         t.append(round(rec.time_s, 4))
-        veh.append([round(c, 4) for c in rec.vehicle_pos_m])
-        tgt.append([round(c, 4) for c in rec.target_pos_m])
-        vel.append([round(c, 4) for c in rec.vehicle_vel_m_s])
+        veh.append([round(c, 4) for c in rec.vehicle_p_enu_m])
+        tgt.append([round(c, 4) for c in rec.target_p_enu_m])
+        vel.append([round(c, 4) for c in rec.vehicle_v_enu_m_s])
         a_n.append(round(rec.normal_accel_m_s2, 4))
-        los = np.subtract(rec.target_pos_m, rec.vehicle_pos_m)
-        v_n.append(round(normal_component(np.asarray(rec.vehicle_vel_m_s), los), 4))
+        los = np.subtract(rec.target_p_enu_m, rec.vehicle_p_enu_m)
+        v_n.append(round(normal_component(np.asarray(rec.vehicle_v_enu_m_s), los), 4))
         est = rec.telemetry.e_est_px
         if est is None:
             e.append(None)
@@ -77,8 +79,9 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
 
 def run_job(job: SortieJob) -> SortieOutcome:
     """Run one sortie (in whatever process) and return its outcome."""
+    observers = [] if job.log_dir is None else [SortieRecorder(Path(job.log_dir))]
     sim = Simulation(
-        job.scenario, job.law, job.seed, job.camera, keep_records=job.trace, log_dir=job.log_dir
+        job.scenario, job.law, job.seed, job.camera, keep_records=job.trace, observers=observers
     )
     initial_px = sim.camera_model.project(
         sim.R_WC().T @ (np.array(sim.target.p) - np.array(sim.vehicle.p))

@@ -23,8 +23,8 @@ _CONTROL = (
     '"vel_elev_rad":%s,"vel_azim_rad":%s,"accel_desired_m_s2":[%.4f,%.4f,%.4f],'
     '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
     '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
-    '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%.4f,'
-    '"range_m":%s}'
+    '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%s,'
+    '"range_m":%s,"vel_m_s":%s,"e_raw_px":%s,"raw_capture_t_s":%s}'
 )
 _DKF = '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s}'
 
@@ -36,6 +36,14 @@ def js(x: float | None) -> str:
 
 def js2(pair) -> str:
     return "null" if pair is None else "[%.3f,%.3f]" % (pair[0], pair[1])
+
+
+def _js3(v) -> str:
+    return (
+        "null"
+        if v is None or not math.isfinite(v[0] + v[1] + v[2])
+        else ("[%.4f,%.4f,%.4f]" % (v[0], v[1], v[2]))
+    )
 
 
 def _js4(v) -> str:
@@ -54,15 +62,17 @@ def tf(sec: int, nsec: int, x, y, z, qx, qy, qz, qw, camera_tf: str) -> bytes:
 
 def control(
     t_s, mode, law, q_y, q_z, s_y, s_z, a, an_des, an, w, thrust, yaw_rate, e, e_rate, speed,
-    range_m,
+    range_m, vel, e_raw, raw_t,
 ) -> bytes:  # fmt: skip
-    """peregrine.Control (``a`` and ``w`` are 3-tuples, ``e`` and ``e_rate`` pairs or None)."""
+    """peregrine.Control (``a``, ``w`` and ``vel`` are 3-tuples, ``e``, ``e_rate`` and ``e_raw``
+    pairs or None)."""
     return (
         _CONTROL
         % (
             t_s, mode, law, js(q_y), js(q_z), js(s_y), js(s_z), a[0], a[1], a[2], js(an_des),
-            js(an), w[0], w[1], w[2], thrust, js(yaw_rate), js2(e), js2(e_rate), speed,
-            js(range_m),
+            js(an), w[0], w[1], w[2], thrust, js(yaw_rate), js2(e), js2(e_rate),
+            "null" if speed is None or not math.isfinite(speed) else "%.4f" % speed,
+            js(range_m), _js3(vel), js2(e_raw), "null" if raw_t is None else "%.6f" % raw_t,
         )
     ).encode()  # fmt: skip
 

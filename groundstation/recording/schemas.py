@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 
+from onboard import messages
+
 _TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
 _VEC3 = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
 _QUAT = {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}}
@@ -19,6 +21,22 @@ _NUMS = {"type": "array", "items": _NUM}
 
 def _obj(title: str, **props) -> dict:
     return {"title": title, "type": "object", "properties": props}
+
+
+_KIND = {
+    "number": _NUM,
+    "numbers": _NUMS,
+    "string": {"type": "string"},
+    "boolean": {"type": "boolean"},
+}
+
+
+def _message(title: str, fields: tuple[messages.MessageField, ...]) -> dict:
+    """A schema from its one definition in onboard/messages.py (units and meanings kept)."""
+    return _obj(
+        title,
+        **{f.name: {**_KIND[f.kind], "description": f"{f.meaning} [{f.unit}]"} for f in fields},
+    )
 
 
 SCHEMAS: dict[str, dict] = {
@@ -124,35 +142,8 @@ SCHEMAS: dict[str, dict] = {
         file={"type": "string"},
         line={"type": "integer"},
     ),
-    "peregrine.Control": _obj(
-        "peregrine.Control",
-        t_s=_NUM,
-        mode={"type": "string"},
-        law={"type": "string"},
-        los_elev_rad=_NUM,
-        los_azim_rad=_NUM,
-        vel_elev_rad=_NUM,
-        vel_azim_rad=_NUM,
-        accel_desired_m_s2=_NUMS,
-        accel_normal_desired_m_s2=_NUM,
-        accel_normal_m_s2=_NUM,
-        body_rates_cmd_rad_s=_NUMS,
-        thrust_cmd=_NUM,
-        yaw_rate_cmd_rad_s=_NUM,
-        e_px=_NUMS,
-        e_rate_px_s=_NUMS,
-        speed_m_s=_NUM,
-        range_m=_NUM,
-    ),
-    "peregrine.Dkf": _obj(
-        "peregrine.Dkf",
-        t_s=_NUM,
-        state=_NUMS,
-        cov_diag=_NUMS,
-        acquired={"type": "boolean"},
-        lost={"type": "boolean"},
-        time_since_detection_s=_NUM,
-    ),
+    "peregrine.Control": _message("peregrine.Control", messages.CONTROL),
+    "peregrine.Dkf": _message("peregrine.Dkf", messages.DKF),
     "peregrine.Gains": {
         "title": "peregrine.Gains",
         "type": "object",

@@ -1,5 +1,9 @@
 """Writes one sortie to ``logs/<UTC time>_<scenario>_<law>.mcap`` while it flies.
 
+:class:`SortieRecorder` is a sortie observer (:mod:`groundstation.frames`): whoever produces
+the sortie (the simulator, live mode) tells it ``start``, each ``frame`` and ``image``, and
+``finish``; it reads nothing else.
+
 Chunked and indexed MCAP (zstd), JSON messages with Foxglove's well-known schemas, log times
 on the sortie's own clock. The file is created here, exclusively (an existing one is never
 overwritten); the sortie's thread gathers each message's numbers and hands them, in batches,
@@ -34,10 +38,10 @@ import cv2
 import numpy as np
 
 from onboard import __version__ as onboard_version
-from onboard.datatypes import ControlTelemetry, LoopMode
+from onboard.datatypes import LoopMode
 
 from .. import __version__ as gs_version
-from ..scenario import Scenario, scenario_toml
+from ..frames import Frame, SortieStart
 from . import encode as enc
 from .schemas import CHANNELS
 from .sink import open_sink
@@ -75,16 +79,23 @@ def open_new_log(directory: Path, scenario: str, law: str):
 
 
 class SortieRecorder:
+    """Records the sortie it observes into a new file in ``directory`` (created at
+    :meth:`start`; ``path`` is None before)."""
+
     def __init__(
         self,
         directory: Path,
-        sim: Any,
         record_every: int = 5,
         annotate_every: int = 3,
         frame_every: int = 6,
         mode: str = "auto",
     ) -> None:
-        self.sim = sim
+        self.directory = Path(directory)
+        self.mode = mode
+        self.path: Path | None = None
+        self.info: SortieStart | None = None
+        self._t0 = 0.0
+        self._last: Frame | None = None
         self.record_every = record_every
         self.annotate_every = annotate_every
         self.frame_every = frame_every
@@ -96,17 +107,23 @@ class SortieRecorder:
         self._was_tracking = False
         self._was_lost = False
         self._guard_trips = 0
-        self.path, fileobj = open_new_log(directory, sim.scenario.name, sim.law)
+        self._sink = None
         self._ch = {topic: i for i, (topic, _) in enumerate(CHANNELS)}
+
+    def start(self, info: SortieStart) -> None:
+        """Create the file and write what the sortie is (metadata, scenario, calibration)."""
+        self.info = info
+        self._t0 = info.t0_s
+        self.path, fileobj = open_new_log(self.directory, info.scenario, info.law)
         try:
-            self._sink = open_sink(self.path, fileobj, mode)
+            self._sink = open_sink(self.path, fileobj, self.mode)
         except OSError as exc:
             self._sink = None
             fileobj.close()
             self._fail(exc)
             return
         try:
-            cam = sim.camera_model
+            cam = info.camera_model
             R = cam.R_BC
             q = _quat_xyzw(R)
             self._tf_camera = (
@@ -117,26 +134,24 @@ class SortieRecorder:
             self._sink.metadata(
                 "sortie",
                 {
-                    "scenario": sim.scenario.name,
-                    "law": sim.law,
-                    "seed": str(sim.seed),
-                    "camera": sim.camera.mode,
-                    "gains": json.dumps(sim.loop.gains.to_dict()),
+                    "scenario": info.scenario,
+                    "law": info.law,
+                    "seed": str(info.seed),
+                    "camera": info.camera,
+                    "gains": json.dumps(info.gains.to_dict()),
                     "software_version": f"peregrine {gs_version} (onboard {onboard_version})",
-                    "scenario_source": sim.scenario.source,
+                    "scenario_source": info.scenario_source,
                     "recorded_at_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                    "record_rate_hz": str(sim.scenario.sim.control_rate_hz / record_every),
+                    "record_rate_hz": str(info.control_rate_hz / self.record_every),
                 },
             )
-            sc = sim.scenario  # a live sortie has no scenario, only what the recorder reads
-            toml = scenario_toml(sc) if isinstance(sc, Scenario) else sc.text
-            self._sink.attachment("scenario.toml", "application/toml", toml.encode())
+            self._sink.attachment("scenario.toml", "application/toml", info.scenario_toml.encode())
             self._calibration(0.0)
             self.event(
                 0.0,
                 "info",
-                f"sortie start: {sim.scenario.name}, law {sim.law}, "
-                f"seed {sim.seed}, camera {sim.camera.mode}",
+                f"sortie start: {info.scenario}, law {info.law}, "
+                f"seed {info.seed}, camera {info.camera}",
             )
             self._sink.started()
         except OSError as exc:
@@ -183,7 +198,7 @@ class SortieRecorder:
         )
 
     def _calibration(self, t_s: float) -> None:
-        cam = self.sim.camera_model
+        cam = self.info.camera_model
         f, cu, cv = cam.f_px, cam.cu_px, cam.cv_px
         self._json(
             "/camera/calibration",
@@ -201,21 +216,28 @@ class SortieRecorder:
             },
         )
 
-    def on_tick(self, t_s: float, tel: ControlTelemetry, normal_accel_m_s2: float) -> None:
-        if self.closed:
+    def frame(self, frame: Frame) -> None:
+        """One control tick: /gains and /events as they change, the fast channels at their
+        rates (see the module docstring)."""
+        if self.closed or frame.telemetry is None:
             return
-        sim = self.sim
-        loop = sim.loop
-        if loop.gains is not self._last_gains:
+        t_s = max(frame.time_s - self._t0, 0.0)
+        for ev in frame.events:
+            self.event(max(ev.time_s - self._t0, 0.0), ev.level, ev.message)
+        if self._last is not None and frame.time_s <= self._last.time_s:
+            return  # a frame seen already (re-sent to carry late events)
+        self._last = frame
+        tel = frame.telemetry
+        gains = frame.gains
+        if gains is not self._last_gains:
             first = self._last_gains is None
-            self._last_gains = loop.gains
-            self._json("/gains", t_s, loop.gains.to_dict())
+            self._last_gains = gains
+            self._json("/gains", t_s, gains.to_dict())
             if not first:
                 self.event(
                     t_s,
                     "info",
-                    "gains changed: "
-                    + ", ".join(f"{k}={v:g}" for k, v in loop.gains.to_dict().items()),
+                    "gains changed: " + ", ".join(f"{k}={v:g}" for k, v in gains.to_dict().items()),
                 )
         tracking = tel.mode is LoopMode.TRACKING
         if tracking and not self._was_tracking:
@@ -225,8 +247,8 @@ class SortieRecorder:
         if tel.mode is LoopMode.LOST and not self._was_lost:
             self.event(t_s, "warning", "target lost: braking and holding")
         self._was_tracking, self._was_lost = tracking, tel.mode is LoopMode.LOST
-        if loop.guard_trips != self._guard_trips:
-            self._guard_trips = loop.guard_trips
+        if frame.guard_trips != self._guard_trips:
+            self._guard_trips = frame.guard_trips
             self.event(t_s, "error", "output guard: non-finite command replaced by hover")
         self._tick += 1
         if (self._tick - 1) % self.record_every:
@@ -234,9 +256,9 @@ class SortieRecorder:
         ns = _ns(t_s)
         sec, nsec = divmod(ns, 1_000_000_000)
         ch = self._ch
-        p, q = sim.vehicle.p, sim.vehicle.q
+        p, q = frame.vehicle_p_enu_m, frame.vehicle_q_wxyz
         pose = (sec, nsec, p[0], p[1], p[2], q[1], q[2], q[3], q[0])
-        tp = sim.target.p  # None: a live target that does not report its position
+        tp = frame.target_p_enu_m  # None: a live target that does not report its position
         items = [(ch["/world/vehicle"], enc.POSE, pose)]
         half = (self._tick - 1) % (2 * self.record_every) == 0
         if half:  # the target, /tf (the vehicle pose again) and /dkf at half rate
@@ -245,7 +267,7 @@ class SortieRecorder:
                     (ch["/world/target"], enc.POSE, (sec, nsec, tp[0], tp[1], tp[2], 0, 0, 0, 1))
                 )
             items.append((ch["/tf"], enc.TF, (*pose, self._tf_camera)))
-        v = sim.vehicle.v
+        det = frame.detection
         rng = None
         if tp is not None:
             rx, ry, rz = tp[0] - p[0], tp[1] - p[1], tp[2] - p[2]
@@ -265,30 +287,33 @@ class SortieRecorder:
                     tel.vel_azim_rad,
                     tel.accel_desired_enu_m_s2.tolist(),
                     tel.accel_normal_desired_m_s2,
-                    normal_accel_m_s2,
+                    frame.normal_accel_m_s2,
                     cmd.body_rates_flu_rad_s.tolist(),
                     cmd.thrust_normalised,
                     tel.yaw_rate_cmd_rad_s,
                     tel.e_est_px,
                     tel.e_rate_est_px_s,
-                    math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]),
+                    frame.speed_m_s,
                     rng,
+                    frame.vehicle_v_enu_m_s,
+                    None if det is None else self.info.camera_model.error_px(*det.center_px),
+                    None if det is None else det.capture_time_s - self._t0,
                 ),
             )
         )
         if half:
-            loop = sim.loop
-            state = loop.dkf.state_vector()
-            st = cov = None
-            if state is not None:
-                st = state[0].tolist() if hasattr(state[0], "tolist") else list(state[0])
-                if state[1] is not None:
-                    cov = state[1].tolist() if hasattr(state[1], "tolist") else list(state[1])
             items.append(
                 (
                     ch["/dkf"],
                     enc.DKF,
-                    (t_s, st, cov, loop.acquired, tel.dkf_lost, tel.dkf_time_since_detection_s),
+                    (
+                        t_s,
+                        frame.dkf_state_px,
+                        frame.dkf_cov_diag,
+                        frame.acquired,
+                        tel.dkf_lost,
+                        tel.dkf_time_since_detection_s,
+                    ),
                 )
             )
         self._put_many(ns, items)
@@ -297,7 +322,7 @@ class SortieRecorder:
 
     def _scene(self, t_s: float, p, tp) -> None:
         stamp = _stamp(t_s)
-        d = self.sim.scenario.target.diameter_m
+        d = self.info.target_diameter_m
         ident = {"x": 0, "y": 0, "z": 0, "w": 1}
         self._json(
             "/scene",
@@ -342,11 +367,13 @@ class SortieRecorder:
             },
         )
 
-    def on_frame(self, t_s: float, frame: np.ndarray | None) -> None:
-        """A camera capture at ``t_s``: the frame (rendered mode) and the annotations (image
-        centre, DKF estimate, latest raw detection), each at its own fraction of captures."""
+    def image(self, time_s: float, frame: np.ndarray | None) -> None:
+        """A camera capture at ``time_s``: the frame (rendered mode) and the annotations
+        (image centre, DKF estimate, latest raw detection as of the last control tick), each at
+        its own fraction of captures."""
         if self.closed:
             return
+        t_s = max(time_s - self._t0, 0.0)
         self._frames += 1
         k = self._frames - 1
         if k % self.annotate_every and k % self.frame_every:
@@ -366,7 +393,7 @@ class SortieRecorder:
                 )
         if k % self.annotate_every:
             return
-        cam = self.sim.camera_model
+        cam = self.info.camera_model
         ts = '{"sec":%d,"nsec":%d}' % (sec, nsec)
         clear = '{"r":0,"g":0,"b":0,"a":0}'
         circles = [
@@ -374,7 +401,8 @@ class SortieRecorder:
             '"fill_color":%s,"outline_color":{"r":1,"g":1,"b":1,"a":1}}'
             % (ts, cam.cu_px, cam.cv_px, clear)
         ]
-        tel = self.sim.last_telemetry
+        last = self._last
+        tel = None if last is None else last.telemetry
         if tel is not None and tel.e_est_px is not None:
             circles.append(
                 '{"timestamp":%s,"position":{"x":%.2f,"y":%.2f},"diameter":18,"thickness":2.5,'
@@ -382,7 +410,7 @@ class SortieRecorder:
                 % (ts, cam.cu_px + tel.e_est_px[0], cam.cv_px + tel.e_est_px[1], clear)
             )
         points = ""
-        det = self.sim.last_detection
+        det = None if last is None else last.detection
         if det is not None:
             u, v = det.center_px
             points = (
@@ -397,11 +425,13 @@ class SortieRecorder:
             ('{"circles":[%s],"points":[%s]}' % (",".join(circles), points)).encode(),
         )
 
-    def finish(self, summary: dict[str, Any] | None, reason: str | None = None) -> None:
+    def finish(
+        self, time_s: float, summary: dict[str, Any] | None, reason: str | None = None
+    ) -> None:
         """Close the file with the outcome (or the reason the sortie stopped early)."""
-        if self.closed:
+        if self.closed or self._sink is None:
             return
-        t_end = self.sim.time_s
+        t_end = time_s - self._t0
         if summary is not None:
             level = "info" if summary.get("outcome") == "HIT" else "warning"
             miss = summary.get("miss_m")

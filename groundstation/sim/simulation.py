@@ -9,34 +9,25 @@ is found in continuous time inside every step (relative motion linear over the s
 
 from __future__ import annotations
 
-import enum
 import math
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample
+from onboard.enums import Outcome
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
 
-from ..scenario import Scenario
+from ..frames import Frame, SortieObserver, SortieStart
+from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
-
-
-class Outcome(str, enum.Enum):
-    HIT = "HIT"
-    MISS = "MISS"
-    TIMEOUT = "TIMEOUT"
-    TARGET_LOST = "TARGET_LOST"
-    CRASHED = "CRASHED"
-    DIVERGED = "DIVERGED"
-
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
 ACQUIRE_TIMEOUT_S = 1.0  # no detection fused by then: TARGET_LOST
@@ -68,19 +59,6 @@ class SortieResult:
         return d
 
 
-@dataclass
-class TickRecord:
-    """Truth and loop output at one control tick (for plots, the dashboard, campaigns)."""
-
-    time_s: float
-    vehicle_pos_m: tuple[float, float, float]
-    vehicle_vel_m_s: tuple[float, float, float]
-    target_pos_m: tuple[float, float, float]
-    range_m: float
-    normal_accel_m_s2: float  # actual, normal to the velocity
-    telemetry: ControlTelemetry = field(repr=False)
-
-
 def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool]:
     """Closest approach within one physics step, the relative position moving linearly from
     ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
@@ -104,7 +82,7 @@ class Simulation:
         camera_mode: str = "projected",
         gains: Gains | None = None,
         keep_records: bool = True,
-        log_dir: Path | None = None,
+        observers: Sequence[SortieObserver] = (),
         target_track: tuple[list[float], list[tuple[float, float, float]]] | None = None,
     ) -> None:
         self.scenario = scenario
@@ -147,7 +125,7 @@ class Simulation:
         self.step_index = 0
         self.outcome: Outcome | None = None
         self.keep_records = keep_records
-        self.records: list[TickRecord] = []
+        self.records: list[Frame] = []  # every control tick's frame, if keep_records
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
         tp, vp = self.target.p, self.vehicle.p
@@ -161,11 +139,12 @@ class Simulation:
         self.max_normal_accel_m_s2 = 0.0
         self.normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
-        self.recorder = None
-        if log_dir is not None:
-            from ..recording.writer import SortieRecorder
-
-            self.recorder = SortieRecorder(Path(log_dir), self)
+        self.observers = list(observers)
+        self.finished = False  # observers told the end
+        if self.observers:
+            info = self.start_info()
+            for o in self.observers:
+                o.start(info)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -178,6 +157,42 @@ class Simulation:
 
     def R_WC(self) -> np.ndarray:
         return quat_to_rotmat(self.vehicle.q) @ self.camera_model.R_BC
+
+    def start_info(self) -> SortieStart:
+        sc = self.scenario
+        return SortieStart(
+            scenario=sc.name,
+            law=self.law,
+            seed=self.seed,
+            camera=self.camera.mode,
+            camera_model=self.camera_model,
+            target_diameter_m=sc.target.diameter_m,
+            control_rate_hz=sc.sim.control_rate_hz,
+            gains=self.loop.gains,
+            scenario_source=sc.source,
+            scenario_toml=scenario_toml(sc),
+        )
+
+    def frame(self) -> Frame:
+        """The sortie now: at a control tick, what that tick computed; between ticks, the
+        truth now with the last tick's loop output."""
+        veh, loop = self.vehicle, self.loop
+        state = loop.dkf.state_vector()
+        return Frame(
+            time_s=self.time_s,
+            vehicle_p_enu_m=tuple(veh.p),
+            vehicle_q_wxyz=tuple(veh.q),
+            vehicle_v_enu_m_s=tuple(veh.v),
+            target_p_enu_m=tuple(self.target.p),
+            telemetry=self.last_telemetry,
+            normal_accel_m_s2=None if self.last_telemetry is None else self.normal_accel_m_s2,
+            detection=self.last_detection,
+            dkf_state_px=None if state is None else tuple(state[0].tolist()),
+            dkf_cov_diag=None if state is None else tuple(state[1].tolist()),
+            acquired=loop.acquired,
+            gains=loop.gains,
+            guard_trips=loop.guard_trips,
+        )
 
     # ------------------------------------------------------------------ stepping
     def step(self) -> None:
@@ -195,13 +210,12 @@ class Simulation:
                 np.array(self.target.p),
                 self.scenario.target.diameter_m,
             )
-            if self.recorder is not None:
-                self.recorder.on_frame(t, self.camera.last_frame)
+            for o in self.observers:
+                o.image(t, self.camera.last_frame)
         if k % self._control_div == 0:
             self._control_tick(t)
             if self._check_loop_outcome(t):
-                if self.recorder is not None:
-                    self.recorder.finish(self.result().to_json_dict())
+                self._tell_finish(None)
                 return
         wind = self.wind.velocity_m_s
         veh.step(self.dt_s, wind)
@@ -209,8 +223,8 @@ class Simulation:
         self.wind.step(self.dt_s)
         self.step_index = k + 1
         self._check_physics_outcome(t)
-        if self.outcome is not None and self.recorder is not None:
-            self.recorder.finish(self.result().to_json_dict())
+        if self.outcome is not None:
+            self._tell_finish(None)
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -236,21 +250,12 @@ class Simulation:
         if vv > 0.25 and a_n > self.max_normal_accel_m_s2:
             self.max_normal_accel_m_s2 = a_n
         self.last_telemetry = tel
-        if self.recorder is not None:
-            self.recorder.on_tick(t, tel, a_n)
-        if self.keep_records:
-            rel = self._rel
-            self.records.append(
-                TickRecord(
-                    t,
-                    tuple(veh.p),
-                    tuple(v),
-                    tuple(self.target.p),
-                    math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2),
-                    a_n,
-                    tel,
-                )
-            )
+        if self.observers or self.keep_records:  # frames cost only when someone reads them
+            frame = self.frame()
+            for o in self.observers:
+                o.frame(frame)
+            if self.keep_records:
+                self.records.append(frame)
 
     def _check_loop_outcome(self, t: float) -> bool:
         """Outcomes that can only change at a control tick: target lost, never acquired,
@@ -287,13 +292,18 @@ class Simulation:
         elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED
 
-    def close_recording(self, reason: str) -> None:
-        """End the recording of a sortie stopped before its outcome (operator reset)."""
-        if self.recorder is not None and not self.recorder.closed:
-            if self.outcome is not None:
-                self.recorder.finish(self.result().to_json_dict())
-            else:
-                self.recorder.finish(None, reason)
+    def _tell_finish(self, reason: str | None) -> None:
+        if self.finished:
+            return
+        self.finished = True
+        summary = None if self.outcome is None else self.result().to_json_dict()
+        for o in self.observers:
+            o.finish(self.time_s, summary, reason)
+
+    def close(self, reason: str) -> None:
+        """Tell the observers a sortie stopped before its outcome ends here (operator reset):
+        a recording keeps it, marked INCOMPLETE with the reason."""
+        self._tell_finish(reason)
 
     def step_control_period(self) -> None:
         """Advance to the next control tick (or the end)."""
@@ -334,8 +344,10 @@ def run_sortie(
     seed: int = 0,
     camera_mode: str = "projected",
     gains: Gains | None = None,
-    log_dir: Path | None = None,
+    observers: Sequence[SortieObserver] = (),
 ) -> SortieResult:
-    """Run one sortie to its outcome (recorded to ``log_dir`` if given)."""
-    sim = Simulation(scenario, law, seed, camera_mode, gains, keep_records=False, log_dir=log_dir)
+    """Run one sortie to its outcome (observed by ``observers``: a recorder, ...)."""
+    sim = Simulation(
+        scenario, law, seed, camera_mode, gains, keep_records=False, observers=observers
+    )
     return sim.run()

@@ -34,6 +34,7 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.control.attitude import attitude_command
+from onboard.enums import Outcome
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat, wrap_pi
 from onboard.link.px4 import (
@@ -207,9 +208,10 @@ class SitlVehicle:
             self.miss_m = dist
             self.closest = (ts + s * self.dt_s, speed)
         if closing and opening and dist < PASS_RADIUS_M:
-            self._finish("HIT" if self.miss_m <= self.hit_radius_m else "MISS")
+            hit = self.miss_m <= self.hit_radius_m
+            self._finish((Outcome.HIT if hit else Outcome.MISS).value)
         elif vp[2] <= 0.0:
-            self._finish("CRASHED")
+            self._finish(Outcome.CRASHED.value)
 
     def _finish(self, outcome: str) -> None:
         t_c, speed = self.closest or (self.sortie_time_s, 0.0)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..enums import GuidanceLaw as Law
 from ..gains import Gains
 from ..geometry import wrap_pi
 
@@ -158,10 +159,11 @@ def ibvs_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
 GuidanceLaw = Callable[[GuidanceInput, Gains], GuidanceOutput]
 
 GUIDANCE_LAWS: dict[str, GuidanceLaw] = {
-    "png": png_law,
-    "pg": pursuit_law,
-    "ibvs": ibvs_law,
+    Law.PNG.value: png_law,
+    Law.PG.value: pursuit_law,
+    Law.IBVS.value: ibvs_law,
 }
+assert set(GUIDANCE_LAWS) == {m.value for m in Law}
 
 
 def los_change(

@@ -261,7 +261,7 @@ class DelayedKalmanFilter:
         if not self._initialised or not self._buf or self._buf[-1].x is None:
             return None
         e = self._buf[-1]
-        return e.x.copy(), np.diag(e.P).copy()
+        return e.x.copy(), e.P.diagonal().copy()
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""

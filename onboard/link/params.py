@@ -14,6 +14,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..enums import GuidanceLaw, describe_codes
 from ..gains import GAIN_SPECS, GainError, Gains, check_ranges, ranged
 from .telemetry import LAW_CODES
 
@@ -25,7 +26,9 @@ else:  # pragma: no cover
 
 @dataclass(frozen=True)
 class RuntimeParams:
-    LAW: float = ranged(0, "-", 0, len(LAW_CODES) - 1, "guidance law: 0 png, 1 pg, 2 ibvs")
+    LAW: float = ranged(
+        0, "-", 0, len(LAW_CODES) - 1, "guidance law: " + describe_codes(GuidanceLaw)
+    )
     CAM_HFOV_DEG: float = ranged(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
     CAM_PITCH_DEG: float = ranged(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
     CAM_ROLL_DEG: float = ranged(0.0, "deg", -180.0, 180.0, "camera mount roll")

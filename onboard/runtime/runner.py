@@ -52,6 +52,7 @@ from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .state_machine import Inputs, OffboardStateMachine, Output, State
+from .timing import LoopTiming
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
@@ -145,14 +146,9 @@ class OnboardRuntime:
         self._events: deque[tuple[str, str]] = deque()
         self._last_event = deque(maxlen=1)
         self.commands_sent = 0
-        self.overruns = 0
         self._last_overrun_report = -1e9
-        self._periods: deque[tuple[float, float]] = deque()  # (tick start, period)
-        keep = int(600 * config.control_rate_hz)  # ten minutes of figures, not the whole day
-        self.periods_all: deque[float] = deque(maxlen=keep)
-        self.tick_work_s: deque[float] = deque(maxlen=keep)
-        self.latency_total_s: deque[float] = deque(maxlen=keep)
-        self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
+        # ten minutes of figures, not the whole day
+        self.timing = LoopTiming(self.period_s, keep=int(600 * config.control_rate_hz))
         self._pending_latency: list[tuple[float, float]] = []
         self._last_det = None
         self._last_forward: dict[tuple[int, str], float] = {}
@@ -380,8 +376,8 @@ class OnboardRuntime:
             "commands_sent": self.commands_sent,
             "target_size_frac": self.target_size_frac,
         }
-        if self.latency_total_s:
-            vals["latency_ms"] = 1000.0 * self.latency_total_s[-1]
+        if self.timing.latency_total_s:
+            vals["latency_ms"] = 1000.0 * self.timing.latency_total_s[-1]
         if loop is not None:
             cam = loop.camera
             vals.update(
@@ -390,48 +386,13 @@ class OnboardRuntime:
                 f_px=cam.f_px,
                 guard_trips=loop.guard_trips,
             )
-            det = self._last_det
-            if det is not None:
-                e = cam.error_px(*det.center_px)
-                vals.update(e_raw_u_px=e[0], e_raw_v_px=e[1], raw_capture_t_s=det.capture_time_s)
+            vals.update(tm.detection_values(self._last_det, cam))
+            state = loop.dkf.state_vector()
+            if state is not None:
+                vals.update(tm.dkf_values(state[0], state[1]))
         if tel is not None:
-            a, w = tel.accel_desired_enu_m_s2, tel.command.body_rates_flu_rad_s
-            vals.update(
-                loop_mode=tm.LOOP_MODE_CODES.index(tel.mode.value),
-                los_elev_rad=tel.los_elev_rad,
-                los_azim_rad=tel.los_azim_rad,
-                vel_elev_rad=tel.vel_elev_rad,
-                vel_azim_rad=tel.vel_azim_rad,
-                acc_des_e_m_s2=a[0],
-                acc_des_n_m_s2=a[1],
-                acc_des_u_m_s2=a[2],
-                acc_normal_des_m_s2=tel.accel_normal_desired_m_s2,
-                rate_cmd_x_rad_s=w[0],
-                rate_cmd_y_rad_s=w[1],
-                rate_cmd_z_rad_s=w[2],
-                thrust_cmd=tel.command.thrust_normalised,
-                yaw_rate_cmd_rad_s=tel.yaw_rate_cmd_rad_s,
-                dkf_since_det_s=min(tel.dkf_time_since_detection_s, 1e6),
-                dkf_lost=float(tel.dkf_lost),
-            )
-            if tel.e_est_px is not None:
-                vals.update(
-                    e_est_u_px=tel.e_est_px[0],
-                    e_est_v_px=tel.e_est_px[1],
-                    e_rate_u_px_s=tel.e_rate_est_px_s[0],
-                    e_rate_v_px_s=tel.e_rate_est_px_s[1],
-                )
-        if f.pos_enu_m is not None:
-            vals.update(
-                pos_e_m=f.pos_enu_m[0],
-                pos_n_m=f.pos_enu_m[1],
-                pos_u_m=f.pos_enu_m[2],
-                vel_e_m_s=f.vel_enu_m_s[0],
-                vel_n_m_s=f.vel_enu_m_s[1],
-                vel_u_m_s=f.vel_enu_m_s[2],
-            )
-        if f.q_wxyz is not None:
-            vals.update(q_w=f.q_wxyz[0], q_x=f.q_wxyz[1], q_y=f.q_wxyz[2], q_z=f.q_wxyz[3])
+            vals.update(tm.loop_values(tel))
+        vals.update(tm.pose_values(f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz))
         self.gcs.send(
             self.gcs.mav.debug_float_array_encode(
                 int(now * 1e6), tm.ARRAY_NAME.encode(), tm.ARRAY_ID, tm.pack(vals)
@@ -454,51 +415,19 @@ class OnboardRuntime:
                 )
 
     # ------------------------------------------------------------------ timing figures
+    @property
+    def overruns(self) -> int:
+        return self.timing.overruns
+
     def loop_rate_hz(self) -> float:
-        p = self._periods
-        if len(p) < 2:
-            return 0.0
-        span = p[-1][0] - p[0][0]
-        return (len(p) - 1) / span if span > 0 else 0.0
+        return self.timing.loop_rate_hz()
 
     def jitter_p99_ms(self) -> float:
-        if not self._periods:
-            return 0.0
-        dev = sorted(abs(per - self.period_s) for _, per in self._periods)
-        return 1000.0 * dev[min(len(dev) - 1, int(0.99 * len(dev)))]
+        return self.timing.jitter_p99_ms()
 
     def stats(self) -> dict:
-        def pct(xs, q):
-            if not xs:
-                return None
-            s = sorted(xs)
-            return s[min(len(s) - 1, int(q * len(s)))]
-
-        per = self.periods_all
-        jit = [abs(p - self.period_s) for p in per]
         return {
-            "ticks": len(per) + 1 if per else 0,
-            "rate_hz": (len(per) / sum(per)) if per else None,
-            "period_median_ms": None if not per else 1000 * pct(per, 0.5),
-            "jitter_p99_ms": None if not jit else 1000 * pct(jit, 0.99),
-            "jitter_max_ms": None if not jit else 1000 * max(jit),
-            "tick_work_median_ms": None
-            if not self.tick_work_s
-            else 1000 * pct(self.tick_work_s, 0.5),
-            "tick_work_p99_ms": None
-            if not self.tick_work_s
-            else 1000 * pct(self.tick_work_s, 0.99),
-            "overruns": self.overruns,
-            "latency_total_median_ms": None
-            if not self.latency_total_s
-            else 1000 * pct(self.latency_total_s, 0.5),
-            "latency_beyond_camera_median_ms": None
-            if not self.latency_beyond_camera_s
-            else 1000 * pct(self.latency_beyond_camera_s, 0.5),
-            "latency_beyond_camera_p99_ms": None
-            if not self.latency_beyond_camera_s
-            else 1000 * pct(self.latency_beyond_camera_s, 0.99),
-            "detections_fused": len(self.latency_total_s),
+            **self.timing.figures(),
             "frames": self.camera.frames,
             "commands_sent": self.commands_sent,
             "bad_frames_fc": self.fc.bad_frames,
@@ -564,8 +493,7 @@ class OnboardRuntime:
             sent_at = self.clock.now()
             if tel.mode is LoopMode.TRACKING and loop.last_fusion:
                 for cap, rec in self._pending_latency:
-                    self.latency_total_s.append(sent_at - cap)
-                    self.latency_beyond_camera_s.append(sent_at - rec)
+                    self.timing.command_sent(sent_at, cap, rec)
                 self._pending_latency.clear()
         if self.sm.state is not State.INTERCEPT or not tracking:
             self._pending_latency.clear()
@@ -602,28 +530,19 @@ class OnboardRuntime:
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         period = self.period_s
         next_t = time.perf_counter()
-        last_start = None
         end = None if duration_s is None else time.perf_counter() + duration_s
         try:
             while not self._stop.is_set():
                 start = time.perf_counter()
-                if last_start is not None:
-                    per = start - last_start
-                    self.periods_all.append(per)
-                    self._periods.append((start, per))
-                    while self._periods and self._periods[0][0] < start - 1.0:
-                        self._periods.popleft()
-                last_start = start
+                self.timing.tick_started(start)
                 self.tick()
                 work = time.perf_counter() - start
-                self.tick_work_s.append(work)
                 next_t += period
                 now = time.perf_counter()
-                if work > period:
-                    self.overruns += 1
-                    if now - self._last_overrun_report > 5.0:
-                        self._last_overrun_report = now
-                        self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
+                overran = self.timing.tick_done(work)
+                if overran and now - self._last_overrun_report > 5.0:
+                    self._last_overrun_report = now
+                    self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
                 if now > next_t + period:  # far behind (a stall): do not try to catch up
                     next_t = now
                 elif now < next_t:

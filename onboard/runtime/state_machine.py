@@ -14,6 +14,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
+from ..enums import RuntimeState
+
 STREAM_BEFORE_OFFBOARD_S = 0.3
 START_TIMEOUT_S = 3.0  # PX4 has not entered offboard by then: give up, back to ready
 LINK_TIMEOUT_S = 0.5  # the flight controller silent this long: link lost
@@ -21,15 +23,7 @@ OFFBOARD_EXIT_GRACE_S = 0.3  # PX4 out of offboard for this long while intercept
 REQUEST_EVERY_S = 0.5  # repeat arm / mode requests this often until PX4 complies
 
 
-class State(enum.Enum):
-    LINK_DOWN = "link_down"
-    WAITING_TARGET = "waiting_target"
-    READY = "ready"
-    STARTING = "starting"
-    INTERCEPT = "intercept"
-    BRAKING = "braking"
-    FINISHED = "finished"
-    LINK_LOST = "link_lost"
+State = RuntimeState  # declared in onboard.enums
 
 
 class Output(enum.Enum):

@@ -1,0 +1,80 @@
+"""A live sortie's recording: from the accepted start until the onboard component reports the
+sortie finished (or the link is lost). It is told the frames live mode builds and the events
+heard, hands them to the recorder, and keeps the closest approach."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+from ..frames import Frame, SortieEvent, SortieStart
+from ..recording.writer import SortieRecorder
+from ..sim.simulation import closest_in_step
+
+
+class LiveRecording:
+    def __init__(self, log_dir: Path, start: SortieStart) -> None:
+        self.law = start.law
+        self.t0_s = self.last_s = start.t0_s  # onboard clock: start, last recorded frame
+        self.acquired = False
+        self.miss_m: float | None = None
+        self._events: list[SortieEvent] = []  # heard since the last recorded frame
+        self._last_frame: Frame | None = None
+        self._rel_prev: list[float] | None = None
+        # every tick (50 Hz) and annotation; no camera frames reach the ground
+        self.recorder = SortieRecorder(
+            Path(log_dir), record_every=1, annotate_every=1, frame_every=1000000
+        )
+        self.recorder.start(start)
+
+    @property
+    def elapsed_s(self) -> float:
+        return max(self.last_s - self.t0_s, 0.0)
+
+    def status(self) -> dict[str, Any]:
+        rec = self.recorder
+        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+
+    def event(self, level: str, message: str) -> None:
+        """Recorded with the next frame, at the time of the last one."""
+        self._events.append(SortieEvent(self.last_s, level, message))
+
+    def record(self, frame: Frame) -> None:
+        frame = dataclasses.replace(frame, events=tuple(self._events))
+        self._events = []
+        self.acquired = frame.acquired
+        self.last_s = frame.time_s
+        self._last_frame = frame
+        self.recorder.frame(frame)
+        if int(frame.time_s * 50) % 5 == 0:  # annotations at about 10 Hz
+            self.recorder.image(frame.time_s, None)
+
+    def track_miss(self, rel: list[float] | None) -> None:
+        """Closest approach: ``rel`` (target minus vehicle at this control tick, m; None when
+        either is unknown), the relative motion linear between ticks (the simulator's
+        continuous-time test)."""
+        if rel is None:
+            self._rel_prev = None
+            return
+        if self._rel_prev is None:
+            dist = math.sqrt(sum(c * c for c in rel))
+        else:
+            dist = closest_in_step(self._rel_prev, rel)[0]
+        self._rel_prev = rel
+        self.miss_m = dist if self.miss_m is None else min(self.miss_m, dist)
+
+    def finish(self, outcome: str, reason: str) -> None:
+        """Close the file: events heard after the last frame, then the outcome."""
+        if self._events and self._last_frame is not None:
+            self.recorder.frame(dataclasses.replace(self._last_frame, events=tuple(self._events)))
+            self._events = []
+        summary = {
+            "outcome": outcome,
+            "miss_m": self.miss_m,
+            "intercept_time_s": self.elapsed_s,
+            "reason": reason,
+            "law": self.law,
+        }
+        self.recorder.finish(self.last_s, summary)

@@ -1,0 +1,128 @@
+"""``/api/logs`` and ``/api/replay``: the recorded sorties (list, inspect, download, delete
+with confirmation), replay and compare in the dashboard, and re-fly with another law."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException
+from fastapi.responses import FileResponse
+
+from onboard.gains import GainError
+
+from ..recording.reader import LogError, LogIndex, scenario_attachment
+from ..scenario import ScenarioError, parse_scenario, with_changes
+from ..sim.camera import CAMERA_MODES
+from .api_models import Deleted, ReflyRequest, Status
+from .replay import ReplayPlayer
+from .routes_sortie import command
+from .session import SessionError, SortieConfig
+
+
+def router(session: Any, logs: LogIndex) -> APIRouter:
+    r = APIRouter()
+
+    def log_path(name: str) -> Path:
+        try:
+            path = logs.resolve(name)
+        except LogError as exc:
+            raise HTTPException(400, str(exc)) from None
+        if not path.is_file():
+            raise HTTPException(404, f"no recorded sortie named {name!r}")
+        return path
+
+    def player(name: str) -> ReplayPlayer:
+        try:
+            return ReplayPlayer(log_path(name))
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @r.get("/api/logs", tags=["logs"])
+    async def list_logs() -> list[dict[str, Any]]:
+        return await asyncio.to_thread(logs.list)
+
+    @r.get("/api/logs/{name}", tags=["logs"])
+    async def log_info(name: str) -> dict[str, Any]:
+        try:
+            return logs.info(log_path(name).name).to_json_dict()
+        except LogError as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @r.get("/api/logs/{name}/series", tags=["logs"])
+    async def log_series(name: str) -> dict[str, Any]:
+        """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns,
+        every numeric /control field, the timeline's markers and who the sortie is."""
+        return (await asyncio.to_thread(player, name)).series()
+
+    @r.get("/api/logs/{name}/file", tags=["logs"])
+    async def download_log(name: str) -> FileResponse:
+        path = log_path(name)
+        return FileResponse(path, media_type="application/octet-stream", filename=path.name)
+
+    @r.delete("/api/logs/{name}", tags=["logs"])
+    async def delete_log(name: str, confirm: str = "") -> Deleted:
+        path = log_path(name)
+        if confirm != name:
+            raise HTTPException(400, "to delete, repeat the file name in ?confirm=")
+        rec = session.recording
+        if rec is not None and rec["file"] == name and not rec["closed"]:
+            raise HTTPException(409, "this sortie is still being recorded")
+        path.unlink()
+        return Deleted(deleted=name)
+
+    @r.post("/api/replay/open", tags=["replay"])
+    async def replay_open(name: Annotated[str, Body(embed=True)]) -> Status:
+        path = log_path(name)
+        try:
+            await asyncio.to_thread(session.open_replay, path)
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        return session.status()
+
+    @r.post("/api/replay/compare", tags=["replay"])
+    async def replay_compare(name: Annotated[str, Body(embed=True)]) -> Status:
+        path = log_path(name)
+        try:
+            await asyncio.to_thread(session.compare_with, path)
+        except (LogError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        except SessionError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return session.status()
+
+    @r.post("/api/replay/{action}", tags=["replay"])
+    async def replay_action(
+        action: str, t_s: Annotated[float | None, Body(embed=True)] = None
+    ) -> Status:
+        """``play``, ``pause``, ``seek`` (to ``t_s``) or ``closest`` (closest approach)."""
+        if action not in ("play", "pause", "seek", "closest"):
+            raise HTTPException(404, f"unknown replay action {action!r}")
+        if action == "seek" and (t_s is None or not math.isfinite(t_s)):
+            raise HTTPException(422, "seek needs a finite t_s")
+        return command(session, session.replay_command, action, t_s)
+
+    @r.post("/api/logs/{name}/refly", tags=["logs"])
+    async def refly(name: str, req: ReflyRequest) -> Status:
+        """Fly the recorded target track again (another law, seed or gains), recorded, with
+        the old sortie overlaid."""
+        rp = await asyncio.to_thread(player, name)
+        text = scenario_attachment(rp.path)
+        if not text:
+            raise HTTPException(422, f"{name}: no scenario recorded with it")
+        try:
+            scenario = parse_scenario(text, source=name)
+            # the gains it flew (edits included), so the re-fly flies the same sortie
+            flown = rp.describe()["gains"] or scenario.gains
+            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
+        except (ScenarioError, GainError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        camera = rp.info.camera if rp.info.camera in CAMERA_MODES else "projected"
+        seed = req.seed if req.seed is not None else (rp.info.seed or 0)
+        config = SortieConfig(scenario, req.law, seed, camera, req.speed)
+        command(session, session.start, config, (rp.tt, rp.tp))
+        return command(session, session.compare_with, rp.path)
+
+    return r

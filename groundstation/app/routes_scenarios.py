@@ -1,0 +1,51 @@
+"""``/api/meta`` and ``/api/scenarios``: what the page can choose from (read-only)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Body, HTTPException
+
+from onboard import enums
+
+from ..scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+from ..sim.camera import CAMERA_MODES
+from .api_models import Meta, ScenarioCheck, ScenarioSummary, ScenarioText
+from .session import SPEEDS
+
+
+def router() -> APIRouter:
+    r = APIRouter()
+
+    @r.get("/api/meta", tags=["meta"])
+    async def get_meta() -> Meta:
+        """The option lists the page offers, from their one declaration (onboard/enums.py,
+        the simulator's camera modes, the session's speeds)."""
+        return Meta(**enums.meta(), camera_modes=list(CAMERA_MODES), speeds=list(SPEEDS))
+
+    @r.get("/api/scenarios", tags=["scenarios"])
+    async def list_scenarios() -> list[ScenarioSummary]:
+        out = []
+        for p in shipped_scenarios():
+            s = load_scenario(p)
+            out.append(
+                ScenarioSummary(name=s.name, motion=s.target.motion, description=s.description)
+            )
+        return out
+
+    @r.get("/api/scenarios/{name}", tags=["scenarios"])
+    async def get_scenario(name: str) -> ScenarioText:
+        names = {p.stem: p for p in shipped_scenarios()}
+        if name not in names:
+            raise HTTPException(404, f"unknown scenario {name!r}")
+        return ScenarioText(name=name, toml=names[name].read_text(encoding="utf-8"))
+
+    @r.post("/api/scenarios/validate", tags=["scenarios"])
+    async def validate_scenario(toml: Annotated[str, Body(embed=True)]) -> ScenarioCheck:
+        try:
+            s = parse_scenario(toml, source="uploaded scenario")
+        except ScenarioError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return ScenarioCheck(ok=True, name=s.name, motion=s.target.motion)
+
+    return r

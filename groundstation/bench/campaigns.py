@@ -1,0 +1,50 @@
+"""``groundstation bench --campaigns``: campaign throughput with 1 and 2 workers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from onboard.enums import GuidanceLaw, codes
+
+
+def run_campaign_bench(as_json: bool = False) -> int:
+    """Campaign throughput (simulated sortie-seconds per wall second) with 1 and 2 workers,
+    and the wall time of the full static campaign (50 targets x 3 laws, projected)."""
+    import tempfile
+
+    from ..campaigns.driver import run_campaign
+    from ..campaigns.runner import default_workers
+
+    figures: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for workers in (1, 2):
+            res = run_campaign(
+                "static", n=20, workers=workers, progress=False, out=Path(tmp) / f"w{workers}"
+            )
+            figures[f"throughput_{workers}_workers"] = res["meta"]["throughput_sim_s_per_s"]
+            figures[f"wall_s_{workers}_workers"] = res["meta"]["wall_s"]
+        res = run_campaign(
+            "static", workers=default_workers(), progress=False, out=Path(tmp) / "full"
+        )
+        figures["static50_wall_s"] = res["meta"]["wall_s"]
+        figures["static50_sorties"] = res["meta"]["sorties"]
+        figures["static50_workers"] = res["meta"]["workers"]
+    figures["speedup_2_vs_1"] = figures["throughput_2_workers"] / figures["throughput_1_workers"]
+    if as_json:
+        print(json.dumps(figures, indent=2))
+        return 0
+    print("Campaign benchmark: static, projected, laws " + ",".join(codes(GuidanceLaw)))
+    for w in (1, 2):
+        print(
+            f"  n=20 (60 sorties), {w} worker(s): {figures[f'throughput_{w}_workers']:6.1f} "
+            f"sortie-s per wall s ({figures[f'wall_s_{w}_workers']:.1f} s wall)"
+        )
+    print(f"  speed-up 2 vs 1 workers: {figures['speedup_2_vs_1']:.2f}x")
+    ok = "met" if figures["static50_wall_s"] <= 60.0 else "NOT MET"
+    print(
+        f"  full static campaign ({figures['static50_sorties']} sorties, "
+        f"{figures['static50_workers']} workers): {figures['static50_wall_s']:.1f} s wall"
+        f"  target <= 60 s: {ok}"
+    )
+    return 0

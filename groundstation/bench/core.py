@@ -1,0 +1,169 @@
+"""``groundstation bench``: speed and memory figures of the interception core.
+
+Prints the simulator's real-time factor per camera mode, the control tick's median and p99
+time, the detector's and the renderer's time per 640x480 frame, and peak memory. Pinned to one
+core (and OpenCV to one thread) unless told otherwise. Figures are medians over repeated
+sorties measured in this one run; the machine is shared, so compare ratios, not single runs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import statistics
+import time
+
+import cv2
+import numpy as np
+
+from ..scenario import load_scenario
+from ..sim.simulation import Simulation
+
+BENCH_SCENARIOS = ("static-ahead-20m", "cv-top-to-bottom")
+TARGETS = {
+    "rtf_projected": 50.0,
+    "rtf_rendered": 10.0,
+    "tick_median_ms": 0.3,
+    "detector_median_ms": 3.0,
+}
+
+
+def _pin_one_core() -> str:
+    cv2.setNumThreads(1)
+    if hasattr(os, "sched_setaffinity"):
+        cpu = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpu})
+        return f"pinned to CPU {cpu}, OpenCV 1 thread"
+    return "OpenCV 1 thread (no CPU pinning on this OS)"
+
+
+def _real_time_factors(mode: str, repeat: int) -> list[float]:
+    rtfs = []
+    for name in BENCH_SCENARIOS:
+        scenario = load_scenario(name)
+        for seed in range(repeat):
+            sim = Simulation(scenario, "png", seed, mode, keep_records=False)
+            t0 = time.perf_counter()
+            result = sim.run()
+            rtfs.append(result.sim_time_s / (time.perf_counter() - t0))
+    return rtfs
+
+
+def _tick_times_ms(repeat: int) -> list[float]:
+    times = []
+    for seed in range(repeat):
+        sim = Simulation(load_scenario("cv-top-to-bottom"), "png", seed, keep_records=False)
+        tick = sim.loop.tick
+
+        def timed(state, _tick=tick):
+            t0 = time.perf_counter()
+            out = _tick(state)
+            times.append((time.perf_counter() - t0) * 1e3)
+            return out
+
+        sim.loop.tick = timed  # type: ignore[method-assign]
+        sim.run()
+    return times
+
+
+def _frame_times_ms() -> tuple[list[float], list[float], int]:
+    """Renderer and detector time per frame, measured inside a rendered sortie."""
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, "rendered", keep_records=False)
+    renderer, detector = sim.camera.renderer, sim.camera.detector
+    render_ms, detect_ms, found = [], [], [0]
+    render, detect = renderer.render, detector.detect
+
+    def timed_render(*a, **k):
+        t0 = time.perf_counter()
+        f = render(*a, **k)
+        render_ms.append((time.perf_counter() - t0) * 1e3)
+        return f
+
+    def timed_detect(frame, t):
+        t0 = time.perf_counter()
+        det = detect(frame, t)
+        detect_ms.append((time.perf_counter() - t0) * 1e3)
+        found[0] += det is not None
+        return det
+
+    renderer.render = timed_render  # type: ignore[method-assign]
+    detector.detect = timed_detect  # type: ignore[method-assign]
+    sim.run()
+    return detect_ms, render_ms, found[0]
+
+
+def _p99(xs: list[float]) -> float:
+    return float(np.percentile(xs, 99))
+
+
+def run_bench(repeat: int = 5, pin_one_core: bool = True, as_json: bool = False) -> int:
+    where = _pin_one_core() if pin_one_core else "all cores"
+    _real_time_factors("projected", 1)  # warm up imports and caches
+    rtf_p = _real_time_factors("projected", repeat)
+    rtf_r = _real_time_factors("rendered", max(1, repeat // 2))
+    ticks = _tick_times_ms(repeat)
+    detect_ms, render_ms, found = _frame_times_ms()
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    figures = {
+        "where": where,
+        "rtf_projected": statistics.median(rtf_p),
+        "rtf_projected_min": min(rtf_p),
+        "rtf_rendered": statistics.median(rtf_r),
+        "rtf_rendered_min": min(rtf_r),
+        "tick_median_ms": statistics.median(ticks),
+        "tick_p99_ms": _p99(ticks),
+        "ticks": len(ticks),
+        "detector_median_ms": statistics.median(detect_ms),
+        "detector_p99_ms": _p99(detect_ms),
+        "render_median_ms": statistics.median(render_ms),
+        "frames": len(detect_ms),
+        "frames_with_detection": found,
+        "peak_rss_mb": peak_mb,
+    }
+    if as_json:
+        print(json.dumps(figures, indent=2))
+        return 0
+    print(f"Peregrine core benchmark ({where}); scenarios {', '.join(BENCH_SCENARIOS)}")
+    rows = [
+        (
+            "real-time factor, projected",
+            "rtf_projected",
+            "x",
+            f"min {figures['rtf_projected_min']:.1f}x",
+        ),
+        (
+            "real-time factor, rendered",
+            "rtf_rendered",
+            "x",
+            f"min {figures['rtf_rendered_min']:.1f}x",
+        ),
+        (
+            "control tick, median",
+            "tick_median_ms",
+            " ms",
+            f"p99 {figures['tick_p99_ms']:.3f} ms over {len(ticks)} ticks",
+        ),
+        (
+            "detector per 640x480 frame",
+            "detector_median_ms",
+            " ms",
+            f"p99 {figures['detector_p99_ms']:.2f} ms, {len(detect_ms)} frames",
+        ),
+        ("renderer per frame", "render_median_ms", " ms", ""),
+        ("peak memory (RSS)", "peak_rss_mb", " MB", "whole benchmark process"),
+    ]
+    for label, key, unit, extra in rows:
+        value = figures[key]
+        target = TARGETS.get(key)
+        verdict = ""
+        if target is not None:
+            higher_is_better = key.startswith("rtf")
+            ok = value >= target if higher_is_better else value <= target
+            sign = ">=" if higher_is_better else "<="
+            verdict = f"  target {sign} {target:g}{unit.strip()}: {'met' if ok else 'NOT MET'}"
+        print(f"  {label:30s} {value:9.3f}{unit:3s} {extra}{verdict}")
+    return 0
+
+
+# ---------------------------------------------------------------------- onboard vs SITL

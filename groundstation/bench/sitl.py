@@ -1,0 +1,131 @@
+"""``groundstation bench --sitl``: the onboard runtime against the SITL vehicle."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+from ..scenario import load_scenario
+
+
+def _proc_cpu_s(pid: int) -> float | None:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _proc_peak_rss_mb(pid: int) -> float | None:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+def run_sitl_bench(seconds: float = 20.0, as_json: bool = False) -> int:
+    """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
+    (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
+    this process drains: loop rate and jitter, capture-to-command latency, and the onboard
+    process's CPU share and peak memory (from /proc)."""
+    import socket
+    import subprocess
+    import sys
+    import tempfile
+
+    from onboard.link.px4 import MavLink
+
+    socks = [socket.socket(socket.AF_INET, k) for k in (socket.SOCK_DGRAM,) * 2]
+    socks.append(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+    for sock in socks:  # held together, so the three ports differ
+        sock.bind(("127.0.0.1", 0))
+    fc, gcs, cam = (sock.getsockname()[1] for sock in socks)
+    for sock in socks:
+        sock.close()
+    delay_s = load_scenario("cv-top-to-bottom").camera.delay_s
+    with tempfile.TemporaryDirectory() as tmp:
+        stats_path = Path(tmp) / "stats.json"
+        sitl_log = Path(tmp) / "sitl.log"
+        sitl = subprocess.Popen(
+            [sys.executable, "-m", "groundstation", "sitl", "cv-top-to-bottom",
+             "--mavlink", f"udpin:127.0.0.1:{fc}", "--camera-port", str(cam)],
+            stdout=sitl_log.open("w"), stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        ground = MavLink(f"udpin:127.0.0.1:{gcs}", 255, 190)
+        onboard = subprocess.Popen(
+            [sys.executable, "-m", "onboard", "run", "--mavlink", f"udpout:127.0.0.1:{fc}",
+             "--camera", f"sitl://127.0.0.1:{cam}", "--gcs", f"udpout:127.0.0.1:{gcs}",
+             "--sitl-auto-start", "--duration", str(seconds), "--stats", str(stats_path)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        t0 = time.perf_counter()
+        cpu = peak = None
+        received = 0
+        while onboard.poll() is None:
+            received += len(ground.poll())
+            c, m = _proc_cpu_s(onboard.pid), _proc_peak_rss_mb(onboard.pid)
+            wall = time.perf_counter() - t0
+            cpu, peak = (c, wall) if c is not None else cpu, m if m is not None else peak
+            time.sleep(0.05)
+        sitl.terminate()
+        sitl.wait(10)
+        ground.close()
+        stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
+        result = None
+        for line in sitl_log.read_text().splitlines():
+            if line.startswith("SITL_RESULT "):
+                result = json.loads(line.removeprefix("SITL_RESULT "))
+    cpu_s, wall_s = cpu if cpu else (None, None)
+    figures = {
+        "seconds": seconds,
+        "loop_rate_hz": stats.get("rate_hz"),
+        "jitter_p99_ms": stats.get("jitter_p99_ms"),
+        "jitter_max_ms": stats.get("jitter_max_ms"),
+        "tick_work_median_ms": stats.get("tick_work_median_ms"),
+        "tick_work_p99_ms": stats.get("tick_work_p99_ms"),
+        "overruns": stats.get("overruns"),
+        "camera_delay_s": delay_s,
+        "capture_to_command_median_ms": stats.get("latency_total_median_ms"),
+        "beyond_camera_median_ms": stats.get("latency_beyond_camera_median_ms"),
+        "beyond_camera_p99_ms": stats.get("latency_beyond_camera_p99_ms"),
+        "detections_fused": stats.get("detections_fused"),
+        "cpu_share_of_one_core": None if cpu_s is None else cpu_s / wall_s,
+        "peak_rss_mb": peak,
+        "ground_messages": received,
+        "sitl_result": result,
+    }
+    if as_json:
+        print(json.dumps(figures, indent=2))
+        return 0
+
+    def f(x, d=2):
+        return "—" if x is None else f"{x:.{d}f}"
+
+    print(f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept")
+    print(f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target 200")
+    print(
+        f"  period jitter p99 {f(figures['jitter_p99_ms'])} ms (max {f(figures['jitter_max_ms'])})"
+        "  target <= 2 ms"
+    )
+    print(
+        f"  tick work median {f(figures['tick_work_median_ms'])} ms, p99 "
+        f"{f(figures['tick_work_p99_ms'])} ms, overruns {figures['overruns']}"
+    )
+    print(
+        f"  capture-to-command median {f(figures['capture_to_command_median_ms'], 1)} ms, of "
+        f"which beyond the camera's own delay ({1000 * delay_s:.0f} ms): median "
+        f"{f(figures['beyond_camera_median_ms'])} ms, p99 {f(figures['beyond_camera_p99_ms'])} ms"
+        "  target <= 10 ms"
+    )
+    print(
+        f"  onboard process: CPU {f(100 * figures['cpu_share_of_one_core'] if cpu_s else None, 0)}"
+        f" % of one core, peak memory {f(peak, 0)} MB  target <= 300 MB"
+    )
+    if result:
+        print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")
+    return 0

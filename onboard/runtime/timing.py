@@ -1,0 +1,85 @@
+"""The control thread's timing figures: achieved rate and jitter over the last second (sent
+in the telemetry), and over the run (ten minutes at most) the period, the work per tick, the
+overruns and the capture-to-command latency (``onboard run --stats``, ``groundstation bench
+--sitl``). Pure bookkeeping: the runner hands it the times."""
+
+from __future__ import annotations
+
+from collections import deque
+
+
+def _pct(xs, q: float) -> float | None:
+    if not xs:
+        return None
+    s = sorted(xs)
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+def _ms(x: float | None) -> float | None:
+    return None if x is None else 1000.0 * x
+
+
+class LoopTiming:
+    def __init__(self, period_s: float, keep: int) -> None:
+        self.period_s = period_s
+        self.overruns = 0
+        self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
+        self.periods_all: deque[float] = deque(maxlen=keep)
+        self.tick_work_s: deque[float] = deque(maxlen=keep)
+        self.latency_total_s: deque[float] = deque(maxlen=keep)
+        self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
+        self._last_start: float | None = None
+
+    def tick_started(self, start_s: float) -> None:
+        if self._last_start is not None:
+            per = start_s - self._last_start
+            self.periods_all.append(per)
+            self._recent.append((start_s, per))
+            while self._recent and self._recent[0][0] < start_s - 1.0:
+                self._recent.popleft()
+        self._last_start = start_s
+
+    def tick_done(self, work_s: float) -> bool:
+        """Record a tick's work; True when it overran its period."""
+        self.tick_work_s.append(work_s)
+        if work_s > self.period_s:
+            self.overruns += 1
+            return True
+        return False
+
+    def command_sent(self, sent_s: float, capture_s: float, received_s: float) -> None:
+        """A command computed from a detection captured at ``capture_s`` and received from the
+        camera at ``received_s`` went out at ``sent_s``."""
+        self.latency_total_s.append(sent_s - capture_s)
+        self.latency_beyond_camera_s.append(sent_s - received_s)
+
+    def loop_rate_hz(self) -> float:
+        p = self._recent
+        if len(p) < 2:
+            return 0.0
+        span = p[-1][0] - p[0][0]
+        return (len(p) - 1) / span if span > 0 else 0.0
+
+    def jitter_p99_ms(self) -> float:
+        if not self._recent:
+            return 0.0
+        dev = sorted(abs(per - self.period_s) for _, per in self._recent)
+        return 1000.0 * dev[min(len(dev) - 1, int(0.99 * len(dev)))]
+
+    def figures(self) -> dict:
+        per = self.periods_all
+        jit = [abs(p - self.period_s) for p in per]
+        return {
+            "ticks": len(per) + 1 if per else 0,
+            "rate_hz": (len(per) / sum(per)) if per else None,
+            "period_median_ms": _ms(_pct(per, 0.5)),
+            "jitter_p99_ms": _ms(_pct(jit, 0.99)),
+            "jitter_max_ms": None if not jit else 1000 * max(jit),
+            "tick_work_median_ms": _ms(_pct(self.tick_work_s, 0.5)),
+            "tick_work_p99_ms": _ms(_pct(self.tick_work_s, 0.99)),
+            "overruns": self.overruns,
+            "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
+            "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
+            "latency_beyond_camera_p99_ms": _ms(_pct(self.latency_beyond_camera_s, 0.99)),
+            "detections_fused": len(self.latency_total_s),
+        }
