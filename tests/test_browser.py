@@ -299,9 +299,8 @@ def test_option_lists_come_from_the_api_and_the_chosen_law_flies(station, browse
     page.select_option("#law", "pg")
     page.select_option("#speed", "max")
     page.click("#btn-start")
-    page.wait_for_function(  # this sortie's outcome, not the replay's left on screen
-        "window.peregrine.snap.status.state === 'finished'"
-        " && document.querySelector('#st-outcome').textContent.includes('miss')",
+    page.wait_for_function(  # this sortie's end, not an earlier one still on screen
+        "(s => s && s.status.state === 'finished' && s.status.law === 'pg')(window.peregrine.snap)",
         timeout=30000,
     )
     assert station.session.sim.law == "pg"  # what flew is what was chosen
