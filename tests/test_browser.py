@@ -88,10 +88,13 @@ def test_operator_flies_cv_and_edits_a_gain(station, browser, tmp_path):
     applied = float(re.search(r"t = ([\d.]+)", page.text_content("#gains-applied")).group(1))
     assert 0.5 < applied < 10.0
 
-    # the views update while it flies
-    n0 = page.evaluate("window.peregrine.updates")
-    page.wait_for_timeout(1000)
-    assert page.evaluate("window.peregrine.updates") - n0 >= 15
+    # the views follow the sortie while it flies (the rate is `groundstation bench
+    # --dashboard`'s figure, not a timed assertion here: a loaded machine must not fail it)
+    n0, t0 = page.evaluate("[window.peregrine.updates, window.peregrine.shownT]")
+    page.wait_for_function(
+        f"window.peregrine.updates >= {n0 + 5} && window.peregrine.shownT > {t0 + 0.3}",
+        timeout=10000,
+    )
     page.select_option("#speed", "max")
     page.wait_for_function(
         "document.querySelector('#st-outcome').textContent.includes('miss')", timeout=30000
