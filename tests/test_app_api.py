@@ -272,8 +272,13 @@ def test_dashboard_records_lists_replays_and_refiles(client, gs, tmp_path):
     assert st["outcome"] == "HIT"
     logs = {r["name"]: r for r in client.get("/api/logs").json()}
     assert len(logs) == 2 and {r["law"] for r in logs.values()} == {"png", "pg"}
+    refl = next(r for n, r in logs.items() if n != name)
+    assert refl["reflown_from"] == name and logs[name]["reflown_from"] is None  # lineage
+    assert 0 < refl["intercept_time_s"] <= refl["duration_s"] + 0.05
     series = client.get(f"/api/logs/{name}/series").json()
-    assert len(series["t_s"]) > 50 and len(series["range_m"]) == len(series["t_s"])
+    cols = series["columns"]
+    assert len(series["t_s"]) > 50 and len(cols["range_m"]) == len(series["t_s"])
+    assert series["sortie"]["law"] == "png" and series["events"][-1][1] in ("closest", "event")
     # compare two recordings
     client.post("/api/replay/open", json={"name": name})
     other = next(n for n in logs if n != name)

@@ -1,6 +1,7 @@
 """The dashboard in headless Chromium (Playwright driving Debian's chromium): the token is
 required, a sortie runs, a gain edited on the page takes effect, the outcome shows."""
 
+import os
 import re
 import shutil
 import urllib.request
@@ -10,7 +11,10 @@ import pytest
 from groundstation.app.server import GroundStation
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None and not os.environ.get("CI"),
+    reason="Debian's chromium is not installed (with CI set this is a failure)",
+)
 ARGS = [
     "--no-sandbox",
     "--enable-unsafe-swiftshader",
@@ -34,6 +38,8 @@ def station(tmp_path_factory):
 def browser():
     from playwright.sync_api import sync_playwright
 
+    if CHROMIUM is None:
+        pytest.fail("CI is set and Debian's chromium is not installed")
     with sync_playwright() as p:
         b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         yield b
@@ -82,10 +88,13 @@ def test_operator_flies_cv_and_edits_a_gain(station, browser, tmp_path):
     applied = float(re.search(r"t = ([\d.]+)", page.text_content("#gains-applied")).group(1))
     assert 0.5 < applied < 10.0
 
-    # the views update while it flies
-    n0 = page.evaluate("window.peregrine.updates")
-    page.wait_for_timeout(1000)
-    assert page.evaluate("window.peregrine.updates") - n0 >= 15
+    # the views follow the sortie while it flies (the rate is `groundstation bench
+    # --dashboard`'s figure, not a timed assertion here: a loaded machine must not fail it)
+    n0, t0 = page.evaluate("[window.peregrine.updates, window.peregrine.shownT]")
+    page.wait_for_function(
+        f"window.peregrine.updates >= {n0 + 5} && window.peregrine.shownT > {t0 + 0.3}",
+        timeout=10000,
+    )
     page.select_option("#speed", "max")
     page.wait_for_function(
         "document.querySelector('#st-outcome').textContent.includes('miss')", timeout=30000
@@ -103,7 +112,7 @@ def test_viser_scene_connects_through_the_proxy(station, browser):
     page = browser.new_page()
     page.goto(station.url())
     frame = page.frame_locator("#viser")
-    frame.locator("text=Follow vehicle").wait_for(timeout=20000)  # GUI from the server
+    frame.locator("text=View").first.wait_for(timeout=20000)  # per-viewer GUI from the server
     page.close()
 
 

@@ -26,79 +26,275 @@ function msg(el, text, ok) {
   el.className = "msg " + (ok ? "ok" : "err");
 }
 
-// ------------------------------------------------------------------ plots
-class Plot {
-  constructor(canvas, title, unit, series, windowS = 15) {
-    this.c = canvas; this.ctx = canvas.getContext("2d");
-    this.title = title; this.unit = unit; this.series = series; this.windowS = windowS;
-    this.data = series.map(() => []);
-  }
-  clear() { this.data = this.series.map(() => []); }
-  setOverlay(rows) { this.overlay = rows; } // [[t, v] ...] per series, another sortie
-  push(t, snap) {
-    this.series.forEach((s, i) => {
-      const v = s.get(snap);
-      if (v !== null && v !== undefined && isFinite(v)) this.data[i].push([t, v]);
-      const d = this.data[i];
-      while (d.length && d[0][0] < t - this.windowS) d.shift();
-    });
-  }
-  draw(tNow) {
-    const { ctx, c } = this; const w = c.width, h = c.height;
-    const L = 44, R = 8, T = 18, B = 20;
-    ctx.clearRect(0, 0, w, h);
-    let lo = Infinity, hi = -Infinity;
-    for (const d of this.data) for (const [, v] of d) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
-    for (const d of this.overlay || []) for (const [t, v] of d) if (t >= tNow - this.windowS && t <= tNow + 1) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
-    if (!isFinite(lo)) { lo = 0; hi = 1; }
-    if (hi - lo < 1e-6) { hi += 0.5; lo -= 0.5; }
-    const pad = 0.08 * (hi - lo); lo -= pad; hi += pad;
-    const t1 = Math.max(tNow, this.windowS), t0 = t1 - this.windowS;
-    const X = (t) => L + ((t - t0) / (t1 - t0)) * (w - L - R);
-    const Y = (v) => T + (1 - (v - lo) / (hi - lo)) * (h - T - B);
-    ctx.strokeStyle = "#dde3e8"; ctx.fillStyle = "#5b6670"; ctx.font = "10px sans-serif";
-    for (let k = 0; k <= 4; k++) {
-      const v = lo + (k / 4) * (hi - lo), y = Y(v);
-      ctx.beginPath(); ctx.moveTo(L, y); ctx.lineTo(w - R, y); ctx.stroke();
-      ctx.fillText(v.toFixed(Math.abs(hi - lo) < 5 ? 2 : 1), 2, y + 3);
-    }
-    for (let s = Math.ceil(t0); s <= t1; s += 5) ctx.fillText(s + " s", X(s) - 8, h - 5);
-    ctx.fillStyle = "#1d2329"; ctx.font = "bold 11px sans-serif";
-    ctx.fillText(`${this.title} (${this.unit})`, L, 12);
-    let lx = w - R;
-    this.series.slice().reverse().forEach((s) => {
-      ctx.font = "11px sans-serif"; const tw = ctx.measureText(s.label).width;
-      lx -= tw + 18; ctx.fillStyle = s.color; ctx.fillRect(lx, 4, 10, 10);
-      ctx.fillStyle = "#1d2329"; ctx.fillText(s.label, lx + 13, 13);
-    });
-    (this.overlay || []).forEach((d) => {
-      const pts = d.filter(([t]) => t >= t0 && t <= t1); if (pts.length < 2) return;
-      ctx.strokeStyle = "#9aa3ab"; ctx.setLineDash([4, 3]); ctx.lineWidth = 1.2; ctx.beginPath();
-      pts.forEach(([t, v], k) => (k ? ctx.lineTo(X(t), Y(v)) : ctx.moveTo(X(t), Y(v))));
-      ctx.stroke(); ctx.setLineDash([]); ctx.lineWidth = 1;
-    });
-    this.series.forEach((s, i) => {
-      const d = this.data[i]; if (d.length < 2) return;
-      ctx.strokeStyle = s.color; ctx.lineWidth = 1.5; ctx.beginPath();
-      d.forEach(([t, v], k) => (k ? ctx.lineTo(X(t), Y(v)) : ctx.moveTo(X(t), Y(v))));
-      ctx.stroke(); ctx.lineWidth = 1;
-    });
-  }
+// ------------------------------------------------------------------ plots (uPlot)
+// The plots show the whole sortie on screen: a running one as far as it has flown (from
+// /api/sortie/series when the page loads, then every telemetry message), a recorded one whole
+// (from /api/logs/{name}/series) with a cursor at the replay time. A compared sortie ("B") is
+// drawn dashed in colours of its own. All plots share one x range, one cursor and one timeline.
+const unitText = (u) => (u === "-" ? "" : u.replace("^2", "²"));
+const PLOT_DEFS = [
+  { title: "normal acceleration", unit: "m/s²", series: [{ label: "a_n", key: "normal_accel_m_s2", color: "#d7263d" }] },
+  { title: "speed and normal velocity", unit: "m/s", series: [{ label: "|v|", key: "speed_m_s", color: "#2f6fe0" }, { label: "v normal to LOS", key: "normal_vel_m_s", color: "#f08a24" }] },
+  { title: "image error (DKF)", unit: "px", series: [{ label: "e_x", key: "e_x_px", color: "#19a35b" }, { label: "e_y", key: "e_y_px", color: "#8e44ad" }] },
+  { title: "range to target", unit: "m", series: [{ label: "range", key: "range_m", color: "#1d2329" }] },
+];
+const B_COLORS = ["#00a8a8", "#b8860b", "#e0529c", "#6b8e23"];
+const EVENT_COLORS = { detection: "#a8322b", state: "#2f6fe0", gain: "#9a6b00", closest: "#1f7a3a", event: "#5b6670" };
+
+const PV = (W.plotView = {
+  own: null, // {t_s: [], columns: {key: []}, fields?: {...}}
+  cmp: null, cmpInfo: null, ownInfo: null,
+  events: [], tNow: 0, xRange: null, extra: [], hover: false, dirty: true, lastDraw: 0,
+});
+W.plots = [];
+function emptyOwn() { return { t_s: [], columns: Object.fromEntries(PLOT_DEFS.flatMap((d) => d.series.map((s) => [s.key, []]))) }; }
+PV.own = emptyOwn();
+
+function plotDefs() { return PLOT_DEFS.concat(PV.extra); }
+function tEnd() {
+  const a = PV.own.t_s.length ? PV.own.t_s[PV.own.t_s.length - 1] : 0;
+  const b = PV.cmp && PV.cmp.t_s.length ? PV.cmp.t_s[PV.cmp.t_s.length - 1] : 0;
+  return Math.max(a, b, 1);
+}
+function currentRange() { return PV.xRange || [0, tEnd()]; }
+function setXRange(r) {
+  PV.xRange = r;
+  const [min, max] = currentRange();
+  for (const u of W.plots) if (!u.xy) u.setScale("x", { min, max });
+  drawTimeline();
 }
 
-const plots = [
-  new Plot($("plot-an"), "normal acceleration", "m/s²",
-    [{ label: "a_n", color: "#d7263d", get: (s) => s.normal_accel_m_s2 }]),
-  new Plot($("plot-speed"), "speed and normal velocity", "m/s",
-    [{ label: "|v|", color: "#2f6fe0", get: (s) => s.speed_m_s },
-     { label: "v normal to LOS", color: "#f08a24", get: (s) => s.normal_vel_m_s }]),
-  new Plot($("plot-e"), "image error (DKF)", "px",
-    [{ label: "e_x", color: "#19a35b", get: (s) => (s.e_est_px ? s.e_est_px[0] : null) },
-     { label: "e_y", color: "#8e44ad", get: (s) => (s.e_est_px ? s.e_est_px[1] : null) }]),
-  new Plot($("plot-range"), "range to target", "m",
-    [{ label: "range", color: "#1d2329", get: (s) => s.range_m }]),
-];
+function colOf(src, key) {
+  if (src.columns && key in src.columns) return src.columns[key];
+  if (src.fields && key in src.fields) return src.fields[key];
+  return src.t_s.map(() => null);
+}
+function plotData(def) {
+  const own = [PV.own.t_s, ...def.series.map((s) => colOf(PV.own, s.key))];
+  if (!PV.cmp) return own;
+  const cmp = [PV.cmp.t_s, ...def.series.map((s) => colOf(PV.cmp, s.key))];
+  return uPlot.join([own, cmp]);
+}
 
+// the legend's value at the cursor: the sample there, else the series' nearest within 0.1 s
+// (two sorties are sampled at different times; nothing is interpolated)
+function legendVal(u, v, si, idx) {
+  if ((v === null || v === undefined) && idx !== null && idx !== undefined) {
+    const xs = u.data[0], ys = u.data[si], t = xs[idx];
+    for (let d = 1; d < 40; d++) {
+      for (const j of [idx - d, idx + d]) if (j >= 0 && j < xs.length && ys[j] !== null && ys[j] !== undefined && Math.abs(xs[j] - t) <= 0.1) return fmtVal(ys[j]);
+    }
+  }
+  return fmtVal(v);
+}
+function fmtVal(v) { return v === null || v === undefined ? "—" : Math.abs(v) >= 100 ? v.toFixed(1) : Math.abs(v) >= 1 ? v.toFixed(2) : v.toFixed(3); }
+
+function markerHook(u) {
+  const ctx = u.ctx, { top, height } = u.bbox;
+  ctx.save();
+  for (const [t, kind] of PV.events) {
+    if (t === null) continue;
+    const x = u.valToPos(t, "x", true);
+    if (x < u.bbox.left || x > u.bbox.left + u.bbox.width) continue;
+    ctx.strokeStyle = EVENT_COLORS[kind] || "#5b6670"; ctx.setLineDash([3, 3]); ctx.lineWidth = 1;
+    ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+  }
+  const x = u.valToPos(PV.tNow, "x", true);
+  ctx.setLineDash([]); ctx.strokeStyle = "#d7263d"; ctx.lineWidth = 2 * devicePixelRatio;
+  ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+  ctx.restore();
+}
+
+function makePlot(def, parent) {
+  const series = [{ label: "t (s)", value: (u, v) => (v === null || v === undefined ? "—" : v.toFixed(2)) }];
+  def.series.forEach((s) => series.push({ label: PV.cmp ? `${s.label} · A` : s.label, stroke: s.color, width: 1.5, spanGaps: true, value: legendVal }));
+  if (PV.cmp) def.series.forEach((s, i) => series.push({ label: `${s.label} · B`, stroke: B_COLORS[(PLOT_DEFS.indexOf(def) + i) % B_COLORS.length], width: 1.5, dash: [6, 4], spanGaps: true, value: legendVal }));
+  const box = document.createElement("div"); box.className = "plot"; parent.appendChild(box);
+  const width = Math.max(parent.clientWidth / 2 - 10, 300);
+  const u = new uPlot({
+    title: `${def.title} (${def.unit})`, width, height: 190, series,
+    scales: { x: { time: false, auto: false, range: () => currentRange() } },
+    axes: [{ label: "time (s)", labelSize: 16, size: 34 }, { label: def.unit, labelSize: 16, size: 52 }],
+    cursor: { sync: { key: "peregrine", setSeries: false }, drag: { x: true, y: false, setScale: false } },
+    legend: { live: true },
+    hooks: {
+      draw: [markerHook],
+      setSelect: [(u) => {
+        if (u.select.width > 4) setXRange([u.posToVal(u.select.left, "x"), u.posToVal(u.select.left + u.select.width, "x")]);
+        u.setSelect({ left: 0, top: 0, width: 0, height: 0 }, false);
+      }],
+    },
+  }, plotData(def), box);
+  u.def = def;
+  u.over.addEventListener("dblclick", () => setXRange(null));
+  u.over.addEventListener("mouseenter", () => { PV.hover = true; });
+  u.over.addEventListener("mouseleave", () => { PV.hover = false; PV.dirty = true; });
+  u.over.addEventListener("wheel", (ev) => {
+    ev.preventDefault();
+    const [min, max] = currentRange(), span = max - min;
+    if (ev.shiftKey) { const d = (ev.deltaY > 0 ? 0.1 : -0.1) * span; setXRange([min + d, max + d]); return; }
+    const at = u.posToVal(ev.offsetX, "x"), k = ev.deltaY > 0 ? 1.25 : 0.8;
+    setXRange([at - (at - min) * k, at + (max - at) * k]);
+  }, { passive: false });
+  return u;
+}
+
+function makeXY(parent) {
+  const box = document.createElement("div"); box.className = "plot"; parent.appendChild(box);
+  const series = [{}, { label: PV.cmp ? "image error · A" : "image error", stroke: "#19a35b", width: 1.5, paths: uPlot.paths.linear(), points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] }];
+  if (PV.cmp) series.push({ label: "image error · B", stroke: B_COLORS[0], dash: [6, 4], width: 1.5, paths: uPlot.paths.linear(), points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] });
+  const u = new uPlot({
+    mode: 2, title: "image error: e_x against e_y (px)", width: Math.max(parent.clientWidth / 2 - 10, 300), height: 190, series,
+    scales: { x: { time: false, range: padRange }, y: { dir: -1, range: padRange } }, legend: { live: false },
+    axes: [{ label: "e_x (px)", labelSize: 16, size: 34 }, { label: "e_y (px, down)", labelSize: 16, size: 52 }],
+    hooks: { draw: [(u) => { // the point at the cursor time
+      const src = PV.own; if (!src.t_s.length) return;
+      let i = src.t_s.findIndex((t) => t >= PV.tNow); if (i < 0) i = src.t_s.length - 1;
+      const ex = colOf(src, "e_x_px")[i], ey = colOf(src, "e_y_px")[i]; if (ex === null || ey === null) return;
+      const x = u.valToPos(ex, "x", true), y = u.valToPos(ey, "y", true);
+      u.ctx.save(); u.ctx.strokeStyle = "#d7263d"; u.ctx.lineWidth = 2 * devicePixelRatio;
+      u.ctx.beginPath(); u.ctx.arc(x, y, 5 * devicePixelRatio, 0, 2 * Math.PI); u.ctx.stroke(); u.ctx.restore();
+    }] },
+  }, xyData(), box);
+  u.xy = true;
+  return u;
+}
+function padRange(u, min, max) { // never an empty range: a still target is one point
+  if (min === null || max === null || !isFinite(min) || !isFinite(max)) return [-1, 1];
+  if (max - min < 1e-6) return [min - 1, max + 1];
+  const pad = 0.05 * (max - min); return [min - pad, max + pad];
+}
+function xyData() {
+  const pair = (src) => {
+    const xs = [], ys = [], ex = colOf(src, "e_x_px"), ey = colOf(src, "e_y_px");
+    for (let i = 0; i < ex.length; i++) if (ex[i] !== null && ey[i] !== null) { xs.push(ex[i]); ys.push(ey[i]); }
+    return [xs, ys];
+  };
+  const d = [null, pair(PV.own)];
+  if (PV.cmp) d.push(pair(PV.cmp));
+  return d;
+}
+
+function buildPlots() {
+  for (const u of W.plots) u.destroy();
+  const grid = $("plot-grid"); grid.innerHTML = "";
+  W.plots = plotDefs().map((d) => makePlot(d, grid));
+  W.plots.push(makeXY(grid));
+  showCompareLegend();
+  showGainEdits();
+  PV.dirty = true;
+}
+
+function refreshPlots(force) {
+  const now = performance.now();
+  if (!force && (!PV.dirty || now - PV.lastDraw < 100)) return; // at most 10 redraws/s
+  PV.lastDraw = now; PV.dirty = false;
+  for (const u of W.plots) {
+    if (u.xy) { u.setData(xyData()); continue; }
+    u.setData(plotData(u.def), false);
+    const [min, max] = currentRange();
+    u.setScale("x", { min, max });
+    if (!PV.hover) { // legend values at the cursor time
+      const src = u.data[0]; let i = src.findIndex((t) => t >= PV.tNow - 1e-6); if (i < 0) i = src.length - 1;
+      if (i >= 0) u.setLegend({ idx: i }, false);
+    }
+  }
+  W.cursorT = PV.tNow;
+  drawTimeline();
+}
+
+function drawTimeline() {
+  const tl = $("timeline"); const u = W.plots.find((p) => !p.xy); if (!u) return;
+  const [min, max] = currentRange();
+  const left = u.bbox.left / devicePixelRatio, w = u.bbox.width / devicePixelRatio;
+  const html = PV.events.filter(([t]) => t !== null && t >= min && t <= max).map(([t, kind, text]) =>
+    `<span class="mark k-${kind}" style="left:${(left + ((t - min) / (max - min)) * w).toFixed(1)}px" data-t="${t}" title="t = ${Number(t).toFixed(2)} s: ${esc(text)}">${esc(text)}</span>`);
+  tl.innerHTML = html.join("");
+}
+const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+$("timeline").onclick = (ev) => {
+  const m = ev.target.closest(".mark"); if (!m || !W.snap || !W.snap.status.replay) return;
+  replay("seek", { t_s: parseFloat(m.dataset.t) });
+};
+
+function sortieLabel(info, other) {
+  if (!info) return "this sortie";
+  const head = `${info.file || "this sortie"} · ${info.scenario} · ${info.law}${info.seed !== undefined && info.seed !== null ? " · seed " + info.seed : ""}`;
+  const g = info.gains || {};
+  let gains;
+  if (!other) gains = info.gainsText || (Object.keys(g).length ? Object.entries(g).map(([k, v]) => `${k} ${v}`).join(" ") : "");
+  else { // B: only the gains that differ from A's
+    const og = other.gains || {};
+    const diff = Object.entries(g).filter(([k, v]) => k in og && og[k] !== v).map(([k, v]) => `${k} ${v} (A: ${og[k]})`);
+    gains = Object.keys(g).length && Object.keys(og).length ? (diff.length ? diff.join(", ") : "same as A") : "";
+  }
+  return head + (gains ? ` · gains: ${gains}` : "");
+}
+function showCompareLegend() {
+  const el = $("cmp-legend");
+  el.hidden = !PV.cmp;
+  if (!PV.cmp) { el.innerHTML = ""; return; }
+  if (PV.ownInfo && !PV.ownInfo.file) { // a sortie flying now: the gains in force
+    PV.ownInfo.gains = gainValues;
+    const st = W.snap && W.snap.status;
+    PV.ownInfo.gainsText = st && st.gains_source ? st.gains_source + (Object.keys(st.gains_edited || {}).length ? " with edits" : "") : "";
+  }
+  el.innerHTML = `<div class="lg-a"><b>A</b> (solid): ${esc(sortieLabel(PV.ownInfo))}</div><div class="lg-b"><b>B</b> (dashed): ${esc(sortieLabel(PV.cmpInfo, PV.ownInfo))}</div>`;
+}
+
+// Fetch what the plots show for the sortie on screen (status tells which).
+let loadedEpoch = null, loadedCompare = null, loading = false;
+async function syncPlotSources(st) {
+  if (loading) return;
+  const cmpName = st.compare ? st.compare.file : null;
+  if (st.epoch === loadedEpoch && cmpName === loadedCompare) return;
+  loading = true;
+  try {
+    if (st.epoch !== loadedEpoch) {
+      loadedEpoch = st.epoch;
+      PV.xRange = null; img.track = []; img.eyStart = null; img.frame = null;
+      if (st.replay) {
+        const s = await api("GET", `/api/logs/${encodeURIComponent(st.replay.file)}/series`);
+        PV.own = s; PV.events = s.events; PV.ownInfo = s.sortie;
+        fillFieldChoice(s);
+      } else {
+        const s = await api("GET", "/api/sortie/series");
+        PV.own = { t_s: s.t_s, columns: Object.keys(s.columns).length ? s.columns : emptyOwn().columns };
+        PV.events = s.events; PV.ownInfo = { scenario: st.scenario, law: st.law, seed: st.seed, gains: null };
+        PV.extra = []; $("add-plot-row").hidden = true;
+      }
+    }
+    loadedCompare = cmpName;
+    if (cmpName) {
+      PV.cmp = await api("GET", `/api/logs/${encodeURIComponent(cmpName)}/series`);
+      PV.cmpInfo = st.compare;
+    } else { PV.cmp = null; PV.cmpInfo = null; }
+    buildPlots();
+  } catch (e) { msg($("sim-msg"), "plots: " + e.message, false); }
+  finally { loading = false; }
+}
+
+function appendLive(s) { // a running sortie: one more point per telemetry message
+  if (s.status.replay || s.status.epoch !== loadedEpoch || loading) return;
+  const o = PV.own; const t = s.t;
+  if (o.t_s.length && t <= o.t_s[o.t_s.length - 1]) return;
+  o.t_s.push(t);
+  const row = { normal_accel_m_s2: s.normal_accel_m_s2, speed_m_s: s.speed_m_s, normal_vel_m_s: s.normal_vel_m_s, e_x_px: s.e_est_px ? s.e_est_px[0] : null, e_y_px: s.e_est_px ? s.e_est_px[1] : null, range_m: s.range_m };
+  for (const k of Object.keys(o.columns)) o.columns[k].push(row[k] === undefined ? null : row[k]);
+  PV.dirty = true;
+}
+
+function fillFieldChoice(s) {
+  const sel = $("add-field"); sel.innerHTML = "";
+  for (const k of Object.keys(s.fields || {}).sort()) { const o = document.createElement("option"); o.value = k; o.textContent = k; sel.appendChild(o); }
+  $("add-plot-row").hidden = !sel.options.length;
+}
+$("btn-add-plot").onclick = () => {
+  const key = $("add-field").value; if (!key) return;
+  const unit = (key.match(/_(m_s2|m_s|rad_s|px_s|rad|px|m|s)(\.\d)?$/) || [, ""])[1].replace("m_s2", "m/s²").replace("m_s", "m/s").replace("rad_s", "rad/s").replace("px_s", "px/s");
+  PV.extra.push({ title: key, unit: unit || "-", series: [{ label: key, key, color: "#2f6fe0" }] });
+  buildPlots();
+};
 // ------------------------------------------------------------------ image plane
 const img = { canvas: $("image"), frame: null, track: [], eyStart: null };
 img.ctx = img.canvas.getContext("2d");
@@ -119,6 +315,9 @@ function drawImagePlane(s) {
   // cause, dq = atan(k_a / g) -> de_y = c_v tan(dq) / tan(vfov / 2) (eq. 16)
   ctx.setLineDash([6, 4]); ctx.strokeStyle = "#b14ad8"; ctx.lineWidth = 1.5;
   ctx.beginPath(); ctx.moveTo(cu, 0); ctx.lineTo(cu, im.h); ctx.stroke();
+  // the band is fixed to the image: centred on the sortie's first estimate, not the latest
+  const ey0 = (PV.own.columns && PV.own.columns.e_y_px || []).find((v) => v !== null && v !== undefined);
+  if (ey0 !== undefined) img.eyStart = ey0;
   if (img.eyStart !== null) {
     const dq = Math.atan((s.k_a || 2) / 9.81);
     const dey = (cv * Math.tan(dq)) / Math.tan(((im.vfov_deg || 73.7) * Math.PI) / 360);
@@ -134,25 +333,56 @@ function drawImagePlane(s) {
     img.track.forEach(([x, y], k) => (k ? ctx.lineTo(cu + x, cv + y) : ctx.moveTo(cu + x, cv + y)));
     ctx.stroke();
   }
-  if (s.e_raw_px) {
-    ctx.strokeStyle = "#ff9f1c"; ctx.lineWidth = 2;
-    ctx.strokeRect(cu + s.e_raw_px[0] - 7, cv + s.e_raw_px[1] - 7, 14, 14);
+  // markers are outlines drawn clear of the balloon: sized from its apparent diameter
+  const dpx = s.range_m && s.target && s.target.diameter_m ? (im.f * s.target.diameter_m) / s.range_m : 0;
+  const r = Math.max(9, dpx / 2 + 6);
+  if (s.e_raw_px) { // corner brackets: the balloon shows between them
+    const x = cu + s.e_raw_px[0], y = cv + s.e_raw_px[1], a = r + 3, l = Math.max(5, a / 2);
+    ctx.strokeStyle = "#ff9f1c"; ctx.lineWidth = 2; ctx.beginPath();
+    for (const [sx, sy] of [[-1, -1], [1, -1], [1, 1], [-1, 1]]) {
+      ctx.moveTo(x + sx * a, y + sy * (a - l)); ctx.lineTo(x + sx * a, y + sy * a); ctx.lineTo(x + sx * (a - l), y + sy * a);
+    }
+    ctx.stroke();
   }
+  W.edgeArrow = null;
   if (s.e_est_px) {
-    ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
-    ctx.beginPath(); ctx.arc(cu + s.e_est_px[0], cv + s.e_est_px[1], 9, 0, 2 * Math.PI); ctx.stroke();
+    const x = cu + s.e_est_px[0], y = cv + s.e_est_px[1];
+    if (x >= 0 && x <= im.w && y >= 0 && y <= im.h) {
+      ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
+      ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke();
+    } else drawEdgeArrow(ctx, im, cu, cv, x, y);
   }
   ctx.lineWidth = 1;
 }
 
-// ------------------------------------------------------------------ status
-function setBadge(id, text, cls) {
-  const el = $(id); el.textContent = text; el.className = "badge" + (cls ? " " + cls : "");
+// An estimate outside the image: an arrow on the edge pointing at it, with its distance.
+function drawEdgeArrow(ctx, im, cu, cv, x, y) {
+  const dx = x - cu, dy = y - cv, m = 18;
+  const k = Math.min(Math.abs((cu - m) / (dx || 1e-9)), Math.abs((cv - m) / (dy || 1e-9)));
+  const ex = cu + dx * k, ey = cv + dy * k, ang = Math.atan2(dy, dx);
+  ctx.save(); ctx.translate(ex, ey); ctx.rotate(ang);
+  ctx.fillStyle = "#19c15b"; ctx.strokeStyle = "#0b5e2c"; ctx.lineWidth = 1.5;
+  ctx.beginPath(); ctx.moveTo(14, 0); ctx.lineTo(-8, -10); ctx.lineTo(-8, 10); ctx.closePath(); ctx.fill(); ctx.stroke();
+  ctx.restore();
+  const off = Math.hypot(dx, dy) - Math.hypot(ex - cu, ey - cv);
+  ctx.fillStyle = "#0b5e2c"; ctx.font = "bold 12px sans-serif";
+  ctx.fillText(`estimate ${off.toFixed(0)} px outside`, Math.min(Math.max(ex - 60, 4), im.w - 150), Math.min(Math.max(ey + (ey > cv ? -16 : 24), 14), im.h - 6));
+  W.edgeArrow = { x: ex, y: ey };
 }
+
+// ------------------------------------------------------------------ status
+// DOM writes only when something changed: a redraw that rewrites unchanged text still costs
+// style and layout work, 40 times a second in every viewer
+function setText(el, text) { if (el.textContent !== text) el.textContent = text; }
+function setBadge(id, text, cls) {
+  const el = $(id), c = "badge" + (cls ? " " + cls : "");
+  setText(el, text); if (el.className !== c) el.className = c;
+}
+let lastStatusParts = "";
 
 function showStatus(st) {
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
-  setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera} · ${st.speed}×`);
+  setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
   setBadge("st-time", `t = ${Number(st.time_s).toFixed(2)} s`);
   if (st.outcome) setBadge("st-outcome", `${st.outcome} · miss ${Number(st.miss_m).toFixed(3)} m`, st.outcome === "HIT" ? "ok" : "bad");
   else setBadge("st-outcome", "no outcome");
@@ -161,14 +391,71 @@ function showStatus(st) {
     const txt = !st.dkf.acquired ? "DKF waiting" : st.dkf.lost ? "DKF LOST" : `DKF ok · ${since === null ? "—" : (1000 * since).toFixed(0) + " ms"}`;
     setBadge("st-dkf", txt, st.dkf.lost && st.dkf.acquired ? "bad" : st.dkf.acquired ? "ok" : "");
   } else setBadge("st-dkf", "DKF —");
-  setBadge("st-rate", `loop ${st.loop_rate_hz} Hz`);
-  $("btn-pause").textContent = st.state === "paused" ? "Resume" : "Pause";
+  setBadge("st-rate", st.state === "running" ? `loop ${st.loop_rate_hz} Hz` : "loop — Hz");
+  setText($("btn-pause"), st.state === "paused" ? "Resume" : "Pause");
   showLive(st.live);
   showReplay(st.replay);
-  loadOverlay(st.replay ? st.replay.compare : null);
+  syncControls(st);
+  showStateChange(st);
+  syncPlotSources(st);
+  const parts = JSON.stringify([st.recording, st.gains_source, st.gains_edited, st.gains_note]);
+  if (parts !== lastStatusParts) { // rarely changes: not redone every frame
+    lastStatusParts = parts;
+    showRecording(st.recording);
+    showGainsInForce(st);
+    markGains();
+  }
+  let applied = "";
   if (st.gains_applied_time_s !== null && st.gains_applied_time_s !== undefined)
-    $("gains-applied").textContent = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
-  if (st.gains_pending) $("gains-applied").textContent = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
+    applied = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
+  if (st.gains_pending) applied = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
+  setText($("gains-applied"), applied);
+}
+
+// The recording of the sortie on screen: its file, and any error as a banner that stays.
+function showRecording(rec) {
+  const b = $("rec-banner");
+  if (!rec) { b.hidden = true; return; }
+  b.hidden = false;
+  if (rec.error) { b.className = "banner err"; b.textContent = `Recording failed: ${rec.error}. The sortie goes on but is no longer recorded.`; }
+  else { b.className = "banner ok"; b.textContent = `${rec.closed ? "Recorded to" : "Recording to"} ${rec.file}`; }
+}
+
+// Header: which gain set flies, with the operator's edits marked (*).
+function showGainsInForce(st) {
+  if (st.gains_source === undefined) { setBadge("st-gains", "gains: the vehicle's"); return; }
+  const ed = Object.entries(st.gains_edited || {});
+  const txt = `gains: ${st.gains_source}` + (ed.length ? " + edits " + ed.map(([k, [a, b]]) => `${k}* ${a}→${b}`).join(", ") : "");
+  setBadge("st-gains", txt, ed.length ? "warn" : "");
+  $("gains-source").textContent = `flying: ${st.gains_source}${ed.length ? ` with ${ed.length} edit${ed.length > 1 ? "s" : ""}` : ""}`;
+  const note = $("gains-note"); note.hidden = !st.gains_note; note.textContent = st.gains_note || "";
+  W.gainsEdited = st.gains_edited || {};
+}
+
+// The controls show what is in force: the speed always, the sortie's scenario, law, seed and
+// camera whenever a new sortie appears (and on page load), unless the operator is editing one.
+let controlsEpoch = null;
+function syncControls(st) {
+  const set = (id, v) => { const el = $(id); if (v === null || v === undefined || document.activeElement === el) return; if (el.tagName !== "SELECT" || [...el.options].some((o) => o.value === String(v))) el.value = String(v); };
+  set("speed", st.speed);
+  if (st.epoch === controlsEpoch || st.live) return;
+  controlsEpoch = st.epoch;
+  if (st.state === "idle") return;
+  set("law", st.law); set("camera", st.camera); set("seed", st.seed);
+  if (!st.replay && [...$("scenario").options].some((o) => o.value === st.scenario)) { set("scenario", st.scenario); }
+}
+
+// The simulator's message line follows the sortie: no "started" left once it has ended.
+let lastState = null;
+function showStateChange(st) {
+  if (st.state === lastState || st.live) return;
+  const prev = lastState; lastState = st.state;
+  if (prev === null) return;
+  if (st.state === "finished") msg($("sim-msg"), `finished: ${st.outcome || "no outcome"}${st.miss_m !== null && st.miss_m !== undefined ? `, miss ${Number(st.miss_m).toFixed(3)} m` : ""}${st.intercept_time_s !== undefined ? ` at t = ${Number(st.intercept_time_s).toFixed(2)} s` : ""}`, st.outcome === "HIT");
+  else if (st.state === "running") msg($("sim-msg"), prev === "paused" ? "running" : "started", true);
+  else if (st.state === "paused") msg($("sim-msg"), "paused", true);
+  else if (st.state === "idle") msg($("sim-msg"), "reset", true);
+  else if (st.state === "replay") msg($("sim-msg"), `replaying ${st.replay ? st.replay.file : ""}`, true);
 }
 
 // ------------------------------------------------------------------ live vehicle
@@ -209,8 +496,9 @@ let frameRequested = false;
 
 function takeSnapshot(s) {
   W.received = (W.received || 0) + 1; W.snap = s;
+  if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
-    if (W.lastT !== null && s.t < W.lastT) { plots.forEach((p) => p.clear()); img.track = []; img.eyStart = null; img.frame = null; }
+    if (W.lastT !== null && s.t < W.lastT) { img.track = []; img.eyStart = null; }
     W.lastT = s.t;
     if (s.frame_jpeg_b64) {
       const im = new Image();
@@ -221,7 +509,8 @@ function takeSnapshot(s) {
       img.track.push(s.e_est_px); if (img.track.length > 60) img.track.shift();
       if (img.eyStart === null) img.eyStart = s.e_est_px[1];
     }
-    plots.forEach((p) => p.push(s.t, s));
+    appendLive(s);
+    if (PV.tNow !== s.t) { PV.tNow = s.t; PV.dirty = true; }
   }
   pending = s;
   if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); }
@@ -234,8 +523,10 @@ function redraw() {
   W.updates += 1; W.shownT = s.t;
   showStatus(s.status);
   drawImagePlane(s);
-  plots.forEach((p) => p.draw(s.t === undefined ? 0 : s.t));
+  refreshPlots(false);
+  if (PV.dirty && !plotTimer) plotTimer = setTimeout(() => { plotTimer = null; refreshPlots(false); }, 110);
 }
+let plotTimer = null;
 
 function connect() {
   const ws = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws/telemetry");
@@ -252,11 +543,11 @@ let scrubbing = false, lastSeek = 0, seekTimer = null;
 function showReplay(rp) {
   $("replay-panel").hidden = !rp;
   if (!rp) return;
-  $("rp-file").textContent = `${rp.file}${rp.status !== "ok" ? " (" + rp.status + ": replayed up to the damage)" : ""}${rp.compare ? " · compared with " + rp.compare : ""}`;
+  setText($("rp-file"), `${rp.file}${rp.status !== "ok" ? " (" + rp.status + ": replayed up to the damage)" : ""}${rp.compare ? " · compared with " + rp.compare : ""}`);
   const scrub = $("rp-scrub");
   scrub.max = rp.duration_s;
   if (!scrubbing) scrub.value = rp.t_s;
-  $("rp-time").textContent = `${Number(rp.t_s).toFixed(2)} / ${Number(rp.duration_s).toFixed(2)} s`;
+  setText($("rp-time"), `${Number(rp.t_s).toFixed(2)} / ${Number(rp.duration_s).toFixed(2)} s · ${rp.speed_x}×`);
   $("rp-play").textContent = rp.playing ? "Pause" : "Play";
 }
 async function replay(action, body) {
@@ -272,18 +563,15 @@ $("rp-scrub").oninput = () => {
 };
 $("rp-scrub").onchange = () => { scrubbing = false; replay("seek", { t_s: parseFloat($("rp-scrub").value) }); };
 
-// a compared sortie's recorded series, drawn dashed under the live ones
-let overlayName = null;
-async function loadOverlay(name) {
-  if (name === overlayName) return;
-  overlayName = name;
-  if (!name) { plots.forEach((p) => p.setOverlay(null)); return; }
-  const s = await api("GET", `/api/logs/${encodeURIComponent(name)}/series`);
-  const col = (vals) => s.t_s.map((t, i) => [t, vals[i]]).filter(([, v]) => v !== null && v !== undefined);
-  plots[0].setOverlay([col(s.normal_accel_m_s2)]);
-  plots[1].setOverlay([col(s.speed_m_s)]);
-  plots[2].setOverlay([col(s.e_px.map((e) => (e ? e[0] : null))), col(s.e_px.map((e) => (e ? e[1] : null)))]);
-  plots[3].setOverlay([col(s.range_m)]);
+// ?compare=NAME: overlay that recorded sortie on the one on screen (the server keeps it, so a
+// reload or another viewer shows the same comparison).
+async function compareFromUrl() {
+  const name = new URLSearchParams(location.search).get("compare");
+  if (!name) return;
+  const st = await api("GET", "/api/status");
+  if (st.compare && st.compare.file === name) return;
+  try { showStatus(await api("POST", "/api/replay/compare", { name })); }
+  catch (e) { msg($("rp-msg").closest(".panel").hidden ? $("sim-msg") : $("rp-msg"), `compare with ${name}: ${e.message}`, false); }
 }
 
 // ------------------------------------------------------------------ simulator controls
@@ -294,7 +582,8 @@ async function loadScenarios() {
     const o = document.createElement("option"); o.value = s.name; o.textContent = `${s.name} (${s.motion})`; o.title = s.description;
     sel.appendChild(o);
   }
-  sel.value = "cv-top-to-bottom";
+  const st = W.snap && W.snap.status; // the scenario on screen, else the default
+  sel.value = st && st.state !== "idle" && list.some((s) => s.name === st.scenario) ? st.scenario : "cv-top-to-bottom";
   await loadToml();
 }
 
@@ -332,25 +621,91 @@ $("btn-reset").onclick = async () => { try { showStatus(await api("POST", "/api/
 $("speed").onchange = async () => { try { await api("PUT", "/api/sortie/speed", { speed: $("speed").value }); } catch (e) { msg($("sim-msg"), e.message, false); } };
 
 // ------------------------------------------------------------------ gains
-let gainValues = {};
+// Like a parameter editor: grouped, meaning and unit inline, values that differ from the
+// default highlighted, a reset per gain, search, the edits made during this sortie, and named
+// gain sets saved, loaded, downloaded and uploaded. A refused value goes back to the one in force.
+let gainValues = {}, gainSpecs = {};
 async function loadGains() {
   const g = await api("GET", "/api/gains");
   gainValues = g.values;
   const tb = document.querySelector("#gains tbody"); tb.innerHTML = "";
+  let group = null;
   for (const s of g.specs) {
-    const tr = document.createElement("tr"); tr.title = s.meaning;
-    tr.innerHTML = `<td>${s.name}</td><td><input data-gain="${s.name}" value="${g.values[s.name]}"></td><td>${s.unit}</td><td>[${s.min}, ${s.max}]</td><td>${s.default}</td>`;
+    gainSpecs[s.name] = s;
+    if (s.group !== group) {
+      group = s.group;
+      const gr = document.createElement("tr"); gr.className = "group"; gr.innerHTML = `<th colspan="7">${esc(group || "")}</th>`; tb.appendChild(gr);
+    }
+    const tr = document.createElement("tr"); tr.dataset.gain = s.name; tr.dataset.search = `${s.name} ${s.meaning} ${s.group}`.toLowerCase();
+    tr.innerHTML = `<td class="gname">${esc(s.name)}</td><td><input data-gain="${esc(s.name)}" value="${g.values[s.name]}"></td><td>${esc(unitText(s.unit))}</td>` +
+      `<td class="meaning">${esc(s.meaning)}</td><td>${s.min} to ${s.max}</td><td>${s.default}</td><td><button class="mini" data-reset="${esc(s.name)}" title="back to the default, ${s.default}">reset</button></td>`;
     tb.appendChild(tr);
   }
   tb.querySelectorAll("input").forEach((inp) => {
     inp.oninput = () => inp.classList.toggle("changed", inp.value !== String(gainValues[inp.dataset.gain]));
   });
+  markGains();
+  filterGains();
   const names = await api("GET", "/api/gainsets");
-  const sel = $("gainsets"); sel.innerHTML = "";
+  const sel = $("gainsets"); const keep = sel.value; sel.innerHTML = "";
   for (const n of names) { const o = document.createElement("option"); o.value = n; o.textContent = n; sel.appendChild(o); }
+  if (names.includes(keep)) sel.value = keep;
+  gainsetLink();
+}
+function markGains() {
+  document.querySelectorAll("#gains tr[data-gain]").forEach((tr) => {
+    const n = tr.dataset.gain, s = gainSpecs[n]; if (!s) return;
+    tr.classList.toggle("nondefault", gainValues[n] !== s.default);
+    tr.classList.toggle("edited", n in (W.gainsEdited || {}));
+    tr.querySelector("button[data-reset]").disabled = gainValues[n] === s.default;
+  });
+}
+function filterGains() {
+  const q = $("gain-search").value.trim().toLowerCase();
+  document.querySelectorAll("#gains tr[data-gain]").forEach((tr) => { tr.hidden = !!q && !tr.dataset.search.includes(q); });
+}
+$("gain-search").oninput = filterGains;
+function gainsetLink() {
+  const n = $("gainsets").value, a = $("gainset-download");
+  a.href = n ? `/api/gainsets/${encodeURIComponent(n)}/file` : "#"; a.hidden = !n; a.download = n ? `${n}.toml` : "";
+}
+$("gainsets").onchange = gainsetLink;
+
+function showGainEdits() {
+  const ol = $("gain-edits");
+  const edits = PV.events.filter(([, kind]) => kind === "gain");
+  ol.innerHTML = edits.length ? edits.map(([t, , text]) => `<li>${t === null ? "before the sortie" : "t = " + Number(t).toFixed(2) + " s"}: ${esc(text)}</li>`).join("") : "<li class=none>none</li>";
 }
 
-$("btn-apply-gains").onclick = async () => {
+// One sentence on why a value is refused (the range check is the server's; this words it).
+function refusal(name, raw, detail) {
+  const s = gainSpecs[name], v = Number(raw);
+  if (!s) return detail;
+  const unit = unitText(s.unit) ? " " + unitText(s.unit) : "";
+  let why = detail.replace(/\s+-$/, "");
+  if (raw.trim() === "" || !isFinite(v)) why = `"${raw}" is not a number`;
+  else if (v < s.min || v > s.max) why = `${v} is outside ${s.min} to ${s.max}${unit}`;
+  return `${name} refused: ${why}; it stays ${gainValues[name]}${unit}.`;
+}
+
+async function applyGains(changes) {
+  if (!Object.keys(changes).length) { msg($("gains-msg"), "nothing changed", true); return; }
+  try {
+    await api("PUT", "/api/gains", changes);
+    msg($("gains-msg"), "applied: " + Object.entries(changes).map(([k, v]) => `${k} = ${v}`).join(", "), true);
+    await loadGains();
+  } catch (e) {
+    const names = Object.keys(changes);
+    const bad = names.find((k) => e.message.includes(k)) || names[0];
+    msg($("gains-msg"), names.length === 1 || bad ? refusal(bad, String(changes[bad]), e.message) : e.message, false);
+    for (const k of names) { // back to the values in force: the field never keeps a refused value
+      const el = document.querySelector(`#gains input[data-gain="${k}"]`);
+      if (el) { el.value = gainValues[k]; el.classList.remove("changed"); }
+    }
+    const el = document.querySelector(`#gains input[data-gain="${bad}"]`); if (el) el.classList.add("bad");
+  }
+}
+$("btn-apply-gains").onclick = () => {
   const changes = {};
   document.querySelectorAll("#gains input").forEach((inp) => {
     inp.classList.remove("bad");
@@ -359,26 +714,30 @@ $("btn-apply-gains").onclick = async () => {
       changes[inp.dataset.gain] = inp.value.trim() === "" || !isFinite(v) ? inp.value : v;
     }
   });
-  if (!Object.keys(changes).length) { msg($("gains-msg"), "nothing changed", true); return; }
-  try {
-    await api("PUT", "/api/gains", changes);
-    msg($("gains-msg"), "applied: " + Object.entries(changes).map(([k, v]) => `${k} = ${v}`).join(", "), true);
-    await loadGains();
-  } catch (e) {
-    msg($("gains-msg"), "refused: " + e.message + " (running values unchanged)", false);
-    for (const k of Object.keys(changes)) { const el = document.querySelector(`#gains input[data-gain="${k}"]`); if (el) el.classList.add("bad"); }
-  }
+  return applyGains(changes);
 };
-$("btn-reset-gains").onclick = async () => { try { await api("POST", "/api/gains/reset"); await loadGains(); msg($("gains-msg"), "defaults restored", true); } catch (e) { msg($("gains-msg"), e.message, false); } };
+document.querySelector("#gains tbody").onclick = (ev) => {
+  const b = ev.target.closest("button[data-reset]"); if (!b) return;
+  const n = b.dataset.reset; applyGains({ [n]: gainSpecs[n].default });
+};
+$("btn-reset-gains").onclick = async () => { try { await api("POST", "/api/gains/reset"); await loadGains(); msg($("gains-msg"), "your edits are dropped: the gain set in force flies", true); } catch (e) { msg($("gains-msg"), e.message, false); } };
 $("btn-save-gainset").onclick = async () => {
   const name = $("gainset-name").value.trim();
-  try { await api("PUT", "/api/gainsets/" + encodeURIComponent(name)); await loadGains(); msg($("gains-msg"), `saved '${name}'`, true); }
+  if (!name) { msg($("gains-msg"), "give the gain set a name first.", false); $("gainset-name").focus(); return; }
+  try { await api("PUT", "/api/gainsets/" + encodeURIComponent(name)); await loadGains(); $("gainsets").value = name; gainsetLink(); msg($("gains-msg"), `saved '${name}'`, true); }
   catch (e) { msg($("gains-msg"), e.message, false); }
 };
 $("btn-load-gainset").onclick = async () => {
-  const name = $("gainsets").value; if (!name) return;
-  try { await api("POST", `/api/gainsets/${encodeURIComponent(name)}/load`); await loadGains(); msg($("gains-msg"), `loaded '${name}'`, true); }
+  const name = $("gainsets").value; if (!name) { msg($("gains-msg"), "no gain set saved yet.", false); return; }
+  try { await api("POST", `/api/gainsets/${encodeURIComponent(name)}/load`); await loadGains(); msg($("gains-msg"), `loaded '${name}': it replaces the gains in force and your edits`, true); }
   catch (e) { msg($("gains-msg"), e.message, false); }
+};
+$("gainset-upload").onchange = async (ev) => {
+  const f = ev.target.files[0]; if (!f) return;
+  const name = ($("gainset-name").value.trim() || f.name.replace(/\.toml$/i, "")).replace(/[^A-Za-z0-9_.-]/g, "_");
+  try { await api("POST", "/api/gainsets/upload", { name, toml: await f.text() }); await loadGains(); $("gainsets").value = name; gainsetLink(); msg($("gains-msg"), `uploaded '${name}': press Load to fly it`, true); }
+  catch (e) { msg($("gains-msg"), e.message, false); }
+  ev.target.value = "";
 };
 
 // The 3D view only in a visible tab: a hidden one drops its viser connection (viser replays
@@ -390,7 +749,40 @@ function syncSceneToVisibility() {
   if (!visible && frame.dataset.live === "1") { frame.src = "about:blank"; frame.dataset.live = "0"; }
 }
 document.addEventListener("visibilitychange", syncSceneToVisibility);
+// The 3D view shares this page's thread (same origin). Rendered in software, drawing it at the
+// display's rate would starve the telemetry views; the scene changes 5 times a second, so it
+// is drawn at most SCENE_IDLE_FPS times a second, and at full rate while the operator moves
+// the camera (pointer or wheel in the view, for 1.5 s after the last such event).
+const SCENE_IDLE_FPS = 8;
+function throttleSceneFrames(win, doc) {
+  if (!win || win.__peregrineThrottled) return;
+  win.__peregrineThrottled = true;
+  const raf = win.requestAnimationFrame.bind(win);
+  let activeUntil = 0, last = 0;
+  const poke = () => { activeUntil = performance.now() + 1500; };
+  for (const ev of ["pointerdown", "pointermove", "wheel", "keydown", "touchstart"]) doc.addEventListener(ev, poke, { capture: true, passive: true });
+  win.requestAnimationFrame = (cb) => {
+    const now = performance.now();
+    if (now < activeUntil) return raf(cb);
+    const wait = Math.max(0, last + 1000 / SCENE_IDLE_FPS - now);
+    return win.setTimeout(() => raf((ts) => { last = performance.now(); cb(ts); }), wait);
+  };
+}
+// viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
+// corner, where they cover neither the engagement nor the outcome label
+$("viser").addEventListener("load", () => {
+  let doc = null; try { doc = $("viser").contentDocument; } catch (e) { return; }
+  if (!doc || !doc.head || doc.getElementById("peregrine-notices")) return;
+  throttleSceneFrames($("viser").contentWindow, doc);
+  const st = doc.createElement("style"); st.id = "peregrine-notices";
+  st.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
+  doc.head.appendChild(st);
+});
 syncSceneToVisibility();
 
-loadScenarios().then(loadGains).catch((e) => msg($("sim-msg"), e.message, false));
-connect();
+// the option lists (laws, cameras, speeds) come from GET /api/meta first: the controls can
+// then show what is in force
+window.peregrineMeta.catch((e) => msg($("sim-msg"), e.message, false)).then(() => {
+  loadScenarios().then(loadGains).then(compareFromUrl).catch((e) => msg($("sim-msg"), e.message, false));
+  connect();
+});

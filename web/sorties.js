@@ -19,7 +19,7 @@ const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&l
 
 function render() {
   const f = $("filter").value.trim().toLowerCase();
-  const shown = rows.filter((r) => !f || [r.name, r.scenario, r.law, r.outcome, r.status].join(" ").toLowerCase().includes(f));
+  const shown = rows.filter((r) => !f || [r.name, r.scenario, r.law, r.camera, r.seed, r.outcome, r.status, r.reflown_from].join(" ").toLowerCase().includes(f));
   shown.sort((a, b) => {
     const x = a[sortKey] ?? "", y = b[sortKey] ?? "";
     return (x > y ? 1 : x < y ? -1 : 0) * sortDir;
@@ -30,12 +30,19 @@ function render() {
     const ok = r.status === "ok";
     return `<tr data-name="${esc(r.name)}">
       <td title="${esc(r.name)}">${esc(r.recorded_at_utc || r.name.slice(0, 16))}</td><td>${esc(r.scenario || "—")}</td><td>${esc(r.law || "—")}</td>
-      <td>${esc(r.outcome || "—")}</td><td>${fmt(r.miss_m, 3)}</td><td>${fmt(r.duration_s, 2)}</td>
+      <td>${esc(r.camera || "—")}</td><td>${fmt(r.seed, 0)}</td>
+      <td>${esc(r.outcome || "—")}</td><td>${fmt(r.miss_m, 3)}</td><td>${fmt(r.intercept_time_s, 2)}</td><td>${fmt(r.duration_s, 2)}</td>
+      <td class="lineage">${r.reflown_from ? "re-flown from " + esc(r.reflown_from) : ""}</td>
       <td class="${ok ? "" : "bad"}" title="${esc(r.problem || "")}">${esc(r.status)}</td><td>${(r.size_bytes / 1024).toFixed(0)} kB</td>
       <td>${r.status === "not_mcap" ? "" : `<button data-act="open">Open</button> <button data-act="compare">Compare</button> <button data-act="refly">Re-fly</button>`}
           <a href="/api/logs/${n}/file" download>Download</a> <button data-act="delete">Delete</button></td></tr>`;
   }).join("");
   $("count").textContent = `${shown.length} of ${rows.length} sorties`;
+  const empty = $("empty");
+  empty.hidden = shown.length > 0;
+  empty.textContent = rows.length === 0
+    ? "No recorded sorties yet. Every sortie flown from the dashboard is recorded here: go to the dashboard and press Start."
+    : `No sortie matches "${$("filter").value}".`;
 }
 
 async function load() { rows = await api("GET", "/api/logs"); render(); }
@@ -51,7 +58,7 @@ document.querySelector("#logs tbody").onclick = async (ev) => {
   try {
     if (btn.dataset.act === "open") { await api("POST", "/api/replay/open", { name }); location.href = "/"; }
     else if (btn.dataset.act === "compare") { await api("POST", "/api/replay/compare", { name }); say(`overlaying ${name} in the dashboard`, true); location.href = "/?compare=" + encodeURIComponent(name); }
-    else if (btn.dataset.act === "refly") { await api("POST", `/api/logs/${encodeURIComponent(name)}/refly`, { law: $("refly-law").value }); location.href = "/?compare=" + encodeURIComponent(name); }
+    else if (btn.dataset.act === "refly") { await api("POST", `/api/logs/${encodeURIComponent(name)}/refly`, { law: $("refly-law").value, speed: $("refly-speed").value }); location.href = "/?compare=" + encodeURIComponent(name); }
     else if (btn.dataset.act === "delete") {
       if (!window.confirm(`Delete ${name}? This cannot be undone.`)) return;
       await api("DELETE", `/api/logs/${encodeURIComponent(name)}?confirm=${encodeURIComponent(name)}`);

@@ -41,7 +41,7 @@ class StartRequest(BaseModel):
 class ReflyRequest(BaseModel):
     law: LawName = "png"
     seed: int | None = None
-    speed: Speed = "max"
+    speed: Speed = "1"
     gains: dict[str, float] | None = None
 
 
@@ -73,6 +73,7 @@ class GainSpecOut(BaseModel):
     min: float
     max: float
     meaning: str
+    group: str = Field("other", description="the gains panel's group")
 
 
 class GainsOut(BaseModel):

@@ -7,6 +7,8 @@ import os
 import re
 from pathlib import Path
 
+import tomllib
+
 from onboard.gains import Gains, load_gains_file
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,47}$")
@@ -43,6 +45,24 @@ class GainSetStore:
         tmp = path.with_suffix(".toml.tmp")
         tmp.write_text(text, encoding="utf-8")
         os.replace(tmp, path)  # atomic: a crash never leaves half a file
+
+    def text(self, name: str) -> str:
+        """The file of a saved set (for download)."""
+        path = self._path(name)
+        if not path.is_file():
+            raise GainSetError(f"no gain set named {name!r}")
+        return path.read_text(encoding="utf-8")
+
+    def save_text(self, name: str, text: str) -> Gains:
+        """Save an uploaded file as set ``name``, checked first: a bad file changes nothing."""
+        self._path(name)
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise GainSetError(f"{name}: not valid TOML: {exc}") from None
+        gains = Gains.from_mapping(data, source=f"uploaded gain set {name!r}")
+        self.save(name, gains)
+        return gains
 
     def load(self, name: str) -> Gains:
         path = self._path(name)

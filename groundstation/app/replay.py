@@ -8,8 +8,10 @@ whole file."""
 from __future__ import annotations
 
 import bisect
+import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,8 +23,10 @@ from ..frames import Frame
 from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from .scene import SceneState
+from .snapshot import frame_snapshot
 
 OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/dkf", "/gains", "/events"]
+PLOT_KEYS = ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px", "range_m")
 
 
 def _p(msg: dict) -> tuple[float, float, float]:
@@ -98,6 +102,46 @@ class ReplayPlayer:
             ranges = [c.get("range_m") or math.inf for c in self.ctrl]
             t_ca = self.tc[ranges.index(min(ranges))] if ranges else self.duration_s
         self.closest_time_s = min(max(t_ca, 0.0), self.duration_s)
+        self.timeline = self._timeline()
+
+    def _timeline(self) -> list[list]:
+        """Markers for the plots' shared timeline: [t_s, kind, text], by time."""
+        out: list[list] = []
+        for t, text in self.events:
+            if text.startswith("gains changed"):
+                continue  # shown below as old -> new
+            low = text.lower()
+            kind = "detection" if ("lost" in low or "acquired" in low) else "event"
+            out.append([round(t, 3), kind, text])
+        for a, b, t in zip(self.gains, self.gains[1:], self.tg[1:], strict=False):
+            old, new = a.to_dict(), b.to_dict()
+            for k, v in new.items():
+                if old[k] != v:
+                    out.append([round(t, 3), "gain", f"{k} {old[k]:g} → {v:g}"])
+        miss = self.info.miss_m
+        out.append(
+            [
+                round(self.closest_time_s, 3),
+                "closest",
+                "closest approach" + ("" if miss is None else f": miss {miss:.3f} m"),
+            ]
+        )
+        return sorted(out, key=lambda e: e[0])
+
+    def describe(self) -> dict[str, Any]:
+        """Who this sortie is, for a legend: file, scenario, law, seed and gains flown."""
+        meta = self.info.metadata.get("sortie", {})
+        try:
+            gains = json.loads(meta.get("gains", "{}"))
+        except ValueError:
+            gains = {}
+        return {
+            "file": self.path.name,
+            "scenario": self.info.scenario,
+            "law": self.info.law,
+            "seed": self.info.seed,
+            "gains": gains,
+        }
 
     @staticmethod
     def _at(times: list[float], t: float) -> int:
@@ -179,14 +223,42 @@ class ReplayPlayer:
             guard_trips=0,
         )
 
-    def series(self, every: int = 1) -> dict[str, list]:
-        """The recorded plot series (for overlaying this sortie on another)."""
+    def series(self, every: int = 1) -> dict[str, Any]:
+        """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns and
+        every other numeric /control field (arrays split as ``name.0``, ``name.1``), and the
+        timeline's markers."""
+        # through the one snapshot builder: the plots show what the page shows live
+        rows = self.ctrl[::every]
+        cols: dict[str, list] = {k: [] for k in PLOT_KEYS}
+        extra: dict[str, list] = {}
+        for i, (t, c) in enumerate(zip(self.tc[::every], rows, strict=True)):
+            snap = frame_snapshot(self.frame(t), self.camera, self.diameter_m)
+            e = snap["e_est_px"]
+            for k in ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "range_m"):
+                cols[k].append(snap[k])
+            cols["e_x_px"].append(e[0] if e else None)
+            cols["e_y_px"].append(e[1] if e else None)
+            for k, v in c.items():
+                items = list(enumerate(v)) if isinstance(v, list) else [(None, v)]
+                for j, x in items:
+                    if isinstance(x, bool) or not isinstance(x, (int, float, type(None))):
+                        continue
+                    name = k if j is None else f"{k}.{j}"
+                    if name == "t_s":
+                        continue
+                    col = extra.setdefault(name, [None] * i)
+                    col.append(x)
+            for col in extra.values():
+                if len(col) < i + 1:
+                    col.append(None)
+        for name in [k for k in extra if f"{k}.0" in extra]:
+            del extra[name]  # an array recorded as None at first: its elements are kept
         return {
             "t_s": self.tc[::every],
-            "normal_accel_m_s2": [c.get("accel_normal_m_s2") for c in self.ctrl[::every]],
-            "speed_m_s": [c.get("speed_m_s") for c in self.ctrl[::every]],
-            "e_px": [c.get("e_px") for c in self.ctrl[::every]],
-            "range_m": [c.get("range_m") for c in self.ctrl[::every]],
+            "columns": cols,
+            "fields": extra,
+            "events": self.timeline,
+            "sortie": self.describe(),
         }
 
 

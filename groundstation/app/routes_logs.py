@@ -52,7 +52,9 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(422, str(exc)) from None
 
     @r.get("/api/logs/{name}/series", tags=["logs"])
-    async def log_series(name: str) -> dict[str, list]:
+    async def log_series(name: str) -> dict[str, Any]:
+        """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns,
+        every numeric /control field, the timeline's markers and who the sortie is."""
         return (await asyncio.to_thread(player, name)).series()
 
     @r.get("/api/logs/{name}/file", tags=["logs"])
@@ -112,8 +114,9 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:
             scenario = parse_scenario(text, source=name)
-            if req.gains:
-                scenario = with_changes(scenario, gains={**scenario.gains, **req.gains})
+            # the gains it flew (edits included), so the re-fly flies the same sortie
+            flown = rp.describe()["gains"] or scenario.gains
+            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
         except (ScenarioError, GainError) as exc:
             raise HTTPException(422, str(exc)) from None
         camera = rp.info.camera if rp.info.camera in CAMERA_MODES else "projected"

@@ -73,6 +73,15 @@ def router(session: Any) -> APIRouter:
     async def speed(req: SpeedRequest) -> Status:
         return command(session, session.set_speed, req.speed)
 
+    @r.get("/api/sortie/series", tags=["sortie"])
+    async def sortie_series() -> dict[str, Any]:
+        """The sortie on screen so far (plot columns and timeline markers), for a page that
+        loads mid-sortie; a recorded sortie's are at /api/logs/{name}/series."""
+        fn = getattr(session, "series", None)
+        if fn is None:
+            return {"t_s": [], "columns": {}, "events": []}
+        return fn()
+
     @r.get("/api/status", tags=["sortie"])
     async def status() -> Status:
         return session.status()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import viser
@@ -31,6 +32,10 @@ TARGET_RGB = (220, 20, 20)
 TRAIL_VEHICLE_RGB = (30, 110, 230)
 TRAIL_TARGET_RGB = (40, 40, 40)
 LOS_RGB = (250, 170, 0)
+# a compared sortie ("B"), in the colour the plots give it
+COMPARE_VEHICLE_RGB = (0, 168, 168)
+COMPARE_TARGET_RGB = (0, 110, 110)
+VIEW_PRESETS = ("fit engagement", "follow vehicle", "chase", "top")
 
 
 class SceneView:
@@ -49,10 +54,19 @@ class SceneView:
             section_size=10.0,
             position=(0.0, 15.0, 0.0),
         )
+        # a scale for the grid: distances along its west and south edges, and the cell size
+        for k, y in enumerate(range(-10, 50, 10)):
+            server.scene.add_label(f"/ground/scale/n{k}", f"N {y} m", position=(-30.0, y, 0.0))
+        for k, x in enumerate(range(-20, 30, 10)):
+            server.scene.add_label(f"/ground/scale/e{k}", f"E {x} m", position=(x, -15.0, 0.0))
+        server.scene.add_label("/ground/scale/cell", "grid: 5 m cells", position=(30.0, -15.0, 0))
         # the engagement happens 0-35 m north of the origin, 0-20 m up
         server.initial_camera.position = (-11.0, 1.0, 12.0)
         server.initial_camera.look_at = (0.0, 14.0, 5.0)
-        self._follow = server.gui.add_checkbox("Follow vehicle", initial_value=False)
+        self._views: dict[int, Any] = {}  # client id -> its view preset dropdown
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None  # of the sortie on screen
+        server.on_client_connect(self._add_view_control)
+        server.on_client_disconnect(lambda c: self._views.pop(c.client_id, None))
         self._vehicle = None
         self._target = None
         self._frustum = None
@@ -60,6 +74,45 @@ class SceneView:
         self._trail_time_s = -1.0
         self._closest_shown = False
         self._handles: list = []  # every node a sortie added, children before parents
+        self._labels: list = []
+
+    def _add_view_control(self, client: Any) -> None:
+        """Each viewer picks its own view: one operator following the vehicle does not move
+        another's camera."""
+        dd = client.gui.add_dropdown("View", VIEW_PRESETS, initial_value="fit engagement")
+        self._views[client.client_id] = dd
+
+        @dd.on_update
+        def _(_event) -> None:
+            self._apply_static_view(client, dd.value)
+
+    def _apply_static_view(self, client: Any, preset: str) -> None:
+        lo, hi = (
+            self._bounds
+            if self._bounds is not None
+            else (
+                np.array([-5.0, 0.0, 0.0]),
+                np.array([5.0, 35.0, 15.0]),
+            )
+        )
+        centre = (lo + hi) / 2.0
+        size = float(max(np.max(hi - lo), 5.0))
+        with client.atomic():
+            if preset == "fit engagement":
+                client.camera.position = centre + np.array([-0.6 * size, -0.2 * size, 0.3 * size])
+                client.camera.look_at = centre
+            elif preset == "top":
+                client.camera.position = centre + np.array([0.0, -0.01, 1.6 * size])
+                client.camera.look_at = centre
+
+    def _fit_bounds(self, points: list) -> None:
+        if len(points) < 1:
+            return
+        p = np.asarray(points, dtype=float)
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        if self._bounds is not None:
+            lo, hi = np.minimum(lo, self._bounds[0]), np.maximum(hi, self._bounds[1])
+        self._bounds = (lo, hi)
 
     def clear(self) -> None:
         """Remove everything a sortie added (the grid stays)."""
@@ -68,6 +121,7 @@ class SceneView:
         self._handles = []
         self._vehicle = self._target = self._frustum = None
         self._trail_time_s = -1.0
+        self._bounds = None
 
     def reset(self, cam: CameraModel, diameter_m: float, state: SceneState) -> None:
         self.clear()
@@ -95,6 +149,7 @@ class SceneView:
             s.add_label("/vehicle/label", "interceptor", position=(0.0, 0.0, 0.8)),
             s.add_label("/target/label", "target", position=(0.0, 0.0, -0.6)),
         ]
+        self._labels = labels
         # lines are created once and then only their points change: re-adding a node would
         # rebuild its geometry in every viewer
         vp, tp = np.array(state.vehicle_p, np.float32), np.array(state.target_p, np.float32)
@@ -157,7 +212,12 @@ class SceneView:
                         ).copy()
             if done and not self._closest_shown:
                 self._closest_shown = True
-                label = s.add_label("/closest/label", state.outcome_label)
+                # above the meeting point, clear of the interceptor's and target's labels
+                label = s.add_label(
+                    "/closest_label",
+                    state.outcome_label,
+                    position=tuple(np.array(state.closest_point) + np.array([0.0, 0.0, 1.6])),
+                )
                 marker = s.add_icosphere(
                     "/closest",
                     radius=0.08,
@@ -167,19 +227,38 @@ class SceneView:
                     receive_shadow=False,
                 )
                 self._handles = [label, marker, *self._handles]
-        if self._follow.value:
-            R = quat_to_rotmat(state.vehicle_q)
-            eye = vp - 4.0 * R[:, 0] + np.array([0.0, 0.0, 1.5])
-            for client in self.server.get_clients().values():
-                client.camera.position = eye
-                client.camera.look_at = vp + 3.0 * R[:, 0]
+                for name_label in self._labels:  # they meet there: one label, the outcome
+                    name_label.visible = False
+                clients = self.server.get_clients()
+                for cid, dd in list(self._views.items()):  # the whole engagement, now known
+                    if cid in clients and dd.value in ("fit engagement", "top"):
+                        self._apply_static_view(clients[cid], dd.value)
+        if trails_due:
+            self._fit_bounds([*trail_vehicle, *trail_target, list(vp), list(tp)])
+        moving = [(cid, dd.value) for cid, dd in list(self._views.items())]
+        if not any(v in ("follow vehicle", "chase") for _, v in moving):
+            return
+        R = quat_to_rotmat(state.vehicle_q)
+        clients = self.server.get_clients()
+        for cid, preset in moving:
+            client = clients.get(cid)
+            if client is None:
+                continue
+            if preset == "follow vehicle":  # behind and above, north-up: the world stays put
+                eye, look = vp + np.array([-3.0, -6.0, 3.0]), vp
+            elif preset == "chase":  # behind the vehicle along its nose
+                eye, look = vp - 4.0 * R[:, 0] + np.array([0.0, 0.0, 1.5]), vp + 3.0 * R[:, 0]
+            else:
+                continue
+            client.camera.position = eye
+            client.camera.look_at = look
 
     def overlay(self, trail_vehicle: list, trail_target: list) -> None:
         """Another sortie's trails (grey), to compare with the one shown."""
         s = self.server.scene
         for name, pts, rgb in (
-            ("/compare/vehicle", trail_vehicle, (150, 150, 150)),
-            ("/compare/target", trail_target, (90, 90, 90)),
+            ("/compare/vehicle", trail_vehicle, COMPARE_VEHICLE_RGB),
+            ("/compare/target", trail_target, COMPARE_TARGET_RGB),
         ):
             seg = self._segments(pts)
             if seg is not None:

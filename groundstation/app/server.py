@@ -183,6 +183,9 @@ def create_app(
     @app.websocket("/ws/telemetry")
     async def telemetry(ws: WebSocket) -> None:
         await ws.accept()
+        request_frame = getattr(session, "request_frame", None)
+        if request_frame is not None:
+            request_frame()  # a page that (re)loads shows the camera frame at once
         q: asyncio.Queue = asyncio.Queue(maxsize=4)
         hub.queues[q] = True
         key = id(q)

@@ -4,6 +4,11 @@ reset, speed, gains) and observed through telemetry snapshots published at a fix
 
 Commands are queued and carried out by the simulation thread between control ticks, so a gain
 edit takes effect at the next control tick of the running sortie.
+
+The gains rule: the gains in force are a base set (the defaults, a scenario's ``[gains]`` or a
+named gain set) plus the operator's edits. Edits persist from sortie to sortie until the operator
+resets them or starts a scenario (or loads a gain set) that carries gains of its own; that
+replaces base and edits, and :meth:`SimSession.status` says so in ``gains_note``.
 """
 
 from __future__ import annotations
@@ -32,11 +37,14 @@ from .scene import SceneState
 from .snapshot import frame_snapshot
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
-PUBLISH_HZ = 25.0
-SCENE_EVERY = 5  # update the 3D scene with every 5th snapshot (5 Hz): every scene change
+PUBLISH_HZ = 40.0  # telemetry snapshots per second (each viewer shows >= 30 of them)
+SCENE_EVERY = 8  # update the 3D scene with every 8th snapshot (5 Hz): every scene change
 # costs each viewer a WebGL render, which software GL on a laptop without GPU cannot afford
-FRAME_EVERY = 3  # publish a camera frame with every 3rd snapshot (rendered mode)
+FRAME_EVERY = 5  # publish a camera frame with every 5th snapshot (8 Hz, rendered mode)
 TRAIL_EVERY_S = 0.1
+HISTORY_EVERY_S = 0.02  # the sortie's plot series kept for a page that (re)loads mid-sortie
+MAX_EVENTS = 200
+REPLAY_MAX_X = 50.0
 
 
 @dataclass(frozen=True)
@@ -74,6 +82,15 @@ class SimSession:
         self._stop = threading.Event()
         self.config = SortieConfig(load_scenario("cv-top-to-bottom"))
         self.gains = self.config.scenario.gains_obj()
+        self.gains_base = self.gains  # the set the operator's edits are made against
+        self.gains_source = "defaults"
+        self.gains_note: str | None = None
+        self.epoch = 0  # counts sorties shown (start, replay, reset): a page reloads its data
+        self.events: list[list] = []  # [t_s, kind, text] of the sortie on screen
+        self.history: dict[str, list] = _empty_history()
+        self._last_history_t = -1.0
+        self._last_mode: str | None = None
+        self._last_lost = False
         self.sim: Simulation | None = None
         self.recorder: SortieRecorder | None = None  # observes the sortie on screen
         self.state = "idle"  # idle | running | paused | finished
@@ -120,7 +137,18 @@ class SimSession:
             raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
 
         def go():
-            gains = config.scenario.gains_obj()
+            sc = config.scenario
+            if sc.gains:  # the scenario carries its own gains: they replace base and edits
+                edited = sorted(self.gains_edited())
+                self.gains_base = sc.gains_obj()
+                self.gains_source = f"scenario {sc.name}"
+                self.gains_note = f"scenario {sc.name} carries its own gains" + (
+                    f"; your edits to {', '.join(edited)} were replaced" if edited else ""
+                )
+                gains = self.gains_base
+            else:  # operator edits persist
+                gains = self.gains
+                self.gains_note = None
             self._close_current("the operator started another sortie")
             self.recorder = None if self.log_dir is None else SortieRecorder(self.log_dir)
             self.sim = Simulation(
@@ -140,6 +168,7 @@ class SimSession:
             self.speed = SPEEDS[config.speed]
             self._trail_vehicle, self._trail_target = [], []
             self._last_trail_t = -1.0
+            self._new_epoch()
             self._tick_walls.clear()
             self.run_wall_s = self.run_sim_s = 0.0
             self._set_running()
@@ -191,6 +220,7 @@ class SimSession:
             self.replay = self.compare = None
             self.state = "idle"
             self._trail_vehicle, self._trail_target = [], []
+            self._new_epoch()
             if self.scene is not None:
                 self.scene.clear()
             self._publish(force=True)
@@ -209,11 +239,20 @@ class SimSession:
 
         self.submit(go)
 
-    def set_gains(self, gains: Gains) -> Gains:
-        """Use ``gains`` (already validated) from the running sortie's next control tick."""
+    def set_gains(self, gains: Gains, source: str | None = None) -> Gains:
+        """Use ``gains`` (already validated) from the running sortie's next control tick.
+        With ``source`` (a gain set's name) they become the new base set, without edits."""
 
         def go():
+            old = self.gains
+            if source is not None:
+                self.gains_base, self.gains_source, self.gains_note = gains, source, None
             self.gains = gains
+            t = None if self.sim is None else round(self.sim.time_s, 3)
+            for k, v in gains.to_dict().items():
+                before = getattr(old, k)
+                if v != before:
+                    self._event(t, "gain", f"{k} {before:g} → {v:g}")
             if self.sim is not None and not self.sim.done:
                 self.sim.loop.set_gains(gains)
                 self._gains_pending = gains
@@ -222,9 +261,34 @@ class SimSession:
         return self.submit(go)
 
     def default_gains(self) -> Gains:
-        """What "reset gains" restores: the gains the sortie started from, i.e. the gains of
-        the scenario on screen (its ``[gains]`` table over the defaults)."""
-        return self.config.scenario.gains_obj()
+        """What "reset gains" restores: the base set in force, without the operator's edits."""
+        return self.gains_base
+
+    def gains_edited(self) -> dict[str, list[float]]:
+        """The operator's edits: name -> [base value, value in force]."""
+        base, now = self.gains_base.to_dict(), self.gains.to_dict()
+        return {k: [base[k], v] for k, v in now.items() if v != base[k]}
+
+    def request_frame(self) -> None:
+        """Send a camera frame with the next snapshot (a page has just (re)connected)."""
+        self._force_frame = True
+
+    def _new_epoch(self) -> None:
+        self.epoch += 1
+        self.events = []
+        self.history = _empty_history()
+        self._last_history_t = -1.0
+        self._last_mode, self._last_lost = None, False
+
+    def _event(self, t_s: float | None, kind: str, text: str) -> None:
+        if len(self.events) < MAX_EVENTS:
+            self.events.append([t_s, kind, text])
+
+    def series(self) -> dict[str, Any]:
+        """The sortie on screen so far, in the shape of a recorded sortie's series."""
+        with self._lock:
+            h = {k: list(v) for k, v in self.history.items()}
+        return {"t_s": h.pop("t_s"), "columns": h, "events": list(self.events)}
 
     def close(self) -> None:
         self._stop.set()
@@ -255,6 +319,9 @@ class SimSession:
             self.replay, self.compare = player, None
             self.replay_t, self.replay_playing = 0.0, False
             self.state = "replay"
+            self._new_epoch()
+            self.speed = 1.0  # a recorded sortie opens at 1x, whatever the last sortie flew at
+            self.config = dataclasses.replace(self.config, speed="1")
             self._trail_vehicle, self._trail_target = [], []
             if self.scene is not None:
                 self.scene.reset(player.camera, player.diameter_m, player.scene_state(0.0))
@@ -311,10 +378,48 @@ class SimSession:
         if self._gains_pending is not None and sim.loop.gains is self._gains_pending:
             self.gains_applied_time_s = sim.loop.last_tick_time_s
             self._gains_pending = None
+        tel = sim.last_telemetry
+        if tel is not None:
+            mode = tel.mode.value
+            if mode != self._last_mode:
+                if self._last_mode is not None:
+                    self._event(round(sim.time_s, 3), "state", f"{self._last_mode} → {mode}")
+                self._last_mode = mode
+            if tel.dkf_lost != self._last_lost and sim.loop.acquired:
+                text = "detection lost" if tel.dkf_lost else "detection regained"
+                self._event(round(sim.time_s, 3), "detection", text)
+                self._last_lost = tel.dkf_lost
+        if sim.time_s - self._last_history_t >= HISTORY_EVERY_S - 1e-9:
+            self._last_history_t = sim.time_s
+            self._record_history()
+        if sim.done:
+            self._event(
+                round(sim.closest_time_s, 3),
+                "closest",
+                f"closest approach: {sim.outcome.value}, miss {sim.miss_m:.3f} m",
+            )
         if sim.time_s - self._last_trail_t >= TRAIL_EVERY_S:
             self._last_trail_t = sim.time_s
             self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
             self._trail_target.append([round(c, 3) for c in sim.target.p])
+
+    def _record_history(self) -> None:
+        """One row of the plots' series, from the frame through the one snapshot builder."""
+        sim = self.sim
+        snap = frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m)
+        e = snap["e_est_px"]
+        row = {
+            "t_s": snap["t"],
+            "normal_accel_m_s2": snap["normal_accel_m_s2"],
+            "speed_m_s": snap["speed_m_s"],
+            "normal_vel_m_s": snap["normal_vel_m_s"],
+            "e_x_px": None if e is None else float(e[0]),
+            "e_y_px": None if e is None else float(e[1]),
+            "range_m": snap["range_m"],
+        }
+        with self._lock:
+            for k, val in row.items():
+                self.history[k].append(val)
 
     def _run(self) -> None:
         next_publish = 0.0
@@ -350,7 +455,7 @@ class SimSession:
                     self.state = "finished"
                     next_publish = 0.0
             if self.state == "replay" and self.replay is not None and self.replay_playing:
-                speed = 50.0 if math.isinf(self.speed) else self.speed
+                speed = self.replay_speed()
                 self.replay_t = min(
                     self.replay_t + (now - last_wall_replay) * speed, self.replay.duration_s
                 )
@@ -400,6 +505,10 @@ class SimSession:
         )
 
     # ------------------------------------------------------------------ observations
+    def replay_speed(self) -> float:
+        """Recorded seconds played per wall second ("max" plays at REPLAY_MAX_X)."""
+        return REPLAY_MAX_X if math.isinf(self.speed) else self.speed
+
     def loop_rate_hz(self) -> float:
         """Control ticks run per wall-clock second, over the last second."""
         if self.state != "running":
@@ -424,6 +533,11 @@ class SimSession:
             "loop_rate_hz": round(self.loop_rate_hz(), 1),
             "gains_applied_time_s": self.gains_applied_time_s,
             "gains_pending": self._gains_pending is not None,
+            "gains_source": self.gains_source,
+            "gains_edited": self.gains_edited(),
+            "gains_note": self.gains_note,
+            "epoch": self.epoch,
+            "compare": None if self.compare is None else self.compare.describe(),
             "real_time_ratio": (self.run_sim_s / self.run_wall_s) if self.run_wall_s > 0 else None,
             "scene_errors": self.scene_errors,
             "recording": self.recording,
@@ -434,6 +548,7 @@ class SimSession:
                 "t_s": round(self.replay_t, 4),
                 "duration_s": round(self.replay.duration_s, 4),
                 "playing": self.replay_playing,
+                "speed_x": self.replay_speed(),
                 "closest_time_s": round(self.replay.closest_time_s, 4),
                 "status": self.replay.info.status,
                 "compare": None if self.compare is None else self.compare.path.name,
@@ -470,6 +585,7 @@ class SimSession:
     def snapshot(self) -> dict[str, Any]:
         self._publish_count += 1
         snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
+        snap["events"] = self.events if self.replay is None else self.replay.timeline
         if self.replay is not None:
             rp = self.replay
             snap.update(
@@ -488,11 +604,17 @@ class SimSession:
             return snap
         snap.update(frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m))
         frame = sim.camera.last_frame
-        if frame is not None and self._publish_count % FRAME_EVERY == 0:
+        if frame is not None and (self._force_frame or self._publish_count % FRAME_EVERY == 0):
+            self._force_frame = False
             ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 70])
             if ok:
                 snap["frame_jpeg_b64"] = base64.b64encode(jpg.tobytes()).decode("ascii")
         return snap
+
+
+def _empty_history() -> dict[str, list]:
+    keys = ("t_s", "normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px")
+    return {k: [] for k in (*keys, "range_m")}
 
 
 def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):

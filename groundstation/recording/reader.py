@@ -43,6 +43,8 @@ class LogInfo:
     miss_m: float | None = None
     duration_s: float | None = None
     recorded_at_utc: str | None = None
+    intercept_time_s: float | None = None
+    reflown_from: str | None = None  # the recorded sortie this one re-flew
     messages: int = 0
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -90,6 +92,8 @@ def _apply_metadata(info: LogInfo, name: str, data: dict[str, str]) -> None:
         info.law = data.get("law")
         info.camera = data.get("camera")
         info.recorded_at_utc = data.get("recorded_at_utc")
+        source = data.get("scenario_source", "")
+        info.reflown_from = source if source.endswith(".mcap") else None
         try:
             info.seed = int(data.get("seed", ""))
         except ValueError:
@@ -103,6 +107,8 @@ def _apply_metadata(info: LogInfo, name: str, data: dict[str, str]) -> None:
                 out[k] = v
         info.outcome = out.get("outcome")
         info.miss_m = out.get("miss_m")
+        t = out.get("intercept_time_s")
+        info.intercept_time_s = t if isinstance(t, (int, float)) else None
 
 
 def _stream_scan(path: Path, info: LogInfo) -> bool:
