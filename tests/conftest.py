@@ -5,6 +5,9 @@ import pytest
 
 from onboard.geometry import attitude_from_yaw_pitch_roll
 
+# the browser tests' ground station and chromium, one of each per module
+from .browser_support import browser, station  # noqa: F401
+
 _FUZZ: dict[str, tuple[int, int]] = {}  # suite -> (cases tried, failures)
 
 

@@ -1,49 +1,16 @@
 """The dashboard in headless Chromium (Playwright driving Debian's chromium): the token is
 required, a sortie runs, a gain edited on the page takes effect, the outcome shows."""
 
-import os
 import re
-import shutil
 import urllib.request
 
 import pytest
 
 from groundstation.app.server import GroundStation
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(
-    CHROMIUM is None and not os.environ.get("CI"),
-    reason="Debian's chromium is not installed (with CI set this is a failure)",
-)
-ARGS = [
-    "--no-sandbox",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
+from .browser_support import needs_chromium
 
-
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
-    d = tmp_path_factory.mktemp("gs")
-    gs = GroundStation(port=0, data_dir=d, log_dir=d / "logs")
-    gs.start_in_thread()
-    yield gs
-    gs.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    if CHROMIUM is None:
-        pytest.fail("CI is set and Debian's chromium is not installed")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        yield b
-        b.close()
+pytestmark = needs_chromium
 
 
 def test_page_refused_without_token(station, browser):

@@ -4,47 +4,19 @@ re-fly overlay and its legend, plots restored after a reload, the recording bann
 error. One ground station and one headless chromium serve every test of this module."""
 
 import json
-import os
 import re
-import shutil
 import time
 import urllib.request
 from pathlib import Path
 
 import pytest
 
-from groundstation.app.server import GroundStation
 from groundstation.app.session import SortieConfig
 from groundstation.scenario import load_scenario
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(
-    CHROMIUM is None and not os.environ.get("CI"),
-    reason="Debian's chromium is not installed (with CI set this is a failure)",
-)
-ARGS = ["--no-sandbox", "--enable-unsafe-swiftshader", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]  # fmt: skip
+from .browser_support import needs_chromium
 
-
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
-    d = tmp_path_factory.mktemp("gs")
-    gs = GroundStation(port=0, data_dir=d, log_dir=d / "logs")
-    gs.start_in_thread()
-    yield gs
-    gs.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    if CHROMIUM is None:
-        pytest.fail("CI is set and Debian's chromium is not installed")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        yield b
-        b.close()
+pytestmark = needs_chromium
 
 
 @pytest.fixture

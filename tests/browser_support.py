@@ -1,0 +1,44 @@
+"""What every browser test module shares: Debian's chromium (a failure with ``CI`` set, a
+skip elsewhere), its flags, one ground station and one browser per module."""
+
+import os
+import shutil
+
+import pytest
+
+from groundstation.app.server import GroundStation
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None and not os.environ.get("CI"),
+    reason="Debian's chromium is not installed (with CI set this is a failure)",
+)
+ARGS = [
+    "--no-sandbox",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory):
+    d = tmp_path_factory.mktemp("gs")
+    gs = GroundStation(port=0, data_dir=d, log_dir=d / "logs")
+    gs.start_in_thread()
+    yield gs
+    gs.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    if CHROMIUM is None:
+        pytest.fail("CI is set and Debian's chromium is not installed")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield b
+        b.close()
