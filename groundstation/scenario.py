@@ -144,6 +144,27 @@ class SimSpec:
 
 
 @dataclass(frozen=True)
+class EstimateSpec:
+    """What the loop is handed instead of the truth (``groundstation/sim/estimate.py`` gives
+    the model and the sources of each default). Sigmas are 1-sigma per axis."""
+
+    enabled: bool = True  # false: ideal sensors (the loop sees the truth)
+    pos_noise_m: float = 0.05  # Gauss-Markov position error
+    pos_time_constant_s: float = 2.0
+    vel_noise_m_s: float = 0.05  # Gauss-Markov velocity error
+    vel_time_constant_s: float = 1.0
+    att_noise_deg: float = 0.2  # Gauss-Markov attitude error (small rotation, body axes)
+    att_time_constant_s: float = 2.0
+    lag_s: float = 0.02  # the state estimate is the vehicle this long ago
+    gyro_bias_rad_s: float = 0.003  # turn-on bias left after calibration
+    gyro_bias_walk_rad_s_sqrt_s: float = 0.0001  # bias random walk
+    camera_time_offset_s: float = 0.005  # camera-IMU stamp offset, drawn once a sortie
+    camera_stamp_jitter_s: float = 0.001  # per frame, on top of the offset
+    thrust_scale_sigma: float = 0.02  # true / modelled thrust, drawn once a sortie
+    command_delay_s: float = 0.005  # command to actuators (MAVLink + PX4 scheduling)
+
+
+@dataclass(frozen=True)
 class Scenario:
     name: str
     duration_s: float
@@ -153,6 +174,7 @@ class Scenario:
     camera: CameraSpec = field(default_factory=CameraSpec)
     wind: WindSpec = field(default_factory=WindSpec)
     sim: SimSpec = field(default_factory=SimSpec)
+    estimate: EstimateSpec = field(default_factory=EstimateSpec)
     gains: dict[str, float] = field(default_factory=dict)
     source: str = "<memory>"
     text: str = ""  # the file as read, for recording alongside a sortie
@@ -167,6 +189,7 @@ _SECTIONS = {
     "camera": CameraSpec,
     "wind": WindSpec,
     "sim": SimSpec,
+    "estimate": EstimateSpec,
 }
 
 
@@ -178,10 +201,20 @@ class _InvalidValueError(Exception):
     """A value of the wrong type (the message says what was expected)."""
 
 
-_PLACEHOLDER: dict[str, Any] = {"float": 1.0, "int": 1, "str": "", "Vec3": (0.0, 0.0, 1.0)}
+_PLACEHOLDER: dict[str, Any] = {
+    "float": 1.0,
+    "int": 1,
+    "str": "",
+    "bool": True,
+    "Vec3": (0.0, 0.0, 1.0),
+}
 
 
 def _convert(value: Any, annotation: str) -> Any:
+    if annotation == "bool":
+        if not isinstance(value, bool):
+            raise _InvalidValueError(f"expected true or false, got {value!r}")
+        return value
     if annotation == "float":
         if not _is_number(value) or not math.isfinite(value):
             raise _InvalidValueError(f"expected a number, got {value!r}")
@@ -349,6 +382,31 @@ def _validate(s: Scenario, problems: _Problems) -> None:
             f"{rate} Hz must divide the physics rate {sim.physics_rate_hz} Hz",
         )
     check(sim.gyro_noise_rad_s >= 0, "sim.gyro_noise_rad_s", "must not be negative")
+    e = s.estimate
+    for name in (
+        "pos_noise_m",
+        "vel_noise_m_s",
+        "att_noise_deg",
+        "lag_s",
+        "gyro_bias_rad_s",
+        "gyro_bias_walk_rad_s_sqrt_s",
+        "camera_time_offset_s",
+        "camera_stamp_jitter_s",
+        "thrust_scale_sigma",
+        "command_delay_s",
+    ):
+        check(getattr(e, name) >= 0, f"estimate.{name}", "must not be negative")
+    for name in ("pos_time_constant_s", "vel_time_constant_s", "att_time_constant_s"):
+        check(getattr(e, name) > 0, f"estimate.{name}", "must be > 0")
+    check(e.lag_s <= 0.5, "estimate.lag_s", "must be at most 0.5 s")
+    check(e.command_delay_s <= 0.5, "estimate.command_delay_s", "must be at most 0.5 s")
+    check(e.att_noise_deg <= 10, "estimate.att_noise_deg", "must be at most 10 degrees")
+    check(e.thrust_scale_sigma <= 0.2, "estimate.thrust_scale_sigma", "must be at most 0.2")
+    check(
+        e.camera_time_offset_s <= 0.05,
+        "estimate.camera_time_offset_s",
+        "must be at most 0.05 s (a larger offset is a wrong camera delay, camera.delay_s)",
+    )
     each_ok = True
     for k, v in s.gains.items():
         try:
@@ -557,9 +615,18 @@ def _as_toml_table(spec: Any) -> dict[str, Any]:
 
 def scenario_toml(scenario: Scenario) -> str:
     """The scenario as TOML: its file as read if it is unchanged, else generated from its
-    values (every key written, so it reads back to an equal scenario)."""
+    values (every key written, so it reads back to an equal scenario). A file without an
+    ``[estimate]`` table gets the one that applies appended, so a recording names the
+    estimate settings that flew."""
     if scenario.text:
-        return scenario.text
+        if "estimate" in tomllib.loads(scenario.text):
+            return scenario.text
+        table = tomli_w.dumps({"estimate": _as_toml_table(scenario.estimate)})
+        sep = "" if scenario.text.endswith("\n") else "\n"
+        return (
+            f"{scenario.text}{sep}\n# not in the file: the state-estimate model's defaults, "
+            f"as flown\n{table}"
+        )
     data: dict[str, Any] = {
         "name": scenario.name,
         "description": scenario.description,

@@ -10,6 +10,7 @@ is found in continuous time inside every step (relative motion linear over the s
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
@@ -25,6 +26,7 @@ from onboard.loop import InterceptionLoop
 from ..frames import Frame, SortieObserver, SortieStart
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
+from .estimate import StateEstimateModel
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
@@ -101,6 +103,15 @@ class Simulation:
         ss = np.random.SeedSequence(self.seed)
         cam_rng, wind_rng, gyro_rng, render_rng = (np.random.default_rng(s) for s in ss.spawn(4))
         self._gyro_rng = gyro_rng
+        # the estimate model's streams are the next child: the four above stay as they were
+        est_seed = ss.spawn(1)[0]
+        self.estimate = (
+            StateEstimateModel(scenario.estimate, est_seed) if scenario.estimate.enabled else None
+        )
+        self._command_delay_steps = (
+            0 if self.estimate is None else round(self.estimate.command_delay_s / self.dt_s)
+        )
+        self._commands: deque = deque()  # (physics step due, body rates, thrust) in flight
         c = scenario.camera
         self.camera_model = CameraModel(
             c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
@@ -217,6 +228,10 @@ class Simulation:
             if self._check_loop_outcome(t):
                 self._tell_finish(None)
                 return
+        cmds = self._commands
+        while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
+            _, rates, thrust = cmds.popleft()
+            veh.command(rates, thrust)
         wind = self.wind.velocity_m_s
         veh.step(self.dt_s, wind)
         self.target.advance(t + self.dt_s, self.dt_s, wind)
@@ -229,18 +244,35 @@ class Simulation:
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
         loop = self.loop
+        est = self.estimate
         for det in self.camera.deliver(t):
+            if est is not None:
+                det = est.stamp(det)
             loop.on_detection(det)
             self.last_detection = det
         noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
-        loop.on_gyro(GyroSample(t, np.array(veh.read_gyro()) + noise))
-        tel = loop.tick(veh.state(t))
+        rates = np.array(veh.read_gyro()) + noise
+        if est is None:
+            loop.on_gyro(GyroSample(t, rates))
+            tel = loop.tick(veh.state(t))
+        else:
+            loop.on_gyro(GyroSample(t, est.gyro(t, rates)))
+            tel = loop.tick(est.vehicle_state(veh.state(t)))
         for r in loop.last_fusion:
             if r.value in ("accepted", "initialised"):
                 self._fused += 1
             else:
                 self._rejected += 1
-        veh.command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised)
+        if est is None:
+            veh.command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised)
+        else:
+            self._commands.append(
+                (
+                    self.step_index + self._command_delay_steps,
+                    tel.command.body_rates_flu_rad_s,
+                    tel.command.thrust_normalised * est.thrust_scale,
+                )
+            )
         a, v = veh.accel, veh.v
         vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
         av = a[0] * v[0] + a[1] * v[1] + a[2] * v[2]

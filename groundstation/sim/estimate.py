@@ -1,0 +1,278 @@
+"""The state-estimate model: what the onboard loop is handed instead of the simulator's truth.
+
+A real interceptor never sees its true state. PX4's EKF2 hands the companion computer an
+estimate that is noisy, biased, correlated in time and late; the gyro it integrates has a
+bias; the camera's time stamps are off by a few milliseconds; the thrust it commands is not
+quite the thrust it gets, and later. This module models each of these, seeded and
+switchable one by one from the scenario's ``[estimate]`` table (``--set estimate.KEY=...``):
+
+============================  =======  =====================================================
+error (key)                   default  model and source
+============================  =======  =====================================================
+velocity (vel_noise_m_s,      0.05     First-order Gauss-Markov per ENU axis, correlation time
+vel_time_constant_s)          m/s, 1 s 1 s. EKF2 fuses velocity (GNSS ``EKF2_GPS_V_NOISE``
+                                       0.3 m/s, vision ``EKF2_EVV_NOISE`` 0.1 m/s, at 5-50 Hz)
+                                       and its output is smoothed by the output predictor
+                                       (``EKF2_TAU_VEL`` 0.25 s); the error left is a few cm/s,
+                                       correlated over about a second (the filter's own time
+                                       constant), not white at 100 Hz.
+position (pos_noise_m,        0.05 m,  Gauss-Markov per axis. Indoors the paper's vehicle fused
+pos_time_constant_s)          2 s      OptiTrack (``EKF2_EVP_NOISE`` 0.1 m default, the real
+                                       error smaller); the loop does not use position today,
+                                       it is modelled so that the recorded estimate is honest.
+attitude (att_noise_deg,      0.2 deg, Gauss-Markov small rotation per body axis. EKF2's tilt
+att_time_constant_s)          2 s      is held by accelerometer/velocity fusion to a few
+                                       tenths of a degree (``EKF2_ANGERR_INIT`` 0.1 rad is
+                                       the switch-on uncertainty it converges from);
+                                       correlated over seconds as its corrections are slow.
+lag (lag_s)                   20 ms    The estimate is the vehicle ``lag_s`` ago: MAVLink
+                                       transport of ATTITUDE/ODOMETRY to the companion
+                                       (streamed at 100-250 Hz, one to two periods) plus the
+                                       output predictor's tracking error (it propagates the
+                                       delayed-horizon EKF to now through a complementary
+                                       filter, ``EKF2_TAU_VEL``/``EKF2_TAU_POS`` 0.25 s).
+gyro bias (gyro_bias_rad_s,   3e-3     Turn-on bias per axis N(0, 3e-3 rad/s = 0.17 deg/s):
+gyro_bias_walk_rad_s_sqrt_s)  rad/s,   what stays in the raw gyro (HIGHRES_IMU, which the
+                              1e-4     onboard runtime reads) after PX4's calibration, from
+                              rad/s/   thermal drift of an ICM-42688-class MEMS gyro (the
+                              sqrt(s)  Pixhawk 6C's). Plus a random walk; EKF2's process
+                                       noise for it, ``EKF2_GYR_B_NOISE`` 1e-3 rad/s^2, is a
+                                       deliberately loose upper bound, the sensors' bias
+                                       instability (a few deg/h) a lower one. The white gyro
+                                       noise stays where it was, ``sim.gyro_noise_rad_s``
+                                       (3e-3 rad/s a 10 ms sample; EKF2_GYR_NOISE 1.5e-2 is
+                                       again a loose filter setting).
+camera-IMU time               5 ms,    Detections are stamped with capture time + an offset
+(camera_time_offset_s,        1 ms     drawn once a sortie, N(0, 5 ms), + N(0, 1 ms) each
+camera_stamp_jitter_s)                 frame: the stamp is start-of-frame while the target's
+                                       rows are read mid-exposure and mid rolling-shutter
+                                       readout (milliseconds on a CSI camera), and the
+                                       companion-FC clock sync (MAVLink TIMESYNC) is good to
+                                       about a millisecond. Camera-IMU calibrations (Kalibr)
+                                       of unsynchronised cameras find offsets of this order.
+thrust (thrust_scale_sigma)   0.02     True thrust = commanded x s, s ~ N(1, 0.02) once a
+                                       sortie (clipped to 3 sigma): the loop's thrust model
+                                       (max thrust, hover thrust) is off by the battery's sag
+                                       and the hover-thrust estimate's error (PX4's
+                                       estimator, ``MPC_USE_HTE``, tracks hover thrust to a
+                                       few percent). Saturation is then at s x max thrust,
+                                       where the loop does not expect it (s > 1 still clips
+                                       at the airframe's max thrust).
+command latency               5 ms     The rate/thrust command reaches the actuators this much
+(command_delay_s)                      later: MAVLink SET_ATTITUDE_TARGET on a 921600 baud
+                                       link, then PX4's offboard and rate-controller
+                                       scheduling (gyro-rate, ~1 kHz).
+============================  =======  =====================================================
+
+The motor lag itself is already in the airframe (``interceptor.thrust_time_constant_s``
+0.03 s: PX4 passes the thrust setpoint straight to the mixer, so the thrust response *is* the
+motors' and ESCs'; ``interceptor.rate_time_constant_s`` 0.05 s is PX4's closed rate loop).
+
+Every error has its own random stream (children of the sortie's seed): switching one off
+leaves the others' draws unchanged. ``estimate.enabled = false`` hands the loop the truth (the
+ideal-sensor figures). Pure maths: time comes in with the samples, no clock is read.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from onboard.datatypes import Detection, VehicleState
+
+from ..scenario import EstimateSpec
+
+# the independent random streams, in spawn order (a new error goes at the end)
+STREAMS = ("position", "velocity", "attitude", "gyro_bias", "camera_time", "thrust")
+
+
+class GaussMarkov:
+    """First-order Gauss-Markov process per component, x' = -x / tau + w, stationary standard
+    deviation ``sigma``; started in its stationary distribution and stepped exactly for any
+    dt (x <- a x + sigma sqrt(1 - a^2) n, a = exp(-dt / tau))."""
+
+    def __init__(self, sigma: float, tau_s: float, dim: int, rng: np.random.Generator) -> None:
+        self.sigma = float(sigma)
+        self.tau_s = float(tau_s)
+        self._rng = rng
+        self.value = self.sigma * rng.standard_normal(dim)
+
+    def step(self, dt_s: float) -> np.ndarray:
+        a = math.exp(-dt_s / self.tau_s)
+        self.value = a * self.value + self.sigma * math.sqrt(
+            1.0 - a * a
+        ) * self._rng.standard_normal(self.value.shape[0])
+        return self.value
+
+
+class RandomWalk:
+    """A bias: N(0, ``initial``) per component at the start, then a random walk of
+    ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t))."""
+
+    def __init__(
+        self, initial: float, walk_per_sqrt_s: float, dim: int, rng: np.random.Generator
+    ) -> None:
+        self.walk = float(walk_per_sqrt_s)
+        self._rng = rng
+        self.value = float(initial) * rng.standard_normal(dim)
+
+    def step(self, dt_s: float) -> np.ndarray:
+        self.value = self.value + self.walk * math.sqrt(dt_s) * self._rng.standard_normal(
+            self.value.shape[0]
+        )
+        return self.value
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def _quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation vector (rad)."""
+    ang = float(np.linalg.norm(rotvec_rad))
+    if ang < 1e-12:
+        return np.array([1.0, 0.5 * rotvec_rad[0], 0.5 * rotvec_rad[1], 0.5 * rotvec_rad[2]])
+    s = math.sin(0.5 * ang) / ang
+    return np.array([math.cos(0.5 * ang), *(s * rotvec_rad)])
+
+
+@dataclass(frozen=True, slots=True)
+class _Sample:
+    time_s: float
+    p: np.ndarray
+    v: np.ndarray
+    q: np.ndarray
+    w: np.ndarray
+
+
+class DelayLine:
+    """The truth ``lag_s`` ago, linearly interpolated between the samples pushed (quaternions
+    normalised after interpolation); before the history reaches back that far, the oldest
+    sample. With ``lag_s = 0`` it returns the newest sample unchanged."""
+
+    def __init__(self, lag_s: float) -> None:
+        self.lag_s = float(lag_s)
+        self._hist: deque[_Sample] = deque()
+
+    def push(self, s: _Sample) -> _Sample:
+        h = self._hist
+        h.append(s)
+        tq = s.time_s - self.lag_s
+        while len(h) >= 2 and h[1].time_s <= tq + 1e-12:
+            h.popleft()
+        a = h[0]
+        if len(h) == 1 or tq <= a.time_s + 1e-12:
+            return a
+        b = h[1]
+        f = (tq - a.time_s) / (b.time_s - a.time_s)
+        qb = b.q if float(a.q @ b.q) >= 0.0 else -b.q
+        q = a.q + f * (qb - a.q)
+        return _Sample(
+            tq,
+            a.p + f * (b.p - a.p),
+            a.v + f * (b.v - a.v),
+            q / np.linalg.norm(q),
+            a.w + f * (b.w - a.w),
+        )
+
+
+class StateEstimateModel:
+    """The errors of one sortie (see the module docstring). Call :meth:`vehicle_state` and
+    :meth:`gyro` at each control tick (time non-decreasing), :meth:`stamp` on each delivered
+    detection; :attr:`thrust_scale` and :attr:`command_delay_s` shape the actuation."""
+
+    def __init__(self, spec: EstimateSpec, seed: np.random.SeedSequence) -> None:
+        self.spec = spec
+        rngs = dict(
+            zip(STREAMS, (np.random.default_rng(s) for s in seed.spawn(len(STREAMS))), strict=True)
+        )
+        self.position_error = GaussMarkov(
+            spec.pos_noise_m, spec.pos_time_constant_s, 3, rngs["position"]
+        )
+        self.velocity_error = GaussMarkov(
+            spec.vel_noise_m_s, spec.vel_time_constant_s, 3, rngs["velocity"]
+        )
+        self.attitude_error = GaussMarkov(
+            math.radians(spec.att_noise_deg), spec.att_time_constant_s, 3, rngs["attitude"]
+        )
+        self.gyro_bias = RandomWalk(
+            spec.gyro_bias_rad_s, spec.gyro_bias_walk_rad_s_sqrt_s, 3, rngs["gyro_bias"]
+        )
+        self._camera_rng = rngs["camera_time"]
+        self.camera_offset_s = spec.camera_time_offset_s * float(self._camera_rng.standard_normal())
+        n = float(np.clip(rngs["thrust"].standard_normal(), -3.0, 3.0))
+        self.thrust_scale = 1.0 + spec.thrust_scale_sigma * n
+        self.command_delay_s = spec.command_delay_s
+        self._delay = DelayLine(spec.lag_s)
+        self._time_s: float | None = None
+
+    def _advance(self, time_s: float) -> None:
+        """Step every error process to ``time_s`` (once per distinct time)."""
+        if self._time_s is not None:
+            dt = time_s - self._time_s
+            if dt <= 0.0:
+                return
+            self.position_error.step(dt)
+            self.velocity_error.step(dt)
+            self.attitude_error.step(dt)
+            self.gyro_bias.step(dt)
+        self._time_s = time_s
+
+    def vehicle_state(self, truth: VehicleState) -> VehicleState:
+        """The estimate the loop sees at ``truth.time_s``: the truth ``lag_s`` ago with the
+        position, velocity and attitude errors, body rates with the gyro bias."""
+        t = truth.time_s
+        self._advance(t)
+        old = self._delay.push(
+            _Sample(
+                t,
+                np.asarray(truth.position_enu_m, dtype=float),
+                np.asarray(truth.velocity_enu_m_s, dtype=float),
+                np.asarray(truth.attitude_wxyz, dtype=float),
+                np.asarray(truth.body_rates_flu_rad_s, dtype=float),
+            )
+        )
+        q = _quat_mul(old.q, _quat_exp(self.attitude_error.value))
+        return VehicleState(
+            time_s=t,
+            position_enu_m=old.p + self.position_error.value,
+            velocity_enu_m_s=old.v + self.velocity_error.value,
+            attitude_wxyz=q / np.linalg.norm(q),
+            body_rates_flu_rad_s=old.w + self.gyro_bias.value,
+        )
+
+    def gyro(self, time_s: float, rates_flu_rad_s: np.ndarray) -> np.ndarray:
+        """A gyro sample (FLU, rad/s) with the bias at ``time_s`` added."""
+        self._advance(time_s)
+        return np.asarray(rates_flu_rad_s, dtype=float) + self.gyro_bias.value
+
+    def stamp(self, detection: Detection) -> Detection:
+        """The detection as the loop receives it: its capture time off by the sortie's
+        camera-IMU offset and the frame's stamp jitter."""
+        err = self.camera_offset_s + self.spec.camera_stamp_jitter_s * float(
+            self._camera_rng.standard_normal()
+        )
+        return replace(detection, capture_time_s=detection.capture_time_s + err)
+
+    def summary(self) -> dict[str, float]:
+        """This sortie's draws (for reports): camera offset, thrust scale, gyro bias now."""
+        b = self.gyro_bias.value
+        return {
+            "camera_offset_s": self.camera_offset_s,
+            "thrust_scale": self.thrust_scale,
+            "gyro_bias_x_rad_s": float(b[0]),
+            "gyro_bias_y_rad_s": float(b[1]),
+            "gyro_bias_z_rad_s": float(b[2]),
+        }
