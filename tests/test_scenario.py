@@ -105,7 +105,11 @@ def test_a_changed_scenario_writes_toml_that_reads_back_equal(path):
     from groundstation.scenario import scenario_toml, with_overrides
 
     s = load_scenario(path)
-    assert scenario_toml(s) == s.text  # unchanged: the file as read, comments and all
+    text = scenario_toml(s)  # unchanged: the file as read, comments and all, ...
+    assert text.startswith(s.text)
+    if "[estimate]" not in s.text:  # ... with the estimate settings that apply appended
+        assert "[estimate]" in text[len(s.text) :]
+    assert _values(parse_scenario(text)) == _values(s)
     changed = with_overrides(s, {"camera.noise_px": 0, "target.position_m": [1, 2, 3.5]})
     assert changed.camera.noise_px == 0.0 and changed.target.position_m == (1.0, 2.0, 3.5)
     assert changed.text == "" and changed.source == s.source

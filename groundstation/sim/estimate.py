@@ -244,12 +244,13 @@ class StateEstimateModel:
                 np.asarray(truth.body_rates_flu_rad_s, dtype=float),
             )
         )
-        q = _quat_mul(old.q, _quat_exp(self.attitude_error.value))
         return VehicleState(
             time_s=t,
             position_enu_m=old.p + self.position_error.value,
             velocity_enu_m_s=old.v + self.velocity_error.value,
-            attitude_wxyz=q / np.linalg.norm(q),
+            # a unit quaternion times a unit quaternion: no renormalising, so that zero
+            # errors hand the loop the truth bit for bit
+            attitude_wxyz=_quat_mul(old.q, _quat_exp(self.attitude_error.value)),
             body_rates_flu_rad_s=old.w + self.gyro_bias.value,
         )
 
