@@ -155,7 +155,8 @@ class EstimateSpec:
     vel_time_constant_s: float = 1.0
     att_noise_deg: float = 0.2  # Gauss-Markov attitude error (small rotation, body axes)
     att_time_constant_s: float = 2.0
-    lag_s: float = 0.02  # the state estimate is the vehicle this long ago
+    lag_s: float = 0.02  # the position and velocity estimates are the vehicle this long ago
+    att_lag_s: float = 0.01  # the attitude estimate is the vehicle this long ago
     gyro_bias_rad_s: float = 0.003  # turn-on bias left after calibration
     gyro_bias_walk_rad_s_sqrt_s: float = 0.0001  # bias random walk
     camera_time_offset_s: float = 0.005  # camera-IMU stamp offset, drawn once a sortie
@@ -388,6 +389,7 @@ def _validate(s: Scenario, problems: _Problems) -> None:
         "vel_noise_m_s",
         "att_noise_deg",
         "lag_s",
+        "att_lag_s",
         "gyro_bias_rad_s",
         "gyro_bias_walk_rad_s_sqrt_s",
         "camera_time_offset_s",
@@ -399,6 +401,7 @@ def _validate(s: Scenario, problems: _Problems) -> None:
     for name in ("pos_time_constant_s", "vel_time_constant_s", "att_time_constant_s"):
         check(getattr(e, name) > 0, f"estimate.{name}", "must be > 0")
     check(e.lag_s <= 0.5, "estimate.lag_s", "must be at most 0.5 s")
+    check(e.att_lag_s <= 0.5, "estimate.att_lag_s", "must be at most 0.5 s")
     check(e.command_delay_s <= 0.5, "estimate.command_delay_s", "must be at most 0.5 s")
     check(e.att_noise_deg <= 10, "estimate.att_noise_deg", "must be at most 10 degrees")
     check(e.thrust_scale_sigma <= 0.2, "estimate.thrust_scale_sigma", "must be at most 0.2")

@@ -20,19 +20,6 @@ from groundstation.sim.estimate import DelayLine, GaussMarkov, RandomWalk, State
 from groundstation.sim.simulation import Simulation, run_sortie
 from onboard.datatypes import Detection, VehicleState
 
-ZERO = EstimateSpec(
-    pos_noise_m=0.0,
-    vel_noise_m_s=0.0,
-    att_noise_deg=0.0,
-    lag_s=0.0,
-    gyro_bias_rad_s=0.0,
-    gyro_bias_walk_rad_s_sqrt_s=0.0,
-    camera_time_offset_s=0.0,
-    camera_stamp_jitter_s=0.0,
-    thrust_scale_sigma=0.0,
-    command_delay_s=0.0,
-)
-
 
 def _state(t, p=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), q=(1.0, 0.0, 0.0, 0.0)):
     return VehicleState(t, np.array(p), np.array(v), np.array(q), np.zeros(3))
@@ -59,7 +46,7 @@ def test_velocity_error_has_the_configured_sigma_and_is_time_correlated():
 
 
 def test_attitude_and_position_errors_have_their_sigmas():
-    m = _model(att_noise_deg=0.2, att_time_constant_s=2.0, pos_noise_m=0.05, lag_s=0.0)
+    m = _model(att_noise_deg=0.2, att_time_constant_s=2.0, pos_noise_m=0.05, att_lag_s=0.0)
     angles, pos = [], []
     for k in range(8000):
         s = m.vehicle_state(_state(0.1 * k))
@@ -75,14 +62,18 @@ def test_lag_measured_by_cross_correlation():
     rng = np.random.default_rng(3)
     n, dt = 6000, 0.001
     truth = np.convolve(rng.standard_normal(n + 200), np.hanning(60), mode="same")[:n]
-    m = _model(lag_s=0.02, vel_noise_m_s=0.05)
-    est = np.array(
-        [m.vehicle_state(_state(k * dt, v=(truth[k], 0, 0))).velocity_enu_m_s[0] for k in range(n)]
-    )
+    yaw = 0.02 * truth  # rad
+    m = _model(lag_s=0.02, att_lag_s=0.01, vel_noise_m_s=0.05, att_noise_deg=0.2)
+    vel, att = [], []
+    for k in range(n):
+        q = (math.cos(0.5 * yaw[k]), 0.0, 0.0, math.sin(0.5 * yaw[k]))
+        s = m.vehicle_state(_state(k * dt, v=(truth[k], 0, 0), q=q))
+        vel.append(s.velocity_enu_m_s[0])
+        att.append(2.0 * math.atan2(s.attitude_wxyz[3], s.attitude_wxyz[0]))
     shifts = range(0, 60)
-    xc = [float(truth[: n - s] @ est[s:]) for s in shifts]
-    lag_s = shifts[int(np.argmax(xc))] * dt
-    assert lag_s == pytest.approx(0.02, abs=0.005)
+    for signal, est, lag in ((truth, np.array(vel), 0.02), (yaw, np.array(att), 0.01)):
+        xc = [float(signal[: n - s] @ est[s:]) for s in shifts]
+        assert shifts[int(np.argmax(xc))] * dt == pytest.approx(lag, abs=0.005)
 
 
 def test_delay_line_interpolates_between_samples():

@@ -25,12 +25,21 @@ att_time_constant_s)          2 s      is held by accelerometer/velocity fusion 
                                        tenths of a degree (``EKF2_ANGERR_INIT`` 0.1 rad is
                                        the switch-on uncertainty it converges from);
                                        correlated over seconds as its corrections are slow.
-lag (lag_s)                   20 ms    The estimate is the vehicle ``lag_s`` ago: MAVLink
-                                       transport of ATTITUDE/ODOMETRY to the companion
-                                       (streamed at 100-250 Hz, one to two periods) plus the
-                                       output predictor's tracking error (it propagates the
-                                       delayed-horizon EKF to now through a complementary
-                                       filter, ``EKF2_TAU_VEL``/``EKF2_TAU_POS`` 0.25 s).
+lag (lag_s)                   20 ms    Position and velocity are the vehicle ``lag_s`` ago:
+                                       the onboard runtime streams LOCAL_POSITION_NED at
+                                       100 Hz (up to 10 ms old at a tick, plus the serial
+                                       link) and uses it unstamped, as the state at the tick;
+                                       the output predictor that propagates EKF2's delayed
+                                       fusion horizon to now through a complementary filter
+                                       (``EKF2_TAU_VEL``/``EKF2_TAU_POS`` 0.25 s) adds its
+                                       tracking error, a lag of a few ms in manoeuvres.
+attitude lag (att_lag_s)      10 ms    Attitude and body rates: ATTITUDE_QUATERNION streamed
+                                       at 200 Hz (runner.py's STREAM_RATES_HZ, up to 5 ms
+                                       old) from an output predictor updated per integrated
+                                       IMU sample (``IMU_INTEG_RATE`` 200 Hz, up to 5 ms),
+                                       plus ~1 ms on the link. The loop pairs this attitude
+                                       with an image estimate predicted to the tick, so the
+                                       lag shows as a line-of-sight error of body rate x lag.
 gyro bias (gyro_bias_rad_s,   3e-3     Turn-on bias per axis N(0, 3e-3 rad/s = 0.17 deg/s):
 gyro_bias_walk_rad_s_sqrt_s)  rad/s,   what stays in the raw gyro (HIGHRES_IMU, which the
                               1e-4     onboard runtime reads) after PX4's calibration, from
@@ -215,7 +224,8 @@ class StateEstimateModel:
         n = float(np.clip(rngs["thrust"].standard_normal(), -3.0, 3.0))
         self.thrust_scale = 1.0 + spec.thrust_scale_sigma * n
         self.command_delay_s = spec.command_delay_s
-        self._delay = DelayLine(spec.lag_s)
+        self._delay = DelayLine(spec.lag_s)  # position, velocity
+        self._att_delay = DelayLine(spec.att_lag_s)  # attitude, body rates
         self._time_s: float | None = None
 
     def _advance(self, time_s: float) -> None:
@@ -235,23 +245,23 @@ class StateEstimateModel:
         position, velocity and attitude errors, body rates with the gyro bias."""
         t = truth.time_s
         self._advance(t)
-        old = self._delay.push(
-            _Sample(
-                t,
-                np.asarray(truth.position_enu_m, dtype=float),
-                np.asarray(truth.velocity_enu_m_s, dtype=float),
-                np.asarray(truth.attitude_wxyz, dtype=float),
-                np.asarray(truth.body_rates_flu_rad_s, dtype=float),
-            )
+        now = _Sample(
+            t,
+            np.asarray(truth.position_enu_m, dtype=float),
+            np.asarray(truth.velocity_enu_m_s, dtype=float),
+            np.asarray(truth.attitude_wxyz, dtype=float),
+            np.asarray(truth.body_rates_flu_rad_s, dtype=float),
         )
+        old = self._delay.push(now)
+        old_att = self._att_delay.push(now)
         return VehicleState(
             time_s=t,
             position_enu_m=old.p + self.position_error.value,
             velocity_enu_m_s=old.v + self.velocity_error.value,
             # a unit quaternion times a unit quaternion: no renormalising, so that zero
             # errors hand the loop the truth bit for bit
-            attitude_wxyz=_quat_mul(old.q, _quat_exp(self.attitude_error.value)),
-            body_rates_flu_rad_s=old.w + self.gyro_bias.value,
+            attitude_wxyz=_quat_mul(old_att.q, _quat_exp(self.attitude_error.value)),
+            body_rates_flu_rad_s=old_att.w + self.gyro_bias.value,
         )
 
     def gyro(self, time_s: float, rates_flu_rad_s: np.ndarray) -> np.ndarray:
