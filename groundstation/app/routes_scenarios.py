@@ -8,7 +8,7 @@ from fastapi import APIRouter, Body, HTTPException
 
 from onboard import enums
 
-from ..scenario import load_scenario, parse_scenario, shipped_scenarios
+from ..scenario import load_scenario, parse_scenario, scenario_toml, shipped_scenarios
 from ..sim.camera import CAMERA_MODES
 from .api_models import Meta, ScenarioCheck, ScenarioSummary, ScenarioText
 from .session import SPEEDS
@@ -38,7 +38,8 @@ def router() -> APIRouter:
         names = {p.stem: p for p in shipped_scenarios()}
         if name not in names:
             raise HTTPException(404, f"unknown scenario {name!r}")
-        return ScenarioText(name=name, toml=names[name].read_text(encoding="utf-8"))
+        # the file, with the [estimate] table that applies when the file has none
+        return ScenarioText(name=name, toml=scenario_toml(load_scenario(names[name])))
 
     @r.post("/api/scenarios/validate", tags=["scenarios"])
     async def validate_scenario(toml: Annotated[str, Body(embed=True)]) -> ScenarioCheck:
