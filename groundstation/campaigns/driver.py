@@ -89,6 +89,8 @@ def run_campaign(
         "camera": camera,
         "seed": seed,
         "overrides": dict(overrides or {}),
+        # the state-estimate model every sortie flew with (overrides apply to all of them)
+        "estimate": dataclasses.asdict(jobs[0].scenario.estimate) if jobs else {},
         "workers": n_workers,
         "backend": type(runner).__name__,
         "sorties": len(outcomes),

@@ -152,6 +152,21 @@ def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOut
     return _md_outdoor(summary)
 
 
+def _estimate_note(estimate: dict | None) -> str:
+    """One sentence naming the state-estimate model the sorties flew with."""
+    if not estimate:
+        return ""
+    if not estimate.get("enabled", True):
+        return "State estimate: off (ideal sensors, the loop saw the truth). "
+    from ..scenario import EstimateSpec
+
+    changed = {
+        k: v for k, v in estimate.items() if getattr(EstimateSpec(), k, v) != v and k != "enabled"
+    }
+    extra = "".join(f", {k} = {v}" for k, v in changed.items())
+    return f"State estimate: on (the README's defaults{extra}). "
+
+
 def write_report(
     out: Path,
     name: str,
@@ -182,7 +197,8 @@ def write_report(
         f"seed {meta['seed']}, n = {meta['n']} {meta['what_n_counts']}"
         + "".join(f", {k} = {v}" for k, v in meta.get("overrides", {}).items())
         + ". "
-        "Regenerate with the command above; the tables come from `results.json`.",
+        + _estimate_note(meta.get("estimate"))
+        + "Regenerate with the command above; the tables come from `results.json`.",
         "",
         tables_markdown(name, summary, outcomes),
         "",
