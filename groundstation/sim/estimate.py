@@ -98,6 +98,23 @@ from ..scenario import EstimateSpec
 STREAMS = ("position", "velocity", "attitude", "gyro_bias", "camera_time", "thrust")
 
 
+class _Normals:
+    """Standard normal vectors of one stream, drawn a block at a time (one call per 256
+    samples instead of one each: the stream's sequence does not depend on the block)."""
+
+    def __init__(self, rng: np.random.Generator, dim: int, block: int = 256) -> None:
+        self._rng, self._dim, self._block = rng, dim, block
+        self._buf = np.empty((0, dim))
+        self._i = 0
+
+    def next(self) -> np.ndarray:
+        if self._i >= self._buf.shape[0]:
+            self._buf = self._rng.standard_normal((self._block, self._dim))
+            self._i = 0
+        self._i += 1
+        return self._buf[self._i - 1]
+
+
 class GaussMarkov:
     """First-order Gauss-Markov process per component, x' = -x / tau + w, stationary standard
     deviation ``sigma``; started in its stationary distribution and stepped exactly for any
@@ -106,14 +123,17 @@ class GaussMarkov:
     def __init__(self, sigma: float, tau_s: float, dim: int, rng: np.random.Generator) -> None:
         self.sigma = float(sigma)
         self.tau_s = float(tau_s)
-        self._rng = rng
-        self.value = self.sigma * rng.standard_normal(dim)
+        self._normals = _Normals(rng, dim)
+        self.value = self.sigma * self._normals.next()
+        self._dt_s = -1.0
+        self._a = self._b = 0.0
 
     def step(self, dt_s: float) -> np.ndarray:
-        a = math.exp(-dt_s / self.tau_s)
-        self.value = a * self.value + self.sigma * math.sqrt(
-            1.0 - a * a
-        ) * self._rng.standard_normal(self.value.shape[0])
+        if dt_s != self._dt_s:  # the factors, once per step size
+            self._dt_s = dt_s
+            self._a = math.exp(-dt_s / self.tau_s)
+            self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
+        self.value = self._a * self.value + self._b * self._normals.next()
         return self.value
 
 
@@ -125,13 +145,11 @@ class RandomWalk:
         self, initial: float, walk_per_sqrt_s: float, dim: int, rng: np.random.Generator
     ) -> None:
         self.walk = float(walk_per_sqrt_s)
-        self._rng = rng
-        self.value = float(initial) * rng.standard_normal(dim)
+        self._normals = _Normals(rng, dim)
+        self.value = float(initial) * self._normals.next()
 
     def step(self, dt_s: float) -> np.ndarray:
-        self.value = self.value + self.walk * math.sqrt(dt_s) * self._rng.standard_normal(
-            self.value.shape[0]
-        )
+        self.value = self.value + self.walk * math.sqrt(dt_s) * self._normals.next()
         return self.value
 
 
@@ -150,11 +168,12 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) of a rotation vector (rad)."""
-    ang = float(np.linalg.norm(rotvec_rad))
+    x, y, z = rotvec_rad
+    ang = math.sqrt(x * x + y * y + z * z)
     if ang < 1e-12:
         return np.array([1.0, 0.5 * rotvec_rad[0], 0.5 * rotvec_rad[1], 0.5 * rotvec_rad[2]])
     s = math.sin(0.5 * ang) / ang
-    return np.array([math.cos(0.5 * ang), *(s * rotvec_rad)])
+    return np.array([math.cos(0.5 * ang), s * x, s * y, s * z])
 
 
 @dataclass(frozen=True, slots=True)
