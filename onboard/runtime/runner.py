@@ -48,6 +48,7 @@ from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .fc_side import FcState, FlightControllerSide
 from .ground_side import TELEMETRY_EVERY, GroundSide
+from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
@@ -111,6 +112,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self.fcs = FcState()
         self.loop: InterceptionLoop | None = None
         self.period_s = 1.0 / config.control_rate_hz
+        self._fc_rx: LinkReceiver | None = None  # started by run(); tick() polls without it
         self.scheduler = PeriodicScheduler(
             self.period_s, realtime_priority=config.realtime_priority
         )
@@ -205,7 +207,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         for link, take in ((self.fc, self._take_fc), (self.gcs, self._take_gcs)):
             if link is None:
                 continue
-            for msg in link.poll():
+            rx = self._fc_rx if link is self.fc else None
+            for msg in rx.drain() if rx is not None else link.poll():
                 try:
                     take(msg, now)
                 except (ValueError, TypeError, OverflowError, KeyError, IndexError) as exc:
@@ -295,6 +298,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
+        self._fc_rx = LinkReceiver(self.fc)  # parses PX4's stream between ticks
+        self._fc_rx.start()
         self.camera.start()
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         end = None if duration_s is None else time.perf_counter() + duration_s
@@ -316,6 +321,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             pass
         finally:
             sched.stop()
+            self._fc_rx.stop()
             self.camera.stop()
             if self.camera.is_alive():
                 self.camera.join(timeout=2.5)  # a blocked read ends by its own timeout
