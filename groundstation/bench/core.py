@@ -55,21 +55,25 @@ def _real_time_factors(mode: str, repeat: int) -> tuple[list[float], list[float]
     return rtfs, rtfs_cpu
 
 
-def _tick_times_ms(repeat: int) -> list[float]:
-    times = []
+def _tick_times_ms(repeat: int) -> tuple[list[float], list[float]]:
+    """Control tick times (ms) without and with a detection fused in the tick (the DKF's
+    replay of its buffer runs only in the latter)."""
+    plain, fusing = [], []
     for seed in range(repeat):
         sim = Simulation(load_scenario("cv-top-to-bottom"), "png", seed, keep_records=False)
-        tick = sim.loop.tick
+        loop = sim.loop
+        tick = loop.tick
 
-        def timed(state, _tick=tick):
+        def timed(state, _tick=tick, _loop=loop):
             t0 = time.perf_counter()
             out = _tick(state)
-            times.append((time.perf_counter() - t0) * 1e3)
+            ms = (time.perf_counter() - t0) * 1e3
+            (fusing if _loop.last_fusion else plain).append(ms)
             return out
 
-        sim.loop.tick = timed  # type: ignore[method-assign]
+        loop.tick = timed  # type: ignore[method-assign]
         sim.run()
-    return times
+    return plain, fusing
 
 
 def _frame_times_ms() -> tuple[list[float], list[float], int]:
@@ -108,7 +112,8 @@ def run_bench(repeat: int = 5, pin_one_core: bool = True, as_json: bool = False)
     load_before = os.getloadavg()[0]
     rtf_p, rtf_p_cpu = _real_time_factors("projected", repeat)
     rtf_r, rtf_r_cpu = _real_time_factors("rendered", max(1, repeat // 2))
-    ticks = _tick_times_ms(repeat)
+    ticks_plain, ticks_fusing = _tick_times_ms(repeat)
+    ticks = ticks_plain + ticks_fusing
     detect_ms, render_ms, found = _frame_times_ms()
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     figures = {
@@ -123,6 +128,9 @@ def run_bench(repeat: int = 5, pin_one_core: bool = True, as_json: bool = False)
         "tick_median_ms": statistics.median(ticks),
         "tick_p99_ms": _p99(ticks),
         "ticks": len(ticks),
+        "tick_median_without_fusion_ms": statistics.median(ticks_plain),
+        "tick_median_with_fusion_ms": statistics.median(ticks_fusing),
+        "ticks_with_fusion": len(ticks_fusing),
         "detector_median_ms": statistics.median(detect_ms),
         "detector_p99_ms": _p99(detect_ms),
         "render_median_ms": statistics.median(render_ms),
@@ -168,6 +176,13 @@ def run_bench(repeat: int = 5, pin_one_core: bool = True, as_json: bool = False)
             "tick_median_ms",
             " ms",
             f"p99 {figures['tick_p99_ms']:.3f} ms over {len(ticks)} ticks",
+        ),
+        (
+            "  tick without / with a fusion",
+            "tick_median_without_fusion_ms",
+            " ms",
+            f"/ {figures['tick_median_with_fusion_ms']:.3f} ms (DKF replay) in "
+            f"{figures['ticks_with_fusion']} ticks",
         ),
         (
             "detector per 640x480 frame",

@@ -130,7 +130,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._last_overrun_report = -1e9
         # ten minutes of figures, not the whole day
         self.timing = LoopTiming(self.period_s, keep=int(600 * config.control_rate_hz))
-        self._pending_latency: list[tuple[float, float]] = []
+        self._pending_latency: list[tuple[float, float, float]] = []
         self._last_det = None
         self._last_forward: dict[tuple[int, str], float] = {}
         self._last_hb_sent = -1e9
@@ -230,7 +230,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 self._last_det = ev.detection
                 bw = ev.detection.bbox_px[2]
                 self.target_size_frac = bw / loop.camera.width_px
-                self._pending_latency.append((ev.capture_time_s, ev.received_time_s))
+                self._pending_latency.append(
+                    (ev.capture_time_s, ev.received_time_s, ev.detected_time_s)
+                )
         f = self.fcs
         tel = None
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
@@ -258,8 +260,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._send_command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised, now)
             sent_at = self.clock.now()
             if tel.mode is LoopMode.TRACKING and loop.last_fusion:
-                for cap, rec in self._pending_latency:
-                    self.timing.command_sent(sent_at, cap, rec)
+                for cap, rec, det in self._pending_latency:
+                    self.timing.command_sent(sent_at, cap, rec, det)
                 self._pending_latency.clear()
         if self.sm.state is not State.INTERCEPT or not tracking:
             self._pending_latency.clear()
