@@ -279,6 +279,12 @@ def _build_parser() -> argparse.ArgumentParser:
         "--seconds", type=_seconds(0, False), default=20.0, help="--sitl: how long to fly"
     )
     b.add_argument(
+        "--realtime",
+        type=int,
+        metavar="PRIO",
+        help="--sitl: onboard run --realtime PRIO, and the SITL under SCHED_FIFO too",
+    )
+    b.add_argument(
         "--dashboard",
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
@@ -505,7 +511,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
 
             if args.sitl:
-                return run_sitl_bench(args.seconds, as_json=args.json)
+                return run_sitl_bench(
+                    args.seconds, as_json=args.json, realtime_priority=args.realtime
+                )
             if args.recording:
                 return run_recording_bench(as_json=args.json)
             if args.dashboard:

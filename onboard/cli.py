@@ -62,7 +62,10 @@ def _run(args) -> int:
             auto_start=args.sitl_auto_start,
             stats_path=Path(args.stats) if args.stats else None,
             log_dir=Path(args.log) if args.log else None,
+            realtime_priority=args.realtime,
         )
+        if args.realtime is not None and not 1 <= args.realtime <= 99:
+            raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
         if not 10.0 <= args.rate <= 1000.0:
             raise LinkError(f"--rate {args.rate}: expected 10 to 1000 Hz")
         runtime = OnboardRuntime(config)
@@ -128,6 +131,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     r.add_argument("--duration", type=_positive("seconds"), help="stop after this many seconds")
     r.add_argument("--stats", metavar="FILE", help="write timing figures (JSON) here at exit")
+    r.add_argument(
+        "--realtime",
+        type=int,
+        metavar="PRIO",
+        help="run the control and camera threads under SCHED_FIFO at this priority (1-99; "
+        "needs CAP_SYS_NICE, else a warning and normal scheduling)",
+    )
     r.add_argument(
         "--log",
         metavar="DIR",

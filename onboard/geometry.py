@@ -42,7 +42,7 @@ def vex(m: np.ndarray) -> np.ndarray:
 
 def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in q_wxyz)
+    w, x, y, z = q_wxyz.tolist() if isinstance(q_wxyz, np.ndarray) else map(float, q_wxyz)
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z

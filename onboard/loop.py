@@ -146,7 +146,9 @@ class InterceptionLoop:
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
 
         omega, thrust = attitude_command(a_d, R_WB, yaw_rate, gains, self.vehicle)
-        guard = not (np.all(np.isfinite(omega)) and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
+        w0, w1, w2 = omega.tolist()
+        finite = math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
+        guard = not (finite and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
         if guard:
             # never hand a non-finite or out-of-range command on: level hover instead
             self.guard_trips += 1

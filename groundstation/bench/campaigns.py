@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 from onboard.enums import GuidanceLaw, codes
@@ -31,6 +32,11 @@ def run_campaign_bench(as_json: bool = False) -> int:
         figures["static50_sorties"] = res["meta"]["sorties"]
         figures["static50_workers"] = res["meta"]["workers"]
     figures["speedup_2_vs_1"] = figures["throughput_2_workers"] / figures["throughput_1_workers"]
+    # #16's target is 1000 sorties in <= 60 s on 2 cores: scaled from the full static run
+    figures["per_1000_sorties_wall_s"] = (
+        1000.0 * figures["static50_wall_s"] / figures["static50_sorties"]
+    )
+    figures["load_average_1min"] = os.getloadavg()[0]
     if as_json:
         print(json.dumps(figures, indent=2))
         return 0
@@ -41,10 +47,13 @@ def run_campaign_bench(as_json: bool = False) -> int:
             f"sortie-s per wall s ({figures[f'wall_s_{w}_workers']:.1f} s wall)"
         )
     print(f"  speed-up 2 vs 1 workers: {figures['speedup_2_vs_1']:.2f}x")
-    ok = "met" if figures["static50_wall_s"] <= 60.0 else "NOT MET"
     print(
         f"  full static campaign ({figures['static50_sorties']} sorties, "
         f"{figures['static50_workers']} workers): {figures['static50_wall_s']:.1f} s wall"
-        f"  target <= 60 s: {ok}"
+    )
+    ok = "met" if figures["per_1000_sorties_wall_s"] <= 60.0 else "NOT MET"
+    print(
+        f"  scaled to 1000 sorties: {figures['per_1000_sorties_wall_s']:.0f} s wall"
+        f"  target <= 60 s: {ok} (load average {figures['load_average_1min']:.1f})"
     )
     return 0

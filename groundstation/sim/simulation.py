@@ -140,7 +140,7 @@ class Simulation:
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
         tp, vp = self.target.p, self.vehicle.p
-        self._rel = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
+        self._rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
         self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
         self.miss_m = self.initial_range_m
         self.closest_time_s = 0.0
@@ -212,34 +212,43 @@ class Simulation:
             return
         k = self.step_index
         t = k * self.dt_s
-        veh = self.vehicle
         if k % self._camera_div == 0:
-            self.camera.capture(
-                t,
-                self.R_WC(),
-                np.array(veh.p),
-                np.array(self.target.p),
-                self.scenario.target.diameter_m,
-            )
-            for o in self.observers:
-                o.image(t, self.camera.last_frame)
+            self._capture(t)
         if k % self._control_div == 0:
             self._control_tick(t)
             if self._check_loop_outcome(t):
                 self._tell_finish(None)
                 return
+        self._physics_step(k, t)
+        if self.outcome is not None:
+            self._tell_finish(None)
+
+    def _capture(self, t: float) -> None:
+        veh = self.vehicle
+        self.camera.capture(
+            t,
+            self.R_WC(),
+            np.array(veh.p),
+            np.array(self.target.p),
+            self.scenario.target.diameter_m,
+        )
+        for o in self.observers:
+            o.image(t, self.camera.last_frame)
+
+    def _physics_step(self, k: int, t: float) -> None:
+        """Integrate vehicle, target and wind from step k (time t) to k + 1, then check the
+        outcome."""
+        dt = self.dt_s
         cmds = self._commands
         while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
             _, rates, thrust = cmds.popleft()
-            veh.command(rates, thrust)
+            self.vehicle.command(rates, thrust)
         wind = self.wind.velocity_m_s
-        veh.step(self.dt_s, wind)
-        self.target.advance(t + self.dt_s, self.dt_s, wind)
-        self.wind.step(self.dt_s)
+        self.vehicle.step(dt, wind)
+        self.target.advance(t + dt, dt, wind)
+        self.wind.step(dt)
         self.step_index = k + 1
         self._check_physics_outcome(t)
-        if self.outcome is not None:
-            self._tell_finish(None)
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -301,25 +310,31 @@ class Simulation:
         return self.outcome is not None
 
     def _check_physics_outcome(self, t0: float) -> None:
-        r0 = self._rel
+        """Closest approach inside the step just taken (as :func:`closest_in_step`, inlined:
+        this runs every physics step), then hit/miss, divergence and ground contact."""
+        r0x, r0y, r0z = self._rel
         tp, vp = self.target.p, self.vehicle.p
-        r1 = [tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]]
-        self._rel = r1
-        dist, s, (c0, c1, c2), closing_before, opening_now = closest_in_step(r0, r1)
+        r1x, r1y, r1z = tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]
+        self._rel = (r1x, r1y, r1z)
+        d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        r0d = r0x * d0 + r0y * d1 + r0z * d2
+        s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+        c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
+        dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
         veh = self.vehicle
         v = veh.v
+        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
         if dist < self.miss_m:
             self.miss_m = dist
             self.closest_time_s = t0 + s * self.dt_s
             self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
             self.closest_rel_m = (c0, c1, c2)
             self.closest_vel_m_s = (v[0], v[1], v[2])
-        if closing_before and opening_now and dist < PASS_RADIUS_M:
+        if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
+            # closing at the start of the step, opening at its end, near: the pass is over
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif (
-            not (veh.finite() and math.isfinite(r1[0] + r1[1] + r1[2]))
-            or v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > DIVERGED_SPEED_M_S**2
-        ):
+        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > DIVERGED_SPEED_M_S**2:
             self.outcome = Outcome.DIVERGED
         elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED
@@ -345,8 +360,27 @@ class Simulation:
             self.step()
 
     def run(self) -> SortieResult:
+        """Run to the outcome. The same events in the same order as calling :meth:`step`
+        until done, scheduled by control period: a camera frame or control tick where one is
+        due, and between ticks only physics steps."""
+        cam_div, ctl_div, dt = self._camera_div, self._control_div, self.dt_s
+        physics = self._physics_step
         while self.outcome is None:
-            self.step()
+            k = self.step_index
+            t = k * dt
+            if k % cam_div == 0:
+                self._capture(t)
+            if k % ctl_div == 0:
+                self._control_tick(t)
+                if self._check_loop_outcome(t):
+                    break
+            physics(k, t)
+            # physics-only steps up to the next control tick or camera frame
+            k += 1
+            while self.outcome is None and k % ctl_div and k % cam_div:
+                physics(k, k * dt)
+                k += 1
+        self._tell_finish(None)
         return self.result()
 
     def result(self) -> SortieResult:

@@ -36,38 +36,45 @@ class Multicopter:
         self._rate_n = 0
         self._max_rate = math.radians(spec.max_rate_deg_s)
         self._lag_dt = -1.0
-        self._aw = self._at = 0.0
+        self._aw = self._at = self._kd = 0.0
 
     def command(self, body_rates_flu_rad_s: np.ndarray, thrust_normalised: float) -> None:
         lim = self._max_rate
-        self.cmd_w = [min(max(float(c), -lim), lim) for c in body_rates_flu_rad_s]
+        w = (
+            body_rates_flu_rad_s.tolist()
+            if isinstance(body_rates_flu_rad_s, np.ndarray)
+            else body_rates_flu_rad_s
+        )
+        self.cmd_w = [min(max(float(c), -lim), lim) for c in w]
         t = min(max(float(thrust_normalised), 0.0), 1.0)
         self.cmd_thrust_n = t * self.params.max_thrust_n
 
     def step(self, dt: float, wind: tuple[float, float, float]) -> None:
-        s = self.spec
-        if dt != self._lag_dt:  # first-order lag factors, computed once per step size
+        if dt != self._lag_dt:  # per-step-size constants, computed once
+            s = self.spec
             self._lag_dt = dt
             self._aw = 1.0 - math.exp(-dt / s.rate_time_constant_s)
             self._at = 1.0 - math.exp(-dt / s.thrust_time_constant_s)
-        aw, at = self._aw, self._at
-        w = self.w
-        cw = self.cmd_w
-        w0, w1, w2 = (
-            w[0] + (cw[0] - w[0]) * aw,
-            w[1] + (cw[1] - w[1]) * aw,
-            w[2] + (cw[2] - w[2]) * aw,
-        )
+            self._kd = s.drag_n_s_m / s.mass_kg
+        aw = self._aw
+        w0, w1, w2 = self.w
+        c0, c1, c2 = self.cmd_w
+        w0 += (c0 - w0) * aw
+        w1 += (c1 - w1) * aw
+        w2 += (c2 - w2) * aw
         self.w = [w0, w1, w2]
         rs = self._rate_sum
         rs[0] += w0
         rs[1] += w1
         rs[2] += w2
         self._rate_n += 1
-        self.thrust_n += (self.cmd_thrust_n - self.thrust_n) * at
+        thrust_n = self.thrust_n
+        thrust_n += (self.cmd_thrust_n - thrust_n) * self._at
+        self.thrust_n = thrust_n
         # attitude: q <- q (x) exp(w dt / 2)
         qw, qx, qy, qz = self.q
-        ang = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2) * dt
+        rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        ang = rate * dt
         if ang > 1e-12:
             h = 0.5 * ang
             sh = math.sin(h) / (ang / dt)
@@ -82,21 +89,19 @@ class Multicopter:
             qw, qx, qy, qz = qw * n, qx * n, qy * n, qz * n
             self.q = [qw, qx, qy, qz]
         # thrust axis z_B in the world
-        zx = 2.0 * (qx * qz + qw * qy)
-        zy = 2.0 * (qy * qz - qw * qx)
-        zz = 1.0 - 2.0 * (qx * qx + qy * qy)
-        m = s.mass_kg
-        ft = self.thrust_n / m
-        kd = s.drag_n_s_m / m
-        v = self.v
-        ax = ft * zx - kd * (v[0] - wind[0])
-        ay = ft * zy - kd * (v[1] - wind[1])
-        az = ft * zz - kd * (v[2] - wind[2]) - GRAVITY_M_S2
+        ft = thrust_n / self.spec.mass_kg
+        kd = self._kd
+        vx, vy, vz = self.v
+        ax = ft * (2.0 * (qx * qz + qw * qy)) - kd * (vx - wind[0])
+        ay = ft * (2.0 * (qy * qz - qw * qx)) - kd * (vy - wind[1])
+        az = ft * (1.0 - 2.0 * (qx * qx + qy * qy)) - kd * (vz - wind[2]) - GRAVITY_M_S2
         self.accel = [ax, ay, az]
-        vx, vy, vz = v[0] + ax * dt, v[1] + ay * dt, v[2] + az * dt
+        vx += ax * dt
+        vy += ay * dt
+        vz += az * dt
         self.v = [vx, vy, vz]
-        p = self.p
-        self.p = [p[0] + vx * dt, p[1] + vy * dt, p[2] + vz * dt]
+        px, py, pz = self.p
+        self.p = [px + vx * dt, py + vy * dt, pz + vz * dt]
 
     def read_gyro(self) -> list[float]:
         """Mean body rate since the previous read (what averaging IMU samples yields)."""

@@ -1,5 +1,8 @@
 """Geometric attitude loop: desired acceleration -> body rates and collective thrust
-(paper eqs. 18-24, DESIGN.md §3 steps 9-10)."""
+(paper eqs. 18-24, DESIGN.md §3 steps 9-10).
+
+Written in plain floats: it runs every control tick in the simulator and on the vehicle, and
+numpy's per-call overhead on 3-vectors and 3x3 matrices cost more than the arithmetic."""
 
 from __future__ import annotations
 
@@ -7,19 +10,22 @@ import math
 
 import numpy as np
 
-from ..datatypes import GRAVITY_ENU_M_S2, VehicleParams
+from ..datatypes import GRAVITY_M_S2, VehicleParams
 from ..gains import Gains
-from ..geometry import rotation_between, vex
-from .guidance import saturate_norm
 
 
 def desired_thrust_direction(accel_desired_enu_m_s2: np.ndarray) -> np.ndarray:
     """n_fd = (a_d - g) / |a_d - g| (paper eq. 18); straight up if a_d - g vanishes."""
-    f = accel_desired_enu_m_s2 - GRAVITY_ENU_M_S2
-    n = math.sqrt(float(f @ f))
+    fx, fy, fz = _thrust_vector(accel_desired_enu_m_s2)
+    n = math.sqrt(fx * fx + fy * fy + fz * fz)
     if n < 1e-9:
         return np.array([0.0, 0.0, 1.0])
-    return f / n
+    return np.array([fx / n, fy / n, fz / n])
+
+
+def _thrust_vector(a_enu_m_s2) -> tuple[float, float, float]:
+    """a_d - g with g = (0, 0, -9.81) ENU, in floats."""
+    return float(a_enu_m_s2[0]), float(a_enu_m_s2[1]), float(a_enu_m_s2[2]) + GRAVITY_M_S2
 
 
 def attitude_command(
@@ -31,15 +37,46 @@ def attitude_command(
 ) -> tuple[np.ndarray, float]:
     """Body rates (FLU, rad/s) and thrust normalised to [0, 1].
 
-    R_d = R_tilt R_WB with R_tilt the rotation taking n_f = R_WB e_z onto n_fd (eq. 19);
-    w_1 = -k_R/2 vex(R_d^T R - R^T R_d) (eq. 22); w_d = sat(w_1 + (0, 0, r_d), omega_max)
-    (eq. 24); T = m n_f . (a_d - g) clipped to [0, T_max] (eq. 23).
+    R_d = R_tilt R_WB with R_tilt the rotation taking n_f = R_WB e_z onto n_fd by the angle
+    phi about the unit axis k (eq. 19); w_1 = -k_R/2 vex(R_d^T R - R^T R_d) (eq. 22);
+    w_d = sat(w_1 + (0, 0, r_d), omega_max) (eq. 24); T = m n_f . (a_d - g) clipped to
+    [0, T_max] (eq. 23).
+
+    Since R_tilt^T - R_tilt = -2 sin(phi) [k]x (Rodrigues) and R^T [k]x R = [R^T k]x, eq. 22
+    is w_1 = k_R sin(phi) R_WB^T k = k_R R_WB^T (n_f x n_fd): no matrix is formed.
     """
-    n_fd = desired_thrust_direction(accel_desired_enu_m_s2)
-    n_f = R_WB[:, 2]
-    R_d = rotation_between(n_f, n_fd) @ R_WB
-    omega_1 = -0.5 * gains.k_R * vex(R_d.T @ R_WB - R_WB.T @ R_d)
-    omega = saturate_norm(omega_1 + np.array([0.0, 0.0, yaw_rate_rad_s]), gains.omega_max)
-    thrust_n = vehicle.mass_kg * float(n_f @ (accel_desired_enu_m_s2 - GRAVITY_ENU_M_S2))
+    fx, fy, fz = _thrust_vector(accel_desired_enu_m_s2)
+    n = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if n < 1e-9:
+        dx, dy, dz = 0.0, 0.0, 1.0
+    else:
+        dx, dy, dz = fx / n, fy / n, fz / n
+    r = R_WB.tolist() if isinstance(R_WB, np.ndarray) else R_WB
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = r
+    ax, ay, az = r02, r12, r22  # n_f = R_WB e_z
+    # sin(phi) k = n_f x n_fd (the axis of R_tilt times the sine of its angle)
+    cx, cy, cz = ay * dz - az * dy, az * dx - ax * dz, ax * dy - ay * dx
+    s = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if s < 1e-9:  # parallel: no tilt; antiparallel: a half turn, sin(pi) k
+        c = ax * dx + ay * dy + az * dz
+        if c > 0.0:
+            cx = cy = cz = 0.0
+        else:
+            px, py, pz = 0.0, az, -ay  # n_f x e_x
+            if px * px + py * py + pz * pz < 1e-12:
+                px, py, pz = -az, 0.0, ax  # n_f x e_y
+            pn = math.sqrt(px * px + py * py + pz * pz)
+            sp = math.sin(math.pi)
+            cx, cy, cz = sp * px / pn, sp * py / pn, sp * pz / pn
+    k = gains.k_R
+    w0 = k * (r00 * cx + r10 * cy + r20 * cz)
+    w1 = k * (r01 * cx + r11 * cy + r21 * cz)
+    w2 = k * (r02 * cx + r12 * cy + r22 * cz) + yaw_rate_rad_s
+    wn = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    lim = gains.omega_max
+    if wn > lim > 0.0:  # saturate the norm, keeping the direction (eq. 24)
+        g = lim / wn
+        w0, w1, w2 = w0 * g, w1 * g, w2 * g
+    thrust_n = vehicle.mass_kg * (ax * fx + ay * fy + az * fz)
     thrust_n = min(max(thrust_n, 0.0), vehicle.max_thrust_n)
-    return omega, thrust_n / vehicle.max_thrust_n
+    return np.array([w0, w1, w2]), thrust_n / vehicle.max_thrust_n

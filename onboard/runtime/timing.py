@@ -28,6 +28,7 @@ class LoopTiming:
         self.tick_work_s: deque[float] = deque(maxlen=keep)
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
+        self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
         self._last_start: float | None = None
 
     def tick_started(self, start_s: float) -> None:
@@ -47,11 +48,16 @@ class LoopTiming:
             return True
         return False
 
-    def command_sent(self, sent_s: float, capture_s: float, received_s: float) -> None:
-        """A command computed from a detection captured at ``capture_s`` and received from the
-        camera at ``received_s`` went out at ``sent_s``."""
+    def command_sent(
+        self, sent_s: float, capture_s: float, received_s: float, detected_s: float | None = None
+    ) -> None:
+        """A command computed from a detection captured at ``capture_s``, received from the
+        camera at ``received_s`` and out of the detector at ``detected_s`` went out at
+        ``sent_s``."""
         self.latency_total_s.append(sent_s - capture_s)
         self.latency_beyond_camera_s.append(sent_s - received_s)
+        if detected_s is not None:
+            self.latency_after_detection_s.append(sent_s - detected_s)
 
     def loop_rate_hz(self) -> float:
         p = self._recent
@@ -81,5 +87,7 @@ class LoopTiming:
             "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
             "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
             "latency_beyond_camera_p99_ms": _ms(_pct(self.latency_beyond_camera_s, 0.99)),
+            "latency_after_detection_median_ms": _ms(_pct(self.latency_after_detection_s, 0.5)),
+            "latency_after_detection_p99_ms": _ms(_pct(self.latency_after_detection_s, 0.99)),
             "detections_fused": len(self.latency_total_s),
         }

@@ -1,0 +1,172 @@
+"""The flight controller's side of ``onboard run``: what PX4 sends (state, gyro, TIMESYNC,
+parameters, acknowledgements) taken into :class:`FcState` and the loop, and what the runtime
+sends it (the rate-and-thrust setpoint behind the output guard, stream and mode requests).
+
+A mixin of :class:`~onboard.runtime.runner.OnboardRuntime`: it reads and writes the runtime's
+attributes (``fc``, ``fcs``, ``loop``, ``timesync``, ``params``) on the control thread.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..datatypes import GyroSample
+from ..link.px4 import (
+    AUTOPILOT_COMPONENT_ID,
+    ONBOARD_COMPONENT_ID,
+    PX4_MAIN_OFFBOARD,
+    TARGET_SYSTEM_ID,
+    VEHICLE_SYSTEM_ID,
+    all_finite,
+    flu_to_frd,
+    frd_to_flu,
+    mavlink,
+    ned_to_enu,
+    param_id_str,
+    quat_ned_frd_to_enu_flu,
+)
+from ..link.timesync import on_timesync
+from .px4_params import PX4_PARAMS_READ, check
+
+MAX_RATE_RAD_S = 20.0
+STREAM_RATES_HZ = {
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 200.0,
+    mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100.0,
+}
+
+
+@dataclass
+class FcState:
+    """What the flight controller last said (ENU/FLU, onboard clock seconds)."""
+
+    heartbeat_rx_s: float | None = None
+    last_rx_s: float | None = None
+    armed: bool = False
+    custom_mode: int = 0
+    pos_enu_m: np.ndarray | None = None
+    vel_enu_m_s: np.ndarray | None = None
+    q_wxyz: np.ndarray | None = None
+    rates_flu_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def offboard(self) -> bool:
+        return ((self.custom_mode >> 16) & 0xFF) == PX4_MAIN_OFFBOARD
+
+
+class FlightControllerSide:
+    """Inputs from and outputs to PX4 (mixed into the runtime)."""
+
+    # ------------------------------------------------------------------ inputs
+    def _take_fc(self, msg, now: float) -> None:
+        f = self.fcs
+        src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
+        kind = msg.get_type()
+        if src_sys == TARGET_SYSTEM_ID:
+            if kind in ("LOCAL_POSITION_NED", "HEARTBEAT"):
+                self._forward(msg, now)
+            return
+        if src_sys != VEHICLE_SYSTEM_ID or src_comp != AUTOPILOT_COMPONENT_ID:
+            return
+        f.last_rx_s = now
+        if kind == "HEARTBEAT":
+            f.heartbeat_rx_s = now
+            f.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            f.custom_mode = int(msg.custom_mode)
+            self._forward(msg, now, always=True)
+        elif kind == "ATTITUDE_QUATERNION":
+            q = (msg.q1, msg.q2, msg.q3, msg.q4)
+            rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
+            if all_finite(q + rates) and abs(math.fsum(c * c for c in q) - 1.0) < 0.1:
+                f.q_wxyz = quat_ned_frd_to_enu_flu(q)
+                f.rates_flu_rad_s = frd_to_flu(rates)
+                self._forward(msg, now)
+        elif kind == "LOCAL_POSITION_NED":
+            p, v = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
+            if all_finite(p + v):
+                f.pos_enu_m, f.vel_enu_m_s = ned_to_enu(p), ned_to_enu(v)
+                self._forward(msg, now)
+        elif kind == "HIGHRES_IMU":
+            g = (msg.xgyro, msg.ygyro, msg.zgyro)
+            if all_finite(g) and self.loop is not None:
+                self.loop.on_gyro(
+                    GyroSample(self._fc_time(msg.time_usec * 1e-6, now), frd_to_flu(g))
+                )
+        elif kind == "TIMESYNC":
+            on_timesync(self.fc, self.timesync, msg, self._arrival_s(msg, now))
+        elif kind == "PARAM_VALUE" and param_id_str(msg.param_id) in PX4_PARAMS_READ:
+            name, g = param_id_str(msg.param_id), self.params.gains
+            said = check(name, float(msg.param_value), self.params.runtime.HOVER_THR, g.v_max)
+            self.px4_params[name] = float(msg.param_value)
+            if said is not None:
+                self._event(*said)
+        elif kind == "STATUSTEXT":
+            self._forward(msg, now, always=True)
+        elif kind == "COMMAND_ACK":
+            if msg.target_component not in (0, ONBOARD_COMPONENT_ID):
+                return  # an answer to somebody else on the link
+            if msg.command == mavlink.MAV_CMD_DO_SET_MODE and self._mode_requested:
+                if msg.result == mavlink.MAV_RESULT_ACCEPTED:
+                    f.custom_mode = self._mode_requested  # the next heartbeat confirms
+                self._mode_requested = 0
+            if msg.result != mavlink.MAV_RESULT_ACCEPTED:
+                self._event("warning", f"PX4 refused command {msg.command} ({msg.result})")
+
+    def _arrival_s(self, msg, now: float) -> float:
+        """When a frame reached us (the kernel's UDP timestamp when there is one)."""
+        rx = getattr(msg, "rx_monotonic_s", None)
+        return now if rx is None else self.clock.now() - (time.monotonic() - rx)
+
+    def _fc_time(self, t_fc_s: float, now: float) -> float:
+        """A flight-controller sample time in our clock (TIMESYNC), else its arrival."""
+        t = self.timesync.to_companion(t_fc_s)
+        return now if t is None or not now - 0.5 <= t <= now + 0.002 else min(t, now)
+
+    # ------------------------------------------------------------------ outputs
+    def _send_command(self, rates_flu: np.ndarray, thrust: float, now: float) -> bool:
+        rates = flu_to_frd(rates_flu)
+        ok = (
+            all_finite((*tuple(rates), thrust))
+            and 0.0 <= thrust <= 1.0
+            and all(abs(r) <= MAX_RATE_RAD_S for r in rates)
+        )
+        if not ok:  # the last line of defence: nothing non-finite or wild reaches PX4
+            self._event("error", "output guard: bad command replaced by hover")
+            rates = np.zeros(3)
+            thrust = self.params.runtime.HOVER_THR
+        sent = self.fc.send(
+            self.fc.mav.set_attitude_target_encode(
+                int(now * 1000) & 0xFFFFFFFF,
+                VEHICLE_SYSTEM_ID,
+                AUTOPILOT_COMPONENT_ID,
+                mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE,
+                (1.0, 0.0, 0.0, 0.0),
+                float(rates[0]),
+                float(rates[1]),
+                float(rates[2]),
+                float(thrust),
+            )
+        )
+        if sent:
+            self.commands_sent += 1
+        return sent
+
+    def _request_streams(self) -> None:
+        """Ask PX4 for the state at the rates the loop needs (MAV_CMD_SET_MESSAGE_INTERVAL)."""
+        for msg_id, hz in STREAM_RATES_HZ.items():
+            self._fc_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        for name in PX4_PARAMS_READ:  # and the parameters we depend on (px4_params.py)
+            self.fc.send(self.fc.mav.param_request_read_encode(VEHICLE_SYSTEM_ID,
+                         AUTOPILOT_COMPONENT_ID, name.encode(), -1))  # fmt: skip
+
+    def _fc_command(self, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self.fc.send(
+            self.fc.mav.command_long_encode(
+                VEHICLE_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, command, 0, *p
+            )
+        )

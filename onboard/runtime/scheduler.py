@@ -1,0 +1,98 @@
+"""When the control tick runs: fixed-rate ticks on absolute deadlines (k * period from the
+start, so a late tick does not push the later ones back), reached by sleeping until a short
+spin before the deadline and spinning the rest (the kernel's sleep overshoots by tens of
+microseconds, more under load). Garbage collection never interrupts a tick: the heap built at
+start-up is frozen out of the collector, automatic collection is off while the loop runs and
+the young generations are collected in the slack after a tick. Optionally the control thread
+(and the camera thread it starts afterwards) runs under SCHED_FIFO, as a flight stack's
+threads do, so other programs on the companion computer cannot delay a tick.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import sys
+import time
+
+SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
+GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
+GC_OLDER_EVERY_S = 10.0  # and generation 1 this often
+GC_MIN_SLACK_S = 0.002  # only when this much time is left before the next deadline
+
+
+class PeriodicScheduler:
+    """Call :meth:`start` once on the control thread, then per tick :meth:`wait` (returns the
+    tick's start time, perf_counter seconds), run the tick, :meth:`after_tick`; :meth:`stop`
+    at the end restores the interpreter's defaults."""
+
+    def __init__(
+        self, period_s: float, spin_s: float = SPIN_S, realtime_priority: int | None = None
+    ) -> None:
+        if not period_s > 0.0:
+            raise ValueError("period_s must be positive")
+        self.period_s = period_s
+        self.spin_s = min(max(spin_s, 0.0), period_s)
+        self.realtime_priority = realtime_priority
+        self.stalls = 0  # times the loop fell a whole period behind and re-anchored
+        self.gc_runs = 0
+        self._next_s = 0.0
+        self._next_young_s = self._next_older_s = 0.0
+        self._switch_interval = sys.getswitchinterval()
+        self._gc_was_enabled = gc.isenabled()
+
+    def start(self) -> str | None:
+        """Freeze the start-up heap, take collection into our hands, let this thread take the
+        GIL promptly and, if asked, switch it to SCHED_FIFO. Returns a note on what could not
+        be done (no permission for real-time priority), else None."""
+        note = None
+        if self.realtime_priority is not None:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
+            except (AttributeError, OSError, ValueError) as exc:
+                note = f"real-time priority {self.realtime_priority} refused ({exc}): normal"
+        sys.setswitchinterval(0.0005)
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        now = time.perf_counter()
+        self._next_s = now
+        self._next_young_s = now + GC_YOUNG_EVERY_S
+        self._next_older_s = now + GC_OLDER_EVERY_S
+        return note
+
+    def wait(self) -> float:
+        """Return at the next deadline (sleeping, then spinning); when a stall left the loop
+        more than a period behind, start afresh from now rather than run a burst of ticks."""
+        deadline = self._next_s
+        now = time.perf_counter()
+        if now > deadline + self.period_s:
+            self.stalls += 1
+            deadline = now
+        else:
+            if deadline - now > self.spin_s:
+                time.sleep(deadline - now - self.spin_s)
+            while time.perf_counter() < deadline:
+                pass
+        self._next_s = deadline + self.period_s
+        return time.perf_counter()
+
+    def after_tick(self) -> None:
+        """Collect garbage if due and there is slack before the next deadline."""
+        now = time.perf_counter()
+        if now < self._next_young_s or self._next_s - now < GC_MIN_SLACK_S:
+            return
+        self._next_young_s = now + GC_YOUNG_EVERY_S
+        if now >= self._next_older_s:
+            self._next_older_s = now + GC_OLDER_EVERY_S
+            gc.collect(1)
+        else:
+            gc.collect(0)
+        self.gc_runs += 1
+
+    def stop(self) -> None:
+        """Hand collection back to the interpreter."""
+        gc.unfreeze()
+        if self._gc_was_enabled:
+            gc.enable()
+        sys.setswitchinterval(self._switch_interval)

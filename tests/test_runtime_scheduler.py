@@ -1,0 +1,60 @@
+"""The onboard control thread's scheduler (onboard/runtime/scheduler.py): deadlines on a
+fixed grid, re-anchoring after a stall, garbage collection held and handed back."""
+
+from __future__ import annotations
+
+import gc
+import sys
+import time
+
+import pytest
+
+from onboard.runtime.scheduler import PeriodicScheduler
+
+
+def test_ticks_start_no_earlier_than_their_deadlines_on_a_fixed_grid():
+    period = 0.002
+    sched = PeriodicScheduler(period)
+    sched.start()
+    try:
+        first = sched.wait()
+        starts = [sched.wait() for _ in range(5)]
+    finally:
+        sched.stop()
+    for k, s in enumerate(starts, start=1):
+        assert s >= first + k * period - 1e-4  # never early (first is within the spin of 0)
+
+
+def test_a_stall_re_anchors_instead_of_bursting():
+    period = 0.002
+    sched = PeriodicScheduler(period)
+    sched.start()
+    try:
+        sched.wait()
+        time.sleep(5 * period)  # a tick that took 2.5 periods too long
+        after_stall = sched.wait()
+        nxt = sched.wait()
+    finally:
+        sched.stop()
+    assert sched.stalls >= 1
+    assert nxt >= after_stall + period - 1e-4  # the next tick is a full period later
+
+
+def test_collection_is_held_during_the_loop_and_handed_back():
+    enabled = gc.isenabled()
+    interval = sys.getswitchinterval()
+    sched = PeriodicScheduler(0.005)
+    assert sched.start() is None  # no real-time priority asked: nothing refused
+    try:
+        assert not gc.isenabled()
+        assert gc.get_freeze_count() > 0
+    finally:
+        sched.stop()
+    assert gc.isenabled() == enabled
+    assert gc.get_freeze_count() == 0
+    assert sys.getswitchinterval() == interval
+
+
+def test_bad_period_is_refused():
+    with pytest.raises(ValueError):
+        PeriodicScheduler(0.0)
