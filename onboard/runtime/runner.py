@@ -57,6 +57,7 @@ from .camera import CameraThread, Clock, open_source
 from .px4_params import PX4_PARAMS_READ, check
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
+from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
@@ -86,6 +87,7 @@ class RuntimeConfig:
     auto_start: bool = False  # SITL only: start as soon as the target is in view
     stats_path: Path | None = None  # timing figures written here at exit (benchmarks)
     log_dir: Path | None = None  # every MAVLink frame in and out, as a .tlog
+    video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
 
 
 @dataclass
@@ -166,6 +168,8 @@ class OnboardRuntime:
         self.target_size_frac = 0.0
         for note in self.params.notes:
             self._event("warning", note)
+        self.video_overlay = Overlay()
+        self.video = None if config.video is None else runtime_streamer(self)
 
     # ------------------------------------------------------------------ events
     def _event(self, severity: str, text: str) -> None:
@@ -514,6 +518,10 @@ class OnboardRuntime:
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
             state = VehicleState(now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, f.rates_flu_rad_s)
             tel = loop.tick(state, brake=self.sm.state is State.BRAKING)
+        if self.video is not None:
+            self.video_overlay = overlay_of(
+                self._last_det, tel and tel.e_est_px, loop and loop.camera
+            )
         silence = None if f.heartbeat_rx_s is None else now - f.last_rx_s
         tracking = tel is not None and tel.mode is LoopMode.TRACKING
         decision = self.sm.step(
@@ -574,6 +582,8 @@ class OnboardRuntime:
     def run(self, duration_s: float | None = None) -> int:
         sys.setswitchinterval(0.0005)  # let the control thread take the GIL promptly
         self.camera.start()
+        if self.video is not None:
+            self.video.start()
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         period = self.period_s
         next_t = time.perf_counter()
@@ -600,6 +610,8 @@ class OnboardRuntime:
             pass
         finally:
             self.camera.stop()
+            if self.video is not None:
+                self.video.stop()
             if self.camera.is_alive():
                 self.camera.join(timeout=2.5)  # a blocked read ends by its own timeout
             self._event("info", f"onboard stopping ({self.sm.state.value})")
