@@ -313,6 +313,12 @@ def _build_parser() -> argparse.ArgumentParser:
         "--seconds", type=_seconds(0, False), default=20.0, help="--sitl: how long to fly"
     )
     b.add_argument(
+        "--video",
+        action="store_true",
+        help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
+        "here: glass-to-glass latency",
+    )
+    b.add_argument(
         "--dashboard",
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
@@ -558,7 +564,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
 
             if args.sitl:
-                return run_sitl_bench(args.seconds, as_json=args.json)
+                return run_sitl_bench(args.seconds, as_json=args.json, video=args.video)
             if args.recording:
                 return run_recording_bench(as_json=args.json)
             if args.dashboard:
