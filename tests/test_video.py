@@ -241,3 +241,33 @@ def test_onboard_run_video_options_are_checked(capsys):
             code = exc.code
         err = capsys.readouterr().err
         assert code == 2 and needle in err, (argv, err)
+
+
+def test_live_mode_shows_each_new_video_frame_once_in_the_image_panel(receiver):
+    """serve --mavlink --video: the snapshot carries the newest decoded frame (the image
+    panel's JPEG), once; none before the first frame."""
+    import base64
+
+    import cv2
+
+    from groundstation.app.live import LiveSession
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    session.video = receiver
+    sender = H264RtpSender(VideoConfig(port=receiver.port))
+    try:
+        assert "frame_jpeg_b64" not in session.snapshot()
+        sender.send(_frame(7), time.time())
+        assert _wait(lambda: receiver.frames == 1)
+        jpeg = session.snapshot()["frame_jpeg_b64"]
+        shown = cv2.imdecode(np.frombuffer(base64.b64decode(jpeg), np.uint8), cv2.IMREAD_COLOR)
+        assert shown.shape == (H, W, 3)
+        assert np.abs(shown.astype(int) - _frame(7).astype(int)).mean() < 8.0
+        assert "frame_jpeg_b64" not in session.snapshot()  # no new frame: not sent again
+    finally:
+        sender.close()
+        session.close()
