@@ -6,7 +6,9 @@ image panel (:mod:`groundstation.app.video`) receive.
 Frames are dropped, never queued: :class:`VideoStreamer` takes only the newest camera frame
 (frames captured while it encodes are skipped), and a frame the socket cannot take at once
 (a slow link) is abandoned and the next one sent as a keyframe, so the receiver recovers at
-once instead of falling behind. The detection (orange box) and the DKF estimate (green
+once instead of falling behind. The video thread runs at a lower scheduling priority than
+the control thread (nice +10 on Linux; PyAV releases the interpreter lock while it encodes),
+so the loop gets the CPU first. The detection (orange box) and the DKF estimate (green
 circle) are drawn on the frame when ``overlay`` is on.
 
 The RTP timestamp is the capture time on the wall clock (90 kHz, modulo 2^32), so a receiver
@@ -15,6 +17,8 @@ on a clock-synchronised machine reads the glass-to-glass latency off each frame.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import random
 import socket
 import struct
@@ -30,6 +34,7 @@ import numpy as np
 DEFAULT_PORT = 5600  # QGroundControl's UDP video port
 PAYLOAD_TYPE = 96  # dynamic, H.264 (QGC's and GStreamer's default caps)
 RTP_CLOCK_HZ = 90_000
+VIDEO_NICE = 10  # the video thread's priority below the control thread's (Linux)
 MAX_PAYLOAD = 1200  # bytes of NAL data per RTP packet: below any path MTU
 _RTP = struct.Struct("!BBHII")
 _FU_A, _STAP_A = 28, 24
@@ -343,6 +348,8 @@ class VideoStreamer(threading.Thread):
         self._halt.set()
 
     def run(self) -> None:
+        with contextlib.suppress(AttributeError, OSError):  # Linux: this thread only
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), VIDEO_NICE)
         last_seq: int | None = None
         period = 1.0 / self.config.fps
         next_t = time.monotonic()
