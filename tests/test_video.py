@@ -271,3 +271,51 @@ def test_live_mode_shows_each_new_video_frame_once_in_the_image_panel(receiver):
     finally:
         sender.close()
         session.close()
+
+
+def test_onboard_runtime_streams_its_camera_with_a_switchable_overlay(tmp_path, receiver):
+    """onboard run --video: the runtime's newest camera frame, with the detection box drawn
+    (overlay on) or bare (off), reaches the receiver."""
+    from onboard.link.px4 import MavLink
+    from onboard.runtime.camera import Frame as CameraFrame
+    from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
+
+    def port() -> int:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    fc_port = port()
+    fc = MavLink(f"udpin:127.0.0.1:{fc_port}", 1, 1)
+    rt = OnboardRuntime(
+        RuntimeConfig(
+            fc_url=f"udpout:127.0.0.1:{fc_port}",
+            camera="sitl://127.0.0.1:9",
+            params_path=tmp_path / "params.toml",
+            video=VideoConfig(port=receiver.port),
+        ),
+        log=lambda _line: None,
+    )
+    box = (100, 60, 60, 60)  # on the plain gradient, clear of the red square
+    rt.video_overlay = Overlay(box, (130.0, 90.0))
+    top_edge = (slice(59, 62), slice(110, 150))
+    try:
+        rt.video.start()
+        now = rt.clock.now()
+        rt.camera.last_frame = CameraFrame(1, now, now, _frame(40))
+        assert _wait(lambda: receiver.frames >= 1)
+        with_box = receiver.latest()[1][top_edge].reshape(-1, 3).mean(axis=0)
+        assert np.abs(with_box - (28, 158, 255)).max() < 40  # the orange detection box
+        rt.video.overlay_on = False
+        now = rt.clock.now()
+        rt.camera.last_frame = CameraFrame(2, now, now, _frame(40))
+        assert _wait(lambda: receiver.frames >= 2)
+        bare = receiver.latest()[1][top_edge].reshape(-1, 3).mean(axis=0)
+        assert np.abs(bare - _frame(40)[top_edge].reshape(-1, 3).mean(axis=0)).max() < 12
+    finally:
+        rt.video.stop()
+        rt.video.join(timeout=2)
+        rt.fc.close()
+        fc.close()
+    lat = list(receiver.latencies_s)
+    assert len(lat) == 2 and all(0 <= x < 5 for x in lat)  # capture time carried across
