@@ -24,6 +24,7 @@ from onboard.runtime.video import (
     VideoConfig,
     VideoStreamer,
     draw_overlay,
+    overlay_of,
     rtp_ts_of,
     split_annexb,
 )
@@ -319,3 +320,15 @@ def test_onboard_runtime_streams_its_camera_with_a_switchable_overlay(tmp_path, 
         fc.close()
     lat = list(receiver.latencies_s)
     assert len(lat) == 2 and all(0 <= x < 5 for x in lat)  # capture time carried across
+
+
+def test_overlay_of_the_loop_state():
+    from onboard.camera_model import CameraModel
+    from onboard.datatypes import Detection
+
+    cam = CameraModel(320, 240, 90.0, 0.0, 0.0)
+    det = Detection(10.0, (50.0, 60.0), (40.0, 50.0, 20.0, 20.0), 400.0)
+    ov = overlay_of(det, (5.0, -3.0), cam, now_s=10.2)
+    assert ov.det_bbox_px == (40.0, 50.0, 20.0, 20.0)
+    assert ov.est_center_px == (cam.cu_px + 5.0, cam.cv_px - 3.0)
+    assert overlay_of(det, None, cam, now_s=10.6) == Overlay()  # stale detection, no estimate

@@ -520,7 +520,7 @@ class OnboardRuntime:
             tel = loop.tick(state, brake=self.sm.state is State.BRAKING)
         if self.video is not None:
             self.video_overlay = overlay_of(
-                self._last_det, tel and tel.e_est_px, loop and loop.camera
+                self._last_det, tel and tel.e_est_px, loop and loop.camera, now
             )
         silence = None if f.heartbeat_rx_s is None else now - f.last_rx_s
         tracking = tel is not None and tel.mode is LoopMode.TRACKING

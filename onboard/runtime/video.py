@@ -215,9 +215,15 @@ class Overlay:
     est_center_px: tuple[float, float] | None = None  # the DKF's target estimate
 
 
-def overlay_of(detection, e_est_px, camera) -> Overlay:
-    """From the loop's latest detection, its DKF error estimate (pixels from the principal
-    point) and camera model."""
+DETECTION_SHOWN_S = 0.5  # a detection older than this is not drawn
+
+
+def overlay_of(detection, e_est_px, camera, now_s: float) -> Overlay:
+    """From the loop's latest detection (drawn while under half a second old at ``now_s``,
+    onboard clock), its DKF error estimate (pixels from the principal point) and camera
+    model."""
+    if detection is not None and now_s - detection.capture_time_s > DETECTION_SHOWN_S:
+        detection = None
     est = None
     if e_est_px is not None and camera is not None:
         est = (camera.cu_px + float(e_est_px[0]), camera.cv_px + float(e_est_px[1]))
