@@ -245,8 +245,8 @@ def test_onboard_run_video_options_are_checked(capsys):
 
 
 def test_live_mode_shows_each_new_video_frame_once_in_the_image_panel(receiver):
-    """serve --mavlink --video: the snapshot carries the newest decoded frame (the image
-    panel's JPEG), once; none before the first frame."""
+    """serve --mavlink --video: the published snapshots carry each newly decoded frame (the
+    image panel's JPEG) once; none before the first frame."""
     import base64
 
     import cv2
@@ -257,21 +257,28 @@ def test_live_mode_shows_each_new_video_frame_once_in_the_image_panel(receiver):
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()
-    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    snaps: list[dict] = []
+    session = LiveSession(f"udpin:127.0.0.1:{port}", on_snapshot=snaps.append)
     session.video = receiver
     sender = H264RtpSender(VideoConfig(port=receiver.port))
+
+    def shown() -> list[str]:
+        return [x["frame_jpeg_b64"] for x in list(snaps) if "frame_jpeg_b64" in x]
+
     try:
-        assert "frame_jpeg_b64" not in session.snapshot()
+        assert _wait(lambda: len(snaps) >= 3)
+        assert shown() == []
         sender.send(_frame(7), time.time())
-        assert _wait(lambda: receiver.frames == 1)
-        jpeg = session.snapshot()["frame_jpeg_b64"]
-        shown = cv2.imdecode(np.frombuffer(base64.b64decode(jpeg), np.uint8), cv2.IMREAD_COLOR)
-        assert shown.shape == (H, W, 3)
-        assert np.abs(shown.astype(int) - _frame(7).astype(int)).mean() < 8.0
-        assert "frame_jpeg_b64" not in session.snapshot()  # no new frame: not sent again
+        assert _wait(lambda: len(shown()) == 1)
+        n = len(snaps)
+        assert _wait(lambda: len(snaps) >= n + 3)  # more snapshots, no new frame
     finally:
         sender.close()
         session.close()
+    assert len(shown()) == 1
+    image = cv2.imdecode(np.frombuffer(base64.b64decode(shown()[0]), np.uint8), cv2.IMREAD_COLOR)
+    assert image.shape == (H, W, 3)
+    assert np.abs(image.astype(int) - _frame(7).astype(int)).mean() < 8.0
 
 
 def test_onboard_runtime_streams_its_camera_with_a_switchable_overlay(tmp_path, receiver):
