@@ -70,12 +70,15 @@ def test_live_channels_equal_the_recordings_and_messages_arrive():
         c = advertised[topic]
         assert c["encoding"] == "json" and c["schemaEncoding"] == "jsonschema"
         assert json.loads(c["schema"]) == json.loads(schema_bytes(name))
-    # the first vehicle pose is the sortie's first frame, as the recorder writes it
-    first = got[0]
-    assert first["frame_id"] == "world" and first["timestamp"] == {"sec": 0, "nsec": 0}
-    p0 = frames.frames[0].vehicle_p_enu_m
-    pos = first["pose"]["position"]
-    assert (pos["x"], pos["y"], pos["z"]) == pytest.approx(p0, abs=1e-3)
+    # each vehicle pose is the frame of the same time, as the recorder writes it
+    t0 = frames.info.t0_s
+    by_time = {round((f.time_s - t0) * 1e9): f for f in frames.frames}
+    for msg in got:
+        assert msg["frame_id"] == "world"
+        ns = msg["timestamp"]["sec"] * 1_000_000_000 + msg["timestamp"]["nsec"]
+        pos = msg["pose"]["position"]
+        frame = by_time[ns]
+        assert (pos["x"], pos["y"], pos["z"]) == pytest.approx(frame.vehicle_p_enu_m, abs=1e-3)
     times = [m["timestamp"]["sec"] * 1e9 + m["timestamp"]["nsec"] for m in got]
     assert times == sorted(times) and len(set(times)) == 3
 
