@@ -124,3 +124,27 @@ def test_serve_options_are_checked(capsys):
             raise SystemExit(code)
         err = capsys.readouterr().err
         assert exc.value.code == 2 and needle in err, (argv, err)
+
+
+def test_a_live_mode_sortie_publishes_what_it_records(tmp_path):
+    """serve --mavlink --foxglove: the live recording's frames go to the file and to Foxglove
+    through the same recorder, at the live recording's rates."""
+    from groundstation.app.live_recording import LiveRecording
+
+    frames = FrameList()
+    Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[frames]).run()
+    live = live_mod.FoxgloveLive(port=0)
+    published: list[int] = []
+    live.publish = lambda ti, data: published.append(ti)  # count what reaches the server
+    try:
+        rec = LiveRecording(tmp_path, frames.info, foxglove=live)
+        for f in frames.frames[:100]:
+            rec.record(f)
+        rec.finish("HIT", "test")
+    finally:
+        live.stop()
+    file_rec, fox = rec.observers
+    assert file_rec.path.exists() and file_rec.error is None and fox.path is None
+    assert (fox.record_every, fox.annotate_every) == (file_rec.record_every, 1)
+    topics = {CHANNELS[ti][0] for ti in published}
+    assert {"/world/vehicle", "/control", "/dkf", "/events", "/camera/annotations"} <= topics
