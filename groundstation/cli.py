@@ -115,6 +115,21 @@ def _writable_dir(text: str) -> str:
 
 _PORT = _int_at_least(0, 65535, " (0: any free port)")
 _SEED = _int_at_least(0)
+
+
+def _host_port(default_port: int) -> Callable[[str], tuple[str, int]]:
+    """An argparse type: ``HOST:PORT``, ``PORT`` (on 127.0.0.1) or ``HOST``."""
+    from onboard.link.address import parse_host_port
+
+    def parse(text: str) -> tuple[str, int]:
+        try:
+            return parse_host_port(text, default_port)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
+
+
 _COUNT = _int_at_least(1)
 
 
@@ -191,6 +206,25 @@ def _build_parser() -> argparse.ArgumentParser:
         type=_writable_dir,
         default="logs",
         help="where sorties are recorded (default logs)",
+    )
+    sv.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        type=_host_port(8765),
+        nargs="?",
+        const=("127.0.0.1", 8765),
+        help="also publish every sortie's channels (the recording's) to Foxglove over its "
+        "WebSocket protocol on HOST:PORT (alone: 127.0.0.1:8765; a bare PORT is on "
+        "127.0.0.1); in Foxglove: Open connection, Foxglove WebSocket, ws://HOST:PORT",
+    )
+    sv.add_argument(
+        "--video",
+        metavar="[HOST:]PORT",
+        type=_host_port(5600),
+        nargs="?",
+        const=("127.0.0.1", 5600),
+        help="live mode: show the vehicle's H.264/RTP video (onboard run --video) in the "
+        "image panel, received on UDP HOST:PORT (alone: 127.0.0.1:5600)",
     )
 
     st = sub.add_parser("sitl", help="run the simulator as a PX4-like vehicle over MAVLink")
@@ -283,6 +317,10 @@ def _build_parser() -> argparse.ArgumentParser:
         type=int,
         metavar="PRIO",
         help="--sitl: onboard run --realtime PRIO, and the SITL under SCHED_FIFO too",
+        "--video",
+        action="store_true",
+        help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
+        "here: glass-to-glass latency",
     )
     b.add_argument(
         "--dashboard",
@@ -396,6 +434,19 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     if problem is not None:
         print(f"groundstation serve: error: {problem}", file=sys.stderr)
         return 2
+    foxglove = None
+    if args.foxglove is not None:
+        from .recording.live import FoxgloveLive
+
+        try:
+            foxglove = FoxgloveLive(port=args.foxglove[1], host=args.foxglove[0])
+        except Exception as exc:  # the SDK's bind error: one clear line
+            print(
+                f"groundstation serve: error: argument --foxglove: cannot listen on "
+                f"{args.foxglove[0]}:{args.foxglove[1]}: {exc}",
+                file=sys.stderr,
+            )
+            return 2
     try:
         key = load_signing_key(args.signing_key) if args.signing_key else None
         gs = GroundStation(
@@ -406,12 +457,18 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             log_dir=Path(args.log_dir),
             mavlink_url=args.mavlink,
             signing_key=key,
+            foxglove=foxglove,
+            video=args.video,
         )
-    except (ValueError, LinkError) as exc:
+    except (ValueError, LinkError, OSError) as exc:
+        if foxglove is not None:
+            foxglove.stop()
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2
     mode = f"live on {args.mavlink}" if args.mavlink else "simulator mode"
     print(f"Peregrine ground station ({mode}): open {gs.url()}", flush=True)
+    if foxglove is not None:
+        print(f"Foxglove live: open connection {foxglove.url()}", flush=True)
     gs.run_forever()
     return 0
 
@@ -512,7 +569,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             if args.sitl:
                 return run_sitl_bench(
-                    args.seconds, as_json=args.json, realtime_priority=args.realtime
+                    args.seconds,
+                    as_json=args.json,
+                    realtime_priority=args.realtime,
+                    video=args.video,
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

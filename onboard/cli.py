@@ -29,6 +29,19 @@ def _positive(unit: str, maximum: float = float("inf")):
     return parse
 
 
+def _host_port(default_port: int):
+    """An argparse type: ``HOST:PORT``, ``PORT`` (on 127.0.0.1) or ``HOST``."""
+    from .link.address import parse_host_port
+
+    def parse(text: str) -> tuple[str, int]:
+        try:
+            return parse_host_port(text, default_port)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
+
+
 def _gains(args) -> int:
     values = Gains().to_dict()
     if args.check:
@@ -47,8 +60,18 @@ def _gains(args) -> int:
 def _run(args) -> int:
     from .link.px4 import LinkError, load_signing_key
     from .runtime.runner import OnboardRuntime, RuntimeConfig
+    from .runtime.video import VideoConfig
 
     try:
+        video = None
+        if args.video is not None:
+            video = VideoConfig(
+                host=args.video[0],
+                port=args.video[1],
+                fps=args.video_fps,
+                kbps=round(args.video_kbps),
+                overlay=args.video_overlay == "on",
+            )
         key = load_signing_key(args.signing_key) if args.signing_key else None
         if args.sitl_auto_start and not args.camera.startswith("sitl://"):
             raise LinkError("--sitl-auto-start is only allowed with a sitl:// camera")
@@ -63,13 +86,14 @@ def _run(args) -> int:
             stats_path=Path(args.stats) if args.stats else None,
             log_dir=Path(args.log) if args.log else None,
             realtime_priority=args.realtime,
+            video=video,
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
         if not 10.0 <= args.rate <= 1000.0:
             raise LinkError(f"--rate {args.rate}: expected 10 to 1000 Hz")
         runtime = OnboardRuntime(config)
-    except (GainError, LinkError, OSError) as exc:
+    except (GainError, LinkError, OSError, ValueError) as exc:
         print(f"onboard: error: {exc}", file=sys.stderr)
         return 2
     if key is None and config.gcs_url:
@@ -142,6 +166,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--log",
         metavar="DIR",
         help="record every MAVLink frame in and out to DIR/<UTC>_onboard.tlog",
+    )
+    r.add_argument(
+        "--video",
+        metavar="[HOST:]PORT",
+        type=_host_port(5600),
+        nargs="?",
+        const=("127.0.0.1", 5600),
+        help="stream the camera as H.264 over RTP/UDP to HOST:PORT (alone: 127.0.0.1:5600, "
+        "what QGroundControl's UDP h.264 video and groundstation serve --video receive)",
+    )
+    r.add_argument(
+        "--video-overlay",
+        choices=("on", "off"),
+        default="on",
+        help="draw the detection and the DKF estimate on the video (default on)",
+    )
+    r.add_argument(
+        "--video-fps", type=_positive("frames/s", 120.0), default=30.0, help="default 30"
+    )
+    r.add_argument(
+        "--video-kbps", type=_positive("kbit/s", 50000.0), default=2000.0, help="default 2000"
     )
     args = parser.parse_args(argv)
     if args.command == "gains":

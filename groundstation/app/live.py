@@ -78,6 +78,9 @@ ACK_NAMES = {
 class LiveSession:
     """Plays the part of :class:`~groundstation.app.session.SimSession` for a live link."""
 
+    foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
+    video = None  # a VideoReceiver of the vehicle's camera (serve --video)
+
     def __init__(
         self,
         url: str,
@@ -395,7 +398,8 @@ class LiveSession:
         self._trail_vehicle, self._trail_target = [], []
         self.rec = LiveRecording(
             Path(self.log_dir),
-            SortieStart(
+            foxglove=self.foxglove,
+            start=SortieStart(
                 scenario="live",
                 law=tm.LAW_CODES[int(self.params.get("LAW", 0))],
                 seed=0,
@@ -551,6 +555,9 @@ class LiveSession:
             frame = self.frame()
             if frame is not None:
                 snap.update(frame_snapshot(frame, self.camera_model(), TARGET_DIAMETER_M))
+        jpeg = None if self.video is None else self.video.take_jpeg_b64()
+        if jpeg is not None:  # the image panel shows the vehicle's video (overlay drawn onboard)
+            snap["frame_jpeg_b64"] = jpeg
         return snap
 
     def _publish(self) -> None:

@@ -15,7 +15,9 @@ from ..sim.simulation import closest_in_step
 
 
 class LiveRecording:
-    def __init__(self, log_dir: Path, start: SortieStart) -> None:
+    def __init__(self, log_dir: Path, start: SortieStart, foxglove=None) -> None:
+        """``foxglove``: a :class:`~groundstation.recording.live.FoxgloveLive` that publishes
+        the same channels as the file, or None."""
         self.law = start.law
         self.t0_s = self.last_s = start.t0_s  # onboard clock: start, last recorded frame
         self.acquired = False
@@ -27,7 +29,13 @@ class LiveRecording:
         self.recorder = SortieRecorder(
             Path(log_dir), record_every=1, annotate_every=1, frame_every=1000000
         )
-        self.recorder.start(start)
+        self.observers = [self.recorder]
+        if foxglove is not None:
+            self.observers.append(
+                foxglove.observer(record_every=1, annotate_every=1, frame_every=1000000)
+            )
+        for o in self.observers:
+            o.start(start)
 
     @property
     def elapsed_s(self) -> float:
@@ -47,9 +55,10 @@ class LiveRecording:
         self.acquired = frame.acquired
         self.last_s = frame.time_s
         self._last_frame = frame
-        self.recorder.frame(frame)
-        if int(frame.time_s * 50) % 5 == 0:  # annotations at about 10 Hz
-            self.recorder.image(frame.time_s, None)
+        for o in self.observers:
+            o.frame(frame)
+            if int(frame.time_s * 50) % 5 == 0:  # annotations at about 10 Hz
+                o.image(frame.time_s, None)
 
     def track_miss(self, rel: list[float] | None) -> None:
         """Closest approach: ``rel`` (target minus vehicle at this control tick, m; None when
@@ -68,7 +77,9 @@ class LiveRecording:
     def finish(self, outcome: str, reason: str) -> None:
         """Close the file: events heard after the last frame, then the outcome."""
         if self._events and self._last_frame is not None:
-            self.recorder.frame(dataclasses.replace(self._last_frame, events=tuple(self._events)))
+            late = dataclasses.replace(self._last_frame, events=tuple(self._events))
+            for o in self.observers:
+                o.frame(late)
             self._events = []
         summary = {
             "outcome": outcome,
@@ -77,4 +88,5 @@ class LiveRecording:
             "reason": reason,
             "law": self.law,
         }
-        self.recorder.finish(self.last_s, summary)
+        for o in self.observers:
+            o.finish(self.last_s, summary)

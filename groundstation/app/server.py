@@ -272,9 +272,16 @@ class GroundStation:
         log_dir: Path | None = Path("logs"),
         mavlink_url: str | None = None,
         signing_key: bytes | None = None,
+        foxglove=None,
+        video: tuple[str, int] | None = None,
     ) -> None:
+        """``foxglove``: a :class:`~groundstation.recording.live.FoxgloveLive` to publish
+        every sortie's channels on (None: none); ``video``: (host, port) to receive the
+        vehicle's RTP video on (live mode)."""
         if no_auth and not is_loopback(host):
             raise ValueError(f"--no-auth is refused on a non-loopback address ({host})")
+        if video is not None and mavlink_url is None:
+            raise ValueError("--video is for live mode (with --mavlink)")
         self.host = host
         self.token = None if no_auth else new_token()
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: one URL is ours
@@ -300,6 +307,12 @@ class GroundStation:
             self.session = SimSession(
                 on_snapshot=self.hub.publish_from_thread, scene=self.scene, log_dir=log_dir
             )
+        self.session.foxglove = foxglove
+        if video is not None:
+            from .video import VideoReceiver
+
+            self.session.video = VideoReceiver(*video)
+            self.session.video.start()
         self.gainsets = GainSetStore((data_dir or default_data_dir()) / "gainsets")
         self.app = create_app(
             self.session,
@@ -356,5 +369,9 @@ class GroundStation:
 
     def close(self) -> None:
         self.session.close()
+        if self.session.foxglove is not None:
+            self.session.foxglove.stop()
+        if getattr(self.session, "video", None) is not None:
+            self.session.video.stop()
         with contextlib.redirect_stdout(io.StringIO()):
             self.viser.stop()

@@ -61,6 +61,8 @@ class SessionError(ValueError):
 
 
 class SimSession:
+    foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
+
     def __init__(
         self,
         on_snapshot: Callable[[dict[str, Any]], None] | None = None,
@@ -158,7 +160,11 @@ class SimSession:
                 config.camera,
                 gains,
                 keep_records=False,
-                observers=() if self.recorder is None else (self.recorder,),
+                observers=tuple(
+                    o
+                    for o in (self.recorder, self.foxglove and self.foxglove.observer())
+                    if o is not None
+                ),
                 target_track=target_track,
             )
             self.config = config

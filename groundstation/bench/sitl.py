@@ -41,7 +41,10 @@ def _fifo(priority: int):
 
 
 def run_sitl_bench(
-    seconds: float = 20.0, as_json: bool = False, realtime_priority: int | None = None
+    seconds: float = 20.0,
+    as_json: bool = False,
+    realtime_priority: int | None = None,
+    video: bool = False,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -49,7 +52,9 @@ def run_sitl_bench(
     process's CPU share and peak memory (from /proc). With ``realtime_priority`` the onboard
     runtime runs with ``--realtime`` and the SITL (standing in for PX4 on its own processor)
     under SCHED_FIFO too. The load average is printed with the figures: the machine is
-    shared."""
+    shared. ``video``: the onboard process also streams its camera (``--video``) to a
+    receiver here (:mod:`groundstation.app.video`): glass-to-glass latency, from the SITL
+    camera's capture to the decoded frame."""
     import socket
     import subprocess
     import sys
@@ -57,6 +62,12 @@ def run_sitl_bench(
 
     from onboard.link.px4 import MavLink
 
+    receiver = None
+    if video:
+        from ..app.video import VideoReceiver
+
+        receiver = VideoReceiver("127.0.0.1", 0)
+        receiver.start()
     socks = [socket.socket(socket.AF_INET, k) for k in (socket.SOCK_DGRAM,) * 2]
     socks.append(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
     for sock in socks:  # held together, so the three ports differ
@@ -81,7 +92,8 @@ def run_sitl_bench(
             [sys.executable, "-m", "onboard", "run", "--mavlink", f"udpout:127.0.0.1:{fc}",
              "--camera", f"sitl://127.0.0.1:{cam}", "--gcs", f"udpout:127.0.0.1:{gcs}",
              "--sitl-auto-start", "--duration", str(seconds), "--stats", str(stats_path),
-             *rt_args],
+             *rt_args,
+             *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else [])],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         t0 = time.perf_counter()
@@ -103,6 +115,13 @@ def run_sitl_bench(
                 result = json.loads(line.removeprefix("SITL_RESULT "))
             elif line.startswith("sitl: boot clock zero at monotonic "):
                 sitl_zero = float(line.split()[-2])
+    vid = None
+    if receiver is not None:
+        receiver.stop()
+        vid = receiver.stats()
+        vid["fps"] = receiver.frames / seconds
+        lat = vid["latency_median_ms"]
+        vid["beyond_camera_median_ms"] = None if lat is None else lat - 1000 * delay_s
     timesync_error_ms = timesync_error(stats, sitl_zero)
     cpu_s, wall_s = cpu if cpu else (None, None)
     figures = {
@@ -130,6 +149,7 @@ def run_sitl_bench(
         "timesync_error_ms": timesync_error_ms,
         "timesync_min_rtt_ms": stats.get("timesync_min_rtt_ms"),
         "timesync_samples": stats.get("timesync_accepted"),
+        "video": vid,
     }
     if as_json:
         print(json.dumps(figures, indent=2))
@@ -181,6 +201,13 @@ def run_sitl_bench(
         f"  TIMESYNC offset error {f(timesync_error_ms, 3)} ms (quickest round trip "
         f"{f(figures['timesync_min_rtt_ms'], 3)} ms, {figures['timesync_samples']} samples)"
     )
+    if vid is not None:
+        print(
+            f"  video (H.264/RTP, decoded here): {vid['frames']} frames ({f(vid['fps'], 1)}/s), "
+            f"glass-to-glass median {f(vid['latency_median_ms'], 1)} ms, p95 "
+            f"{f(vid['latency_p95_ms'], 1)} ms, of which the camera's own delay "
+            f"{1000 * delay_s:.0f} ms; {vid['packets_lost']} packets lost"
+        )
     if result:
         print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")
     return 0

@@ -84,13 +84,17 @@ class SortieRecorder:
 
     def __init__(
         self,
-        directory: Path,
+        directory: Path | None,
         record_every: int = 5,
         annotate_every: int = 3,
         frame_every: int = 6,
         mode: str = "auto",
+        sink=None,
     ) -> None:
-        self.directory = Path(directory)
+        """``sink``: where the messages go instead of a new file in ``directory`` (Foxglove
+        live, :mod:`.live`)."""
+        self.directory = None if directory is None else Path(directory)
+        self._given_sink = sink
         self.mode = mode
         self.path: Path | None = None
         self.info: SortieStart | None = None
@@ -114,14 +118,17 @@ class SortieRecorder:
         """Create the file and write what the sortie is (metadata, scenario, calibration)."""
         self.info = info
         self._t0 = info.t0_s
-        self.path, fileobj = open_new_log(self.directory, info.scenario, info.law)
-        try:
-            self._sink = open_sink(self.path, fileobj, self.mode)
-        except OSError as exc:
-            self._sink = None
-            fileobj.close()
-            self._fail(exc)
-            return
+        if self._given_sink is not None:
+            self._sink = self._given_sink
+        else:
+            self.path, fileobj = open_new_log(self.directory, info.scenario, info.law)
+            try:
+                self._sink = open_sink(self.path, fileobj, self.mode)
+            except OSError as exc:
+                self._sink = None
+                fileobj.close()
+                self._fail(exc)
+                return
         try:
             cam = info.camera_model
             R = cam.R_BC
@@ -336,6 +343,13 @@ class SortieRecorder:
                         "id": "engagement",
                         "lifetime": {"sec": 0, "nsec": 0},
                         "frame_locked": False,
+                        "metadata": [],
+                        "arrows": [],
+                        "cubes": [],
+                        "cylinders": [],
+                        "triangles": [],
+                        "texts": [],
+                        "models": [],
                         "spheres": [
                             {
                                 "pose": {
@@ -360,6 +374,8 @@ class SortieRecorder:
                                     {"x": tp[0], "y": tp[1], "z": tp[2]},
                                 ],
                                 "color": {"r": 1.0, "g": 0.67, "b": 0.0, "a": 1.0},
+                                "colors": [],
+                                "indices": [],
                             }
                         ],
                     }
@@ -416,13 +432,14 @@ class SortieRecorder:
             points = (
                 '{"timestamp":%s,"type":2,"thickness":2,"points":[{"x":%.2f,"y":%.2f},'
                 '{"x":%.2f,"y":%.2f},{"x":%.2f,"y":%.2f},{"x":%.2f,"y":%.2f}],'
-                '"outline_color":{"r":1,"g":0.62,"b":0.11,"a":1}}'
-                % (ts, u - 7, v - 7, u + 7, v - 7, u + 7, v + 7, u - 7, v + 7)
+                '"outline_color":{"r":1,"g":0.62,"b":0.11,"a":1},"outline_colors":[],'
+                '"fill_color":%s}'
+                % (ts, u - 7, v - 7, u + 7, v - 7, u + 7, v + 7, u - 7, v + 7, clear)
             )
         self._put(
             "/camera/annotations",
             t_s,
-            ('{"circles":[%s],"points":[%s]}' % (",".join(circles), points)).encode(),
+            ('{"circles":[%s],"points":[%s],"texts":[]}' % (",".join(circles), points)).encode(),
         )
 
     def finish(

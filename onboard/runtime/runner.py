@@ -52,6 +52,7 @@ from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
+from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
 
@@ -68,6 +69,7 @@ class RuntimeConfig:
     stats_path: Path | None = None  # timing figures written here at exit (benchmarks)
     log_dir: Path | None = None  # every MAVLink frame in and out, as a .tlog
     realtime_priority: int | None = None  # SCHED_FIFO priority of the control thread (1-99)
+    video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
 
 
 class OnboardRuntime(FlightControllerSide, GroundSide):
@@ -138,6 +140,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self.target_size_frac = 0.0
         for note in self.params.notes:
             self._event("warning", note)
+        self.video_overlay = Overlay()
+        self.video = None if config.video is None else runtime_streamer(self)
 
     # ------------------------------------------------------------------ the loop object
     def _build_loop(self, width: int, height: int) -> None:
@@ -238,6 +242,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
             state = VehicleState(now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, f.rates_flu_rad_s)
             tel = loop.tick(state, brake=self.sm.state is State.BRAKING)
+        if self.video is not None:
+            self.video_overlay = overlay_of(
+                self._last_det, tel and tel.e_est_px, loop and loop.camera, now
+            )
         silence = None if f.heartbeat_rx_s is None else now - f.last_rx_s
         tracking = tel is not None and tel.mode is LoopMode.TRACKING
         decision = self.sm.step(
@@ -303,6 +311,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._fc_rx = LinkReceiver(self.fc)  # parses PX4's stream between ticks
         self._fc_rx.start()
         self.camera.start()
+        if self.video is not None:
+            self.video.start()
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         end = None if duration_s is None else time.perf_counter() + duration_s
         try:
@@ -325,6 +335,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             sched.stop()
             self._fc_rx.stop()
             self.camera.stop()
+            if self.video is not None:
+                self.video.stop()
             if self.camera.is_alive():
                 self.camera.join(timeout=2.5)  # a blocked read ends by its own timeout
             self._event("info", f"onboard stopping ({self.sm.state.value})")

@@ -1,0 +1,26 @@
+"""``HOST:PORT`` option values (stdlib only: command lines import it for --help)."""
+
+from __future__ import annotations
+
+
+def parse_host_port(
+    text: str, default_port: int, default_host: str = "127.0.0.1"
+) -> tuple[str, int]:
+    """``HOST:PORT``, ``PORT`` (on ``default_host``) or ``HOST`` (on ``default_port``);
+    ``[v6addr]:PORT`` for IPv6. A ValueError says what is wrong."""
+    text = text.strip()
+    if text.isdigit():
+        host, port = default_host, text
+    elif text.startswith("["):
+        host, sep, port = text[1:].partition("]")
+        port = port.removeprefix(":") if sep else ""
+        port = port or str(default_port)
+    elif text.count(":") == 1:
+        host, _, port = text.partition(":")
+    else:
+        host, port = text, str(default_port)
+    if not host:
+        raise ValueError(f"{text!r}: no host")
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"{text!r}: the port must be a number in 1..65535")
+    return host, int(port)

@@ -1,0 +1,150 @@
+"""Foxglove live: a WebSocket client speaking Foxglove's WebSocket protocol (subprotocol
+``foxglove.sdk.v1``, the SDK's name for ``foxglove.websocket.v1``; both offered) sees the
+recording's channels advertised (same topics, schema names and schemas) and receives a
+sortie's messages with the recorder's content."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import struct
+
+import pytest
+
+from groundstation.frames import FrameList
+from groundstation.recording.schemas import CHANNELS, schema_bytes
+from groundstation.scenario import load_scenario
+from groundstation.sim.simulation import Simulation
+
+websockets = pytest.importorskip("websockets")
+live_mod = pytest.importorskip("groundstation.recording.live")
+
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+MESSAGE_DATA = 0x01  # binary opcode: subscription id u32, log time u64, payload
+
+
+async def _session(live, run_sortie) -> tuple[dict, list[dict]]:
+    async with websockets.connect(
+        live.url(), subprotocols=SUBPROTOCOLS, open_timeout=10, close_timeout=1
+    ) as ws:
+        advertised: dict[str, dict] = {}
+        while len(advertised) < len(CHANNELS):
+            msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            if msg["op"] == "advertise":
+                advertised.update({c["topic"]: c for c in msg["channels"]})
+        sub = advertised["/world/vehicle"]["id"]
+        await ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": sub}]})
+        )
+        await asyncio.sleep(0.2)  # the server takes the subscription before the sortie
+        sortie = asyncio.create_task(asyncio.to_thread(run_sortie))
+        got: list[dict] = []
+        while len(got) < 3:
+            data = await asyncio.wait_for(ws.recv(), 20)
+            if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
+                sub_id, _log_ns = struct.unpack_from("<IQ", data, 1)
+                assert sub_id == 7
+                got.append(json.loads(data[13:]))
+        await sortie
+        return advertised, got
+
+
+def test_live_channels_equal_the_recordings_and_messages_arrive():
+    live = live_mod.FoxgloveLive(port=0)
+    try:
+        assert live.port > 0 and live.url().startswith("ws://127.0.0.1:")
+        frames = FrameList()
+
+        def run_sortie():
+            sim = Simulation(
+                load_scenario("static-ahead-20m"), keep_records=False,
+                observers=[live.observer(), frames],
+            )  # fmt: skip
+            sim.run()
+
+        advertised, got = asyncio.run(_session(live, run_sortie))
+    finally:
+        live.stop()
+    assert {t: c["schemaName"] for t, c in advertised.items()} == dict(CHANNELS)
+    for topic, name in CHANNELS:
+        c = advertised[topic]
+        assert c["encoding"] == "json" and c["schemaEncoding"] == "jsonschema"
+        assert json.loads(c["schema"]) == json.loads(schema_bytes(name))
+    # each vehicle pose is the frame of the same time, as the recorder writes it
+    t0 = frames.info.t0_s
+    by_time = {round((f.time_s - t0) * 1e9): f for f in frames.frames}
+    for msg in got:
+        assert msg["frame_id"] == "world"
+        ns = msg["timestamp"]["sec"] * 1_000_000_000 + msg["timestamp"]["nsec"]
+        pos = msg["pose"]["position"]
+        frame = by_time[ns]
+        assert (pos["x"], pos["y"], pos["z"]) == pytest.approx(frame.vehicle_p_enu_m, abs=1e-3)
+    times = [m["timestamp"]["sec"] * 1e9 + m["timestamp"]["nsec"] for m in got]
+    assert times == sorted(times) and len(set(times)) == 3
+
+
+def test_live_refuses_a_port_in_use():
+    live = live_mod.FoxgloveLive(port=0)
+    try:
+        with pytest.raises(Exception, match=r"(?i)address|in use|bind"):
+            live_mod.FoxgloveLive(port=live.port)
+    finally:
+        live.stop()
+
+
+def test_the_simulator_session_publishes_to_foxglove_and_records(tmp_path):
+    """serve --foxglove: each sortie the operator starts is observed by the recorder and by
+    a Foxglove publisher (the same recorder class over a FoxgloveSink)."""
+    from groundstation.app.session import SimSession, SortieConfig
+    from groundstation.recording.writer import SortieRecorder
+
+    live = live_mod.FoxgloveLive(port=0)
+    session = SimSession(log_dir=tmp_path)
+    session.foxglove = live
+    try:
+        session.start(SortieConfig(load_scenario("static-ahead-20m")))
+        kinds = [(type(o), type(o._given_sink)) for o in session.sim.observers]
+        assert kinds == [(SortieRecorder, type(None)), (SortieRecorder, live_mod.FoxgloveSink)]
+    finally:
+        session.close()
+        live.stop()
+
+
+def test_serve_options_are_checked(capsys):
+    from groundstation.cli import main
+
+    for argv, needle in (
+        (["serve", "--foxglove", "127.0.0.1:99999"], "argument --foxglove: '127.0.0.1:99999'"),
+        (["serve", "--foxglove", ":8765"], "argument --foxglove: ':8765': no host"),
+        (["serve", "--video", "70000"], "argument --video: '70000': the port must be"),
+        (["serve", "--video", "5600"], "--video is for live mode (with --mavlink)"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            code = main(argv)
+            raise SystemExit(code)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and needle in err, (argv, err)
+
+
+def test_a_live_mode_sortie_publishes_what_it_records(tmp_path):
+    """serve --mavlink --foxglove: the live recording's frames go to the file and to Foxglove
+    through the same recorder, at the live recording's rates."""
+    from groundstation.app.live_recording import LiveRecording
+
+    frames = FrameList()
+    Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[frames]).run()
+    live = live_mod.FoxgloveLive(port=0)
+    published: list[int] = []
+    live.publish = lambda ti, data: published.append(ti)  # count what reaches the server
+    try:
+        rec = LiveRecording(tmp_path, frames.info, foxglove=live)
+        for f in frames.frames[:100]:
+            rec.record(f)
+        rec.finish("HIT", "test")
+    finally:
+        live.stop()
+    file_rec, fox = rec.observers
+    assert file_rec.path.exists() and file_rec.error is None and fox.path is None
+    assert (fox.record_every, fox.annotate_every) == (file_rec.record_every, 1)
+    topics = {CHANNELS[ti][0] for ti in published}
+    assert {"/world/vehicle", "/control", "/dkf", "/events", "/camera/annotations"} <= topics
