@@ -317,6 +317,8 @@ def _build_parser() -> argparse.ArgumentParser:
         type=int,
         metavar="PRIO",
         help="--sitl: onboard run --realtime PRIO, and the SITL under SCHED_FIFO too",
+    )
+    b.add_argument(
         "--video",
         action="store_true",
         help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
