@@ -379,3 +379,15 @@ def test_onboard_options_are_checked_too(capsys, argv, needle):
         onboard_main(argv)
     err = capsys.readouterr().err
     assert exc.value.code == 2 and needle in err and "Traceback" not in err
+
+
+def test_a_cut_anywhere_is_truncated_not_damaged(log_file, tmp_path):
+    """Wherever a copy or a crash cuts the file (inside a record's header, its body, a chunk),
+    the log reads as truncated, never as corrupt bytes."""
+    data = log_file.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    for k in range(1, 60):
+        at = 8 + (len(data) - 8) * k // 61 + k % 9  # spread over the file, odd offsets too
+        cut.write_bytes(data[:at])
+        info = inspect_log(cut)
+        assert info.status == "truncated", (at, info.problem)

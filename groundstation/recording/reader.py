@@ -11,6 +11,7 @@ A file that is not MCAP at all is refused with :class:`LogError`.
 from __future__ import annotations
 
 import json
+import struct
 import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
@@ -126,7 +127,11 @@ def _stream_scan(path: Path, info: LogInfo) -> bool:
                 elif isinstance(rec, Metadata):
                     _apply_metadata(info, rec.name, rec.metadata)
         except Exception as exc:  # mcap, zstd and lz4 each raise their own types
-            ended_early = type(exc).__name__ in ("EndOfFile", "EOFError")
+            # a cut inside a record's header surfaces as a short struct read: at the end of
+            # the file that is the file ending early, not corrupt bytes
+            ended_early = type(exc).__name__ in ("EndOfFile", "EOFError") or (
+                isinstance(exc, struct.error) and f.tell() >= info.size_bytes
+            )
             at = "its first message" if last is None else f"t = {last / 1e9:.2f} s"
             recovered = f"{info.messages} messages recovered"
             if ended_early:
