@@ -291,7 +291,7 @@ function fillFieldChoice(s) {
 }
 $("btn-add-plot").onclick = () => {
   const key = $("add-field").value; if (!key) return;
-  const unit = (key.match(/_(m_s2|m_s|rad_s|px_s|rad|px|m|s)(\.\d)?$/) || [, ""])[1].replace("m_s2", "m/s²").replace("m_s", "m/s").replace("rad_s", "rad/s").replace("px_s", "px/s");
+  const unit = unitText(((PV.own && PV.own.units) || {})[key] || "-"); // from onboard/messages.py
   PV.extra.push({ title: key, unit: unit || "-", series: [{ label: key, key, color: "#2f6fe0" }] });
   buildPlots();
 };

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from onboard import messages
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
 from onboard.gains import GainError, Gains
@@ -257,6 +258,8 @@ class ReplayPlayer:
             "t_s": self.tc[::every],
             "columns": cols,
             "fields": extra,
+            # from the one message definition: the page labels the plots it adds with these
+            "units": {k: u for k, u in messages.units(messages.CONTROL).items() if k in extra},
             "events": self.timeline,
             "sortie": self.describe(),
         }
