@@ -36,8 +36,9 @@ def _p(msg: dict) -> tuple[float, float, float]:
 
 
 class ReplayPlayer:
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, name: str | None = None) -> None:
         self.path = Path(path)
+        self.name = name or self.path.name  # as the API names it (relative to the log folder)
         self.info = inspect_log(self.path)
         self.tv: list[float] = []
         self.vp: list[tuple[float, float, float]] = []
@@ -137,7 +138,7 @@ class ReplayPlayer:
         except ValueError:
             gains = {}
         return {
-            "file": self.path.name,
+            "file": self.name,
             "scenario": self.info.scenario,
             "law": self.info.law,
             "seed": self.info.seed,

@@ -331,7 +331,7 @@ class SimSession(SessionView, SessionReplay):
         next_publish = 0.0
         last_wall = time.perf_counter()
         last_wall_replay = last_wall
-        was_running = False
+        was_running = behind = False
         while not self._stop.is_set():
             now = time.perf_counter()
             if was_running:  # charge the whole last iteration (stepping, publishing, sleeping)
@@ -346,16 +346,19 @@ class SimSession(SessionView, SessionReplay):
             if self.state == "running" and self.sim is not None:
                 sim = self.sim
                 t_before = sim.time_s
+                # step until the sortie is where the clock says or the next snapshot is due,
+                # whichever comes first: a simulator that falls behind (a loaded machine, the
+                # rendered camera) still publishes at PUBLISH_HZ instead of once per 100 ticks
+                deadline = max(next_publish, now + 0.002)
                 if math.isinf(self.speed):
-                    deadline = now + 0.02
+                    behind = False
                     while not sim.done and time.perf_counter() < deadline:
                         self._advance_one()
                 else:
                     target = self._anchor_sim + (now - self._anchor_wall) * self.speed
-                    n = 0
-                    while not sim.done and sim.time_s < target and n < 100:
+                    while not sim.done and sim.time_s < target and time.perf_counter() < deadline:
                         self._advance_one()
-                        n += 1
+                    behind = sim.time_s < target
                 self.run_sim_s += sim.time_s - t_before
                 if sim.done:
                     self.state = "finished"
@@ -373,7 +376,8 @@ class SimSession(SessionView, SessionReplay):
             if now2 >= next_publish:
                 self._publish()
                 next_publish = now2 + self.publish_period_s
-            self._stop.wait(0.002 if was_running else 0.01)
+            # behind the clock: no nap (a zero wait still lets the web server's thread run)
+            self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)
 
 
 def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):

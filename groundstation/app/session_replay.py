@@ -15,8 +15,8 @@ from .replay import ReplayPlayer
 class SessionReplay:
     """The replay commands of a :class:`~.session.SimSession`."""
 
-    def open_replay(self, path: Path) -> None:
-        player = ReplayPlayer(path)  # read (and validated) here, not on the sim thread
+    def open_replay(self, path: Path, name: str | None = None) -> None:
+        player = ReplayPlayer(path, name)  # read (and validated) here, not on the sim thread
 
         def go():
             self._close_current("the operator opened a recorded sortie")
@@ -35,8 +35,8 @@ class SessionReplay:
 
         self.submit(go)
 
-    def compare_with(self, path: Path) -> None:
-        other = ReplayPlayer(path)
+    def compare_with(self, path: Path, name: str | None = None) -> None:
+        other = ReplayPlayer(path, name)
 
         def go():
             if self.replay is None and self.sim is None:

@@ -132,14 +132,14 @@ class SessionView:
             "replay": None
             if self.replay is None
             else {
-                "file": self.replay.path.name,
+                "file": self.replay.name,
                 "t_s": round(self.replay_t, 4),
                 "duration_s": round(self.replay.duration_s, 4),
                 "playing": self.replay_playing,
                 "speed_x": self.replay_speed(),
                 "closest_time_s": round(self.replay.closest_time_s, 4),
                 "status": self.replay.info.status,
-                "compare": None if self.compare is None else self.compare.path.name,
+                "compare": None if self.compare is None else self.compare.name,
             },
         }
         rp = self.replay
