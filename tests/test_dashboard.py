@@ -483,7 +483,9 @@ def test_3d_view_presets_are_per_viewer(station, browser):
     try:
         for pg in pages:
             pg.goto(station.url())
-            pg.frame_locator("#viser").locator("text=View").first.wait_for(timeout=30000)
+            view = pg.frame_locator("#viser").get_by_label("View", exact=True)
+            view.wait_for(timeout=60000)  # each viewer's own View control, from the server
+            assert view.input_value() == "fit engagement"
         deadline = time.monotonic() + 20
         while len(_cameras(station)) < 2:
             assert time.monotonic() < deadline, "the viewers did not connect"
@@ -491,8 +493,8 @@ def test_3d_view_presets_are_per_viewer(station, browser):
         before = _cameras(station)
         # viewer A picks "top" in its own View control
         frame = pages[0].frame_locator("#viser")
-        frame.locator("input.mantine-Select-input").first.click()
-        frame.get_by_role("option", name="top").click()
+        frame.get_by_label("View", exact=True).click()
+        frame.get_by_role("option", name="top", exact=True).click()
         deadline = time.monotonic() + 20
         moved: list = []
         while not moved:
@@ -506,8 +508,11 @@ def test_3d_view_presets_are_per_viewer(station, browser):
         assert above[2] > 10.0 and np.hypot(above[0], above[1]) < 0.05 * above[2]  # top-down
         other = next(c for c in before if c != moved[0])
         assert np.allclose(_cameras(station)[other][0], before[other][0])  # B kept its view
-        shot = pages[0].screenshot()
-        assert len(shot) > 20000
+        # each page's control says what its viewer shows
+        assert frame.get_by_label("View", exact=True).input_value() == "top"
+        other_view = pages[1].frame_locator("#viser").get_by_label("View", exact=True)
+        assert other_view.input_value() == "fit engagement"
+        pages[0].locator("#viser").screenshot(path=str(station.log_dir.parent / "top-view.png"))
     finally:
         for pg in pages:
             pg.close()
@@ -542,7 +547,9 @@ def test_gain_studies_are_listed_and_a_trial_flies_beside_the_defaults(station, 
     page.wait_for_function(
         "document.getElementById('gains-source').textContent.includes('trial #2')"
     )
-    kv = page.input_value('#gains input[data-gain="k_v"]')
-    assert float(kv) == 6.0
+    page.wait_for_function(  # the panel reloads the gains in force (the defaults' 1.8 before)
+        "parseFloat(document.querySelector('#gains input[data-gain=\"k_v\"]').value) === 6"
+    )
+    assert float(page.input_value('#gains input[data-gain="K_y"]')) == 4.5
     legend = "document.querySelector('#plots').textContent.includes('· B')"
     page.wait_for_function(f"window.peregrine.plots.length >= 5 && {legend}")
