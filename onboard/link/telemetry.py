@@ -22,7 +22,6 @@ FIELDS: tuple[tuple[str, str, str], ...] = messages.wire_layout(messages.TELEMET
 INDEX = {name: i for i, (name, _, _) in enumerate(FIELDS)}
 _C, _D = messages.by_name(messages.CONTROL), messages.by_name(messages.DKF)
 _L = messages.by_name(messages.LINK)
-FIELD_NAMES_DKF_COV = _D["cov_diag"].wire
 assert len(FIELDS) <= ARRAY_LEN
 
 # MAVLink codes: a member's index in its enumeration's declaration order
