@@ -54,9 +54,12 @@ async function loadFolders() {
   for (const f of folders) { const o = document.createElement("option"); o.value = f; o.textContent = f ? f + "/" : "(top)"; sel.appendChild(o); }
   sel.value = folders.includes(want) ? want : "";
 }
+let loads = 0; // a listing that comes back after a later one (another folder) is dropped
 async function load() {
-  const folder = $("folder").value || "";
-  rows = await api("GET", "/api/logs?folder=" + encodeURIComponent(folder));
+  const folder = $("folder").value || "", mine = ++loads;
+  const got = await api("GET", "/api/logs?folder=" + encodeURIComponent(folder));
+  if (mine !== loads) return;
+  rows = got;
   $("folder-shown").textContent = `(logs/${folder ? folder + "/" : ""})`;
   render();
 }
