@@ -36,7 +36,6 @@ from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_histo
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
-SEND_NAP_S = 0.001  # after each snapshot, for the web server's thread (see _run)
 MAX_EVENTS = 200
 
 
@@ -377,11 +376,8 @@ class SimSession(SessionView, SessionReplay):
             if now2 >= next_publish:
                 self._publish()
                 next_publish = now2 + self.publish_period_s
-                # let the web server's thread fan the snapshot out now: while this thread
-                # steps it holds the GIL, and the sends (each a GIL hand-over of up to the 5 ms
-                # switch interval) crawled, to a few snapshots a second per viewer
-                time.sleep(SEND_NAP_S)
-            # behind the clock: no nap beyond the send's
+            # behind the clock: no nap (the 2 ms nap otherwise lets the web server's thread,
+            # which needs the GIL for every send, fan the snapshots out)
             self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)
 
 
