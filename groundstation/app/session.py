@@ -36,6 +36,7 @@ from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_histo
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
+BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is behind the clock
 MAX_EVENTS = 200
 
 
@@ -348,7 +349,8 @@ class SimSession(SessionView, SessionReplay):
                 t_before = sim.time_s
                 # step until the sortie is where the clock says or the next snapshot is due,
                 # whichever comes first: a simulator that falls behind (a loaded machine, the
-                # rendered camera) still publishes at PUBLISH_HZ instead of once per 100 ticks
+                # rendered camera) still publishes, at BEHIND_PUBLISH_HZ (it published once
+                # per 100 ticks, about 1 Hz), and keeps most of its time for catching up
                 deadline = max(next_publish, now + 0.002)
                 if math.isinf(self.speed):
                     behind = False
@@ -375,7 +377,8 @@ class SimSession(SessionView, SessionReplay):
             now2 = time.perf_counter()
             if now2 >= next_publish:
                 self._publish()
-                next_publish = now2 + self.publish_period_s
+                slow = was_running and behind
+                next_publish = now2 + (1.0 / BEHIND_PUBLISH_HZ if slow else self.publish_period_s)
             # behind the clock: no nap (the 2 ms nap otherwise lets the web server's thread,
             # which needs the GIL for every send, fan the snapshots out)
             self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)
