@@ -1,6 +1,7 @@
 """The ground station's web app through FastAPI's TestClient: auth, gains, scenarios, the
 sortie lifecycle, gain sets, telemetry, and a clean stop."""
 
+import shutil
 import socket
 import subprocess
 import sys
@@ -302,6 +303,43 @@ def test_log_api_refuses_escapes_and_unconfirmed_deletes(client, gs):
     listed = client.get("/api/logs").json()
     assert listed[0]["status"] == "not_mcap"
     assert client.post("/api/replay/open", json={"name": "junk.mcap"}).status_code == 422
+
+
+def test_campaign_subfolders_are_browsed_and_nothing_outside_the_log_folder(client, gs, tmp_path):
+    client.post("/api/sortie/start", json={"scenario": "static-ahead-20m", "speed": "max"})
+    _wait(client, lambda s: s["state"] == "finished")
+    name = client.get("/api/logs").json()[0]["name"]
+    # what `campaign --log logs/static-n2` leaves: its recordings in a subfolder
+    sub = gs.log_dir / "static-n2"
+    sub.mkdir()
+    shutil.copy(gs.log_dir / name, sub / "a.mcap")
+    (gs.log_dir / "empty-folder").mkdir()
+    (gs.log_dir / ".hidden").mkdir()
+    shutil.copy(gs.log_dir / name, gs.log_dir / ".hidden" / "h.mcap")
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shutil.copy(gs.log_dir / name, outside / "o.mcap")
+    (gs.log_dir / "link").symlink_to(outside)
+    assert client.get("/api/logfolders").json() == ["", "static-n2"]
+    rows = client.get("/api/logs?folder=static-n2").json()
+    assert [r["name"] for r in rows] == ["static-n2/a.mcap"] and rows[0]["outcome"] == "HIT"
+    assert client.get("/api/logs/static-n2/a.mcap").json()["name"] == "static-n2/a.mcap"
+    series = client.get("/api/logs/static-n2/a.mcap/series").json()
+    assert series["sortie"]["file"] == "static-n2/a.mcap" and len(series["t_s"]) > 50
+    st = client.post("/api/replay/open", json={"name": "static-n2/a.mcap"}).json()
+    assert st["replay"]["file"] == "static-n2/a.mcap"
+    assert client.get("/api/logs/static-n2%2Fa.mcap/file").status_code == 200
+    for folder in ("..", "../outside", "link", ".hidden", "/etc", "static-n2/..", "nope"):
+        r = client.get(f"/api/logs?folder={folder}")
+        assert r.status_code == 400, folder
+    for bad in ("link/o.mcap", ".hidden/h.mcap", "static-n2/../../x.mcap", "/etc/passwd.mcap"):
+        assert client.get(f"/api/logs/{bad}").status_code in (400, 404), bad
+        assert client.post("/api/replay/open", json={"name": bad}).status_code in (400, 404), bad
+    # a refused delete changes nothing; a confirmed one deletes the subfolder's file
+    assert client.delete("/api/logs/link/o.mcap?confirm=link/o.mcap").status_code == 400
+    assert (outside / "o.mcap").is_file()
+    assert client.delete("/api/logs/static-n2/a.mcap?confirm=static-n2/a.mcap").status_code == 200
+    assert client.get("/api/logs?folder=static-n2").json() == []
 
 
 def test_reset_keeps_an_unfinished_recording(client, gs):

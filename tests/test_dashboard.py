@@ -5,10 +5,12 @@ error. One ground station and one headless chromium serve every test of this mod
 
 import json
 import re
+import shutil
 import time
 import urllib.request
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from groundstation.app.session import SortieConfig
@@ -437,3 +439,117 @@ def test_image_plane_markers_leave_the_balloon_visible_and_an_outside_estimate_i
     snap["e_est_px"] = [0, -400]  # 160 px above the top edge
     arrow = page.evaluate("(s) => { drawImagePlane(s); return window.peregrine.edgeArrow; }", snap)
     assert arrow["x"] == pytest.approx(320, abs=1) and arrow["y"] == pytest.approx(18, abs=1)
+
+
+# ---------------------------------------------------------------------- B14: campaign folders
+def test_campaign_recordings_in_a_subfolder_are_browsed_and_opened(station, page):
+    name = fly(station, scenario="static-ahead-20m")
+    sub = station.log_dir / "static-n1"  # what `campaign --log logs/static-n1` leaves
+    sub.mkdir(exist_ok=True)
+    shutil.copy(station.log_dir / name, sub / "campaign-sortie.mcap")
+    page.goto(station.url())
+    page.goto(base(station) + "sorties")
+    page.wait_for_selector("#folder option[value='static-n1']", state="attached")
+    page.select_option("#folder", "static-n1")
+    row = page.locator('#logs tbody tr[data-name="static-n1/campaign-sortie.mcap"]')
+    row.wait_for()
+    assert page.text_content("#folder-shown") == "(logs/static-n1/)"
+    assert page.text_content("#count") == "1 of 1 sorties"
+    assert "static-ahead-20m" in row.text_content() and "HIT" in row.text_content()
+    assert "folder=static-n1" in page.url  # a reload stays in the folder
+    row.locator("button[data-act=open]").click()
+    page.wait_for_url(re.compile(r"/(\?.*)?$"))
+    page.wait_for_function(
+        "window.peregrine.snap && window.peregrine.snap.status.replay"
+        " && window.peregrine.snap.status.replay.file === 'static-n1/campaign-sortie.mcap'"
+    )
+    # the plots show the whole recorded sortie, read from the subfolder
+    page.wait_for_function("window.peregrine.plots.length >= 5 && "
+                           "window.peregrine.plots[0].data[0].length > 50")  # fmt: skip
+    assert "static-n1/campaign-sortie.mcap" in page.text_content("#rp-file")
+
+
+# ---------------------------------------------------------------------- B12: 3D view per viewer
+def _cameras(station) -> dict:
+    return {
+        cid: (np.array(c.camera.position), np.array(c.camera.look_at))
+        for cid, c in station.viser.get_clients().items()
+    }
+
+
+def test_3d_view_presets_are_per_viewer(station, browser):
+    fly(station, scenario="static-ahead-20m")  # a sortie on screen: the engagement is known
+    pages = [browser.new_page(viewport={"width": 1500, "height": 1000}) for _ in range(2)]
+    try:
+        for pg in pages:
+            pg.goto(station.url())
+            view = pg.frame_locator("#viser").get_by_label("View", exact=True)
+            view.wait_for(timeout=60000)  # each viewer's own View control, from the server
+            assert view.input_value() == "fit engagement"
+        deadline = time.monotonic() + 20
+        while len(_cameras(station)) < 2:
+            assert time.monotonic() < deadline, "the viewers did not connect"
+            time.sleep(0.1)
+        before = _cameras(station)
+        # viewer A picks "top" in its own View control
+        frame = pages[0].frame_locator("#viser")
+        frame.get_by_label("View", exact=True).click()
+        frame.get_by_role("option", name="top", exact=True).click()
+        deadline = time.monotonic() + 20
+        moved: list = []
+        while not moved:
+            assert time.monotonic() < deadline, "no viewer's camera moved"
+            now = _cameras(station)
+            moved = [c for c in now if c in before and not np.allclose(now[c][0], before[c][0])]
+            time.sleep(0.1)
+        assert len(moved) == 1  # one viewer's camera, not every viewer's
+        pos, look = _cameras(station)[moved[0]]
+        above = pos - look
+        assert above[2] > 10.0 and np.hypot(above[0], above[1]) < 0.05 * above[2]  # top-down
+        other = next(c for c in before if c != moved[0])
+        assert np.allclose(_cameras(station)[other][0], before[other][0])  # B kept its view
+        # each page's control says what its viewer shows
+        assert frame.get_by_label("View", exact=True).input_value() == "top"
+        other_view = pages[1].frame_locator("#viser").get_by_label("View", exact=True)
+        assert other_view.input_value() == "fit engagement"
+        pages[0].locator("#viser").screenshot(path=str(station.log_dir.parent / "top-view.png"))
+    finally:
+        for pg in pages:
+            pg.close()
+
+
+# ---------------------------------------------------------------------- #16: gain studies
+def test_gain_studies_are_listed_and_a_trial_flies_beside_the_defaults(station, page):
+    from .test_studies_api import make_study
+
+    make_study(station.data_dir, "page-study")
+    station.session.reset()
+    goto(page, station)
+    page.click("#btn-studies-refresh")
+    page.wait_for_function("window.peregrine.study && window.peregrine.study.name === 'page-study'")
+    rows = page.locator("#trials tbody tr")
+    assert rows.count() == 5
+    # sorted by loss, the best first and marked; the failed trial last, without a Fly button
+    top = rows.nth(0)
+    assert top.get_attribute("data-trial") == "2" and "best" in top.get_attribute("class")
+    assert "k_v 6.00, K_y 4.50" in rows.nth(0).text_content()
+    assert rows.nth(4).locator("button").count() == 0
+    assert "4 of 5 trials done · best #2" in page.text_content("#study-info")
+    best = page.evaluate("window.peregrine.studyPlot()")
+    assert best == pytest.approx([0.40, 0.40, 0.10, 0.10, 0.10])
+    page.select_option("#speed", "max")
+    rows.nth(0).locator("button[data-act=fly]").click()
+    page.wait_for_function("document.getElementById('study-msg').textContent.includes('flying at')")
+    st = status(station)
+    assert st["gains_source"] == "study page-study trial #2"
+    assert st["compare"]["scenario"] == "static-ahead-20m"
+    # what the operator sees: the gains in force are the trial's, the legend names both sorties
+    page.wait_for_function(
+        "document.getElementById('gains-source').textContent.includes('trial #2')"
+    )
+    page.wait_for_function(  # the panel reloads the gains in force (the defaults' 1.8 before)
+        "parseFloat(document.querySelector('#gains input[data-gain=\"k_v\"]').value) === 6"
+    )
+    assert float(page.input_value('#gains input[data-gain="K_y"]')) == 4.5
+    legend = "document.querySelector('#plots').textContent.includes('· B')"
+    page.wait_for_function(f"window.peregrine.plots.length >= 5 && {legend}")

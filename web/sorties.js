@@ -45,7 +45,30 @@ function render() {
     : `No sortie matches "${$("filter").value}".`;
 }
 
-async function load() { rows = await api("GET", "/api/logs"); render(); }
+// the log folder and its subfolders (a campaign's `--log logs/NAME`): the page browses them
+// without a server restart; the server names nothing outside the log folder
+async function loadFolders() {
+  const folders = await api("GET", "/api/logfolders");
+  const sel = $("folder"), want = new URLSearchParams(location.search).get("folder") || sel.value || "";
+  sel.innerHTML = "";
+  for (const f of folders) { const o = document.createElement("option"); o.value = f; o.textContent = f ? f + "/" : "(top)"; sel.appendChild(o); }
+  sel.value = folders.includes(want) ? want : "";
+}
+let loads = 0; // a listing that comes back after a later one (another folder) is dropped
+async function load() {
+  const folder = $("folder").value || "", mine = ++loads;
+  const got = await api("GET", "/api/logs?folder=" + encodeURIComponent(folder));
+  if (mine !== loads) return;
+  rows = got;
+  $("folder-shown").textContent = `(logs/${folder ? folder + "/" : ""})`;
+  render();
+}
+$("folder").onchange = () => {
+  const u = new URL(location.href);
+  if ($("folder").value) u.searchParams.set("folder", $("folder").value); else u.searchParams.delete("folder");
+  history.replaceState(null, "", u);
+  load().catch((e) => say(e.message, false));
+};
 
 document.querySelectorAll("#logs th[data-k]").forEach((th) => {
   th.style.cursor = "pointer";
@@ -66,4 +89,4 @@ document.querySelector("#logs tbody").onclick = async (ev) => {
     }
   } catch (e) { say(e.message, false); }
 };
-load().catch((e) => say(e.message, false));
+loadFolders().then(load).catch((e) => say(e.message, false));

@@ -16,44 +16,28 @@ built from the latest by the builder the simulator and replay use (:mod:`.snapsh
 
 from __future__ import annotations
 
-import contextlib
 import math
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from onboard.camera_model import CameraModel
-from onboard.control.guidance import normal_component
 from onboard.enums import RuntimeState
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
-from onboard.link.params import PARAM_IDS, PARAM_INDEX, PARAM_NAMES, PARAM_SPECS
+from onboard.link.params import PARAM_IDS, PARAM_SPECS
 from onboard.link.px4 import (
-    AUTOPILOT_COMPONENT_ID,
     CMD_ABORT,
     CMD_START,
-    GCS_COMPONENT_ID,
-    GCS_SYSTEM_ID,
     ONBOARD_COMPONENT_ID,
-    TARGET_SYSTEM_ID,
     VEHICLE_SYSTEM_ID,
-    MavLink,
     mavlink,
-    message_text,
-    ned_to_enu,
-    param_id_str,
-    px4_mode_name,
-    quat_ned_frd_to_enu_flu,
-    real32,
 )
 
 from ..frames import Frame, SortieStart
 from .live_frames import live_frame, pose_from_values
+from .live_link import LINK_TIMEOUT_S, LinkState
 from .live_recording import LiveRecording
 from .scene import SceneState
 from .session import SessionError
@@ -61,7 +45,6 @@ from .snapshot import frame_snapshot
 
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
-LINK_TIMEOUT_S = 2.0
 ACK_TIMEOUT_S = 2.0
 TARGET_DIAMETER_M = 0.3  # drawn size of a cooperative target (its telemetry has no size)
 FINISHED_STATES = (RuntimeState.FINISHED.value, RuntimeState.LINK_LOST.value)
@@ -75,8 +58,10 @@ ACK_NAMES = {
 
 
 # ---------------------------------------------------------------------- the session
-class LiveSession:
-    """Plays the part of :class:`~groundstation.app.session.SimSession` for a live link."""
+class LiveSession(LinkState):
+    """Plays the part of :class:`~groundstation.app.session.SimSession` for a live link: what
+    the vehicle reports (:class:`~.live_link.LinkState`), what the operator sends, the
+    recording and the page's view."""
 
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
     video = None  # a VideoReceiver of the vehicle's camera (serve --video)
@@ -90,55 +75,32 @@ class LiveSession:
         log_dir: Path | None = None,
         publish_hz: float = PUBLISH_HZ,
     ) -> None:
-        self.link = MavLink(url, GCS_SYSTEM_ID, GCS_COMPONENT_ID, signing_key, unsigned_ok=None)
-        self.url = url
-        self.signed = signing_key is not None
+        super().__init__(url, signing_key)
         self.log_dir = log_dir
         self._on_snapshot = on_snapshot
         self.scene = scene
         self.publish_period_s = 1.0 / publish_hz
-        self._lock = threading.RLock()
         self._stop = threading.Event()
         self.replay = self.compare = None
         self.state = "live"
-        self.params: dict[str, float] = {}
-        self.pending: dict[str, float] = {}  # PARAM_SET sent, PARAM_VALUE not yet back
-        self.refused: dict[str, str] = {}
-        self.gains = Gains()
-        self.initial_gains: Gains | None = None  # the vehicle's, first read in full
-        self.gains_applied_time_s: float | None = None
-        self.tel: dict[str, float | None] = {}
-        self.tel_rx_s: float | None = None
-        self.onboard_rx_s: float | None = None
-        self.onboard_state = "unknown"
-        self.fc_mode = "—"
-        self.fc_armed = False
-        self.fc_rx_s: float | None = None
-        self.vehicle_p: list[float] | None = None
-        self.vehicle_v = [0.0, 0.0, 0.0]
-        self.vehicle_q = [1.0, 0.0, 0.0, 0.0]
-        self.target_p: list[float] | None = None
-        self.target_v = [0.0, 0.0, 0.0]
-        self.target_rx_s: float | None = None
-        self.events: deque[dict[str, Any]] = deque(maxlen=50)
-        self.acks: dict[int, tuple[float, int]] = {}
-        self.last_ack: dict[str, Any] | None = None
-        self._acked = threading.Condition(self._lock)
         self.rec: LiveRecording | None = None  # the sortie being recorded
-        self._trail_vehicle: list[list[float]] = []
-        self._trail_target: list[list[float]] = []
-        self._last_trail = -1.0
         self._params_requested = -1e9
         self._publish_count = 0
         self._scene_reset = True  # (re)build the 3D scene at the next publish
-        self._prev_vel: tuple[float, list[float]] | None = None
-        self.normal_accel_m_s2: float | None = None
         self.miss_m: float | None = None  # the last recorded sortie's closest approach
         self.scene_errors = 0
         self.errors = 0
         self.last_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="live-link", daemon=True)
         self._thread.start()
+
+    def _on_telemetry(self, t: dict[str, float | None], now: float) -> None:
+        if self.rec is not None:
+            self._record(t, now)
+
+    def _on_event(self, level: str, text: str) -> None:
+        if self.rec is not None:
+            self.rec.event(level, text)
 
     # ------------------------------------------------------------------ simulator commands
     def _not_live(self, *_a, **_k):
@@ -223,11 +185,6 @@ class LiveSession:
         return self._command(CMD_ABORT, "abort")
 
     # ------------------------------------------------------------------ the link thread
-    def link_up(self) -> bool:
-        return (
-            self.onboard_rx_s is not None and time.monotonic() - self.onboard_rx_s < LINK_TIMEOUT_S
-        )
-
     def _run(self) -> None:
         next_publish = 0.0
         while not self._stop.is_set():
@@ -262,135 +219,7 @@ class LiveSession:
             self._publish()
         return next_publish
 
-    def _take(self, m, now: float) -> None:
-        kind = m.get_type()
-        sys_id, comp = m.get_srcSystem(), m.get_srcComponent()
-        if sys_id == TARGET_SYSTEM_ID:
-            if kind == "LOCAL_POSITION_NED":
-                p, v = ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz))
-                if np.all(np.isfinite(p)) and np.all(np.isfinite(v)):
-                    self.target_p, self.target_rx_s = [float(c) for c in p], now
-                    self.target_v = [float(c) for c in v]
-            return
-        if sys_id != VEHICLE_SYSTEM_ID:
-            return
-        if comp == AUTOPILOT_COMPONENT_ID:
-            self.fc_rx_s = now
-            if kind == "HEARTBEAT":
-                self.fc_mode = px4_mode_name(m.custom_mode)
-                self.fc_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-            elif kind == "ATTITUDE_QUATERNION":
-                q = quat_ned_frd_to_enu_flu((m.q1, m.q2, m.q3, m.q4))
-                if np.all(np.isfinite(q)):
-                    self.vehicle_q = [float(c) for c in q]
-            elif kind == "LOCAL_POSITION_NED":
-                p, v = ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz))
-                if np.all(np.isfinite(p)) and np.all(np.isfinite(v)):
-                    self.vehicle_p, self.vehicle_v = [float(c) for c in p], [float(c) for c in v]
-            elif kind == "STATUSTEXT":
-                self._event(now, "px4", message_text(m), m.severity)
-            return
-        if comp != ONBOARD_COMPONENT_ID:
-            return
-        self.onboard_rx_s = now
-        if kind == "HEARTBEAT":
-            code = int(m.custom_mode)
-            self.onboard_state = tm.STATE_CODES[code] if 0 <= code < len(tm.STATE_CODES) else "?"
-        elif kind == "DEBUG_FLOAT_ARRAY" and m.array_id == tm.ARRAY_ID:
-            self._telemetry(tm.unpack(m.data), now)
-        elif kind == "STATUSTEXT":
-            self._event(now, "onboard", message_text(m), m.severity)
-        elif kind == "PARAM_VALUE":
-            name = PARAM_NAMES.get(param_id_str(m.param_id), "")  # MAVLink id -> Python name
-            value = real32(m.param_value)
-            if name not in PARAM_INDEX or not math.isfinite(value):
-                raise ValueError(f"PARAM_VALUE {name!r} = {value}")
-            self.params[name] = value
-            if name in self.pending:
-                want = self.pending.pop(name)
-                if math.isclose(want, value, rel_tol=1e-6, abs_tol=1e-6):
-                    self.gains_applied_time_s = self.tel.get("t_s")
-                else:
-                    self.refused[name] = f"{name}: vehicle kept {value:g}"
-            if name in GAIN_NAMES:
-                with contextlib.suppress(ValueError):
-                    self.gains = self.gains.replace(**{name: value})
-                if self.initial_gains is None and all(n in self.params for n in GAIN_NAMES):
-                    self.initial_gains = self.gains
-        elif kind == "COMMAND_ACK" and m.target_component in (0, GCS_COMPONENT_ID):
-            self.acks[int(m.command)] = (now, int(m.result))
-            self._acked.notify_all()
-
-    def _event(self, now: float, source: str, text: str, severity: int) -> None:
-        self.events.append(
-            {"t": round(now, 3), "source": source, "text": text, "severity": int(severity)}
-        )
-        if self.rec is not None:
-            level = (
-                "error"
-                if severity <= mavlink.MAV_SEVERITY_ERROR
-                else ("warning" if severity == mavlink.MAV_SEVERITY_WARNING else "info")
-            )
-            self.rec.event(level, f"{source}: {text}")
-
-    def _telemetry(self, t: dict[str, float | None], now: float) -> None:
-        for key, codes in (
-            ("state", tm.STATE_CODES),
-            ("loop_mode", tm.LOOP_MODE_CODES),
-            ("law", tm.LAW_CODES),
-        ):
-            v = t.get(key)
-            if v is not None and not (0 <= v < len(codes) and v == int(v)):
-                t[key] = None  # a code we do not know: show nothing rather than fail
-        for key in ("image_w_px", "image_h_px", "f_px"):
-            v = t.get(key)
-            if v is not None and not 1.0 <= v <= 16384.0:
-                t[key] = None
-        self.tel, self.tel_rx_s = t, now
-        if self.fc_rx_s is None or now - self.fc_rx_s > 1.0:
-            # no pass-through from the flight controller: the pose the control tick used
-            p = [t.get("pos_e_m"), t.get("pos_n_m"), t.get("pos_u_m")]
-            v = [t.get("vel_e_m_s"), t.get("vel_n_m_s"), t.get("vel_u_m_s")]
-            q = [t.get("q_w"), t.get("q_x"), t.get("q_y"), t.get("q_z")]
-            if None not in p and None not in v:
-                self.vehicle_p, self.vehicle_v = p, v
-            if None not in q:
-                self.vehicle_q = q
-        code = t.get("state")
-        if code is not None and 0 <= int(code) < len(tm.STATE_CODES):
-            self.onboard_state = tm.STATE_CODES[int(code)]
-        v = [t.get("vel_e_m_s"), t.get("vel_n_m_s"), t.get("vel_u_m_s")]
-        ts = t.get("t_s")
-        if None not in v and ts is not None:
-            if self._prev_vel is not None and ts > self._prev_vel[0]:
-                dt = ts - self._prev_vel[0]
-                a = (np.array(v) - np.array(self._prev_vel[1])) / dt
-                self.normal_accel_m_s2 = normal_component(a, np.array(v))
-            self._prev_vel = (ts, v)
-        if self.rec is not None:
-            self._record(t, now)
-        if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
-            self._last_trail = ts
-            self._trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
-            if self.target_p is not None:
-                self._trail_target.append([round(c, 3) for c in self.target_p])
-
     # ------------------------------------------------------------------ recording
-    def camera_model(self) -> CameraModel:
-        """The onboard camera: image size and focal length as the telemetry reports them (the
-        field of view parameter when it does not), mount angles from the parameters."""
-        t = self.tel
-        w, h = int(t.get("image_w_px") or 640), int(t.get("image_h_px") or 480)
-        f = t.get("f_px")
-        hfov = (
-            math.degrees(2.0 * math.atan(w / 2.0 / f))
-            if f
-            else self.params.get("CAM_HFOV_DEG", 90.0)
-        )
-        return CameraModel(
-            w, h, hfov, self.params.get("CAM_PITCH_DEG", 0.0), self.params.get("CAM_ROLL_DEG", 0.0)
-        )
-
     def _start_recording(self) -> None:
         if self.log_dir is None:
             return

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from onboard import messages
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
 from onboard.gains import GainError, Gains
@@ -35,8 +36,9 @@ def _p(msg: dict) -> tuple[float, float, float]:
 
 
 class ReplayPlayer:
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, name: str | None = None) -> None:
         self.path = Path(path)
+        self.name = name or self.path.name  # as the API names it (relative to the log folder)
         self.info = inspect_log(self.path)
         self.tv: list[float] = []
         self.vp: list[tuple[float, float, float]] = []
@@ -136,7 +138,7 @@ class ReplayPlayer:
         except ValueError:
             gains = {}
         return {
-            "file": self.path.name,
+            "file": self.name,
             "scenario": self.info.scenario,
             "law": self.info.law,
             "seed": self.info.seed,
@@ -257,6 +259,8 @@ class ReplayPlayer:
             "t_s": self.tc[::every],
             "columns": cols,
             "fields": extra,
+            # from the one message definition: the page labels the plots it adds with these
+            "units": {k: u for k, u in messages.units(messages.CONTROL).items() if k in extra},
             "events": self.timeline,
             "sortie": self.describe(),
         }

@@ -36,33 +36,46 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
 
     def player(name: str) -> ReplayPlayer:
         try:
-            return ReplayPlayer(log_path(name))
+            return ReplayPlayer(log_path(name), name)
         except (LogError, ValueError) as exc:
             raise HTTPException(422, str(exc)) from None
 
     @r.get("/api/logs", tags=["logs"])
-    async def list_logs() -> list[dict[str, Any]]:
-        return await asyncio.to_thread(logs.list)
-
-    @r.get("/api/logs/{name}", tags=["logs"])
-    async def log_info(name: str) -> dict[str, Any]:
+    async def list_logs(folder: str = "") -> list[dict[str, Any]]:
+        """The sorties recorded in ``folder``, a subfolder of the log folder (a campaign's
+        ``--log logs/NAME``; "" the log folder itself). Names are relative to the log folder."""
         try:
-            return logs.info(log_path(name).name).to_json_dict()
+            return await asyncio.to_thread(logs.list, folder)
         except LogError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(400, str(exc)) from None
 
-    @r.get("/api/logs/{name}/series", tags=["logs"])
+    @r.get("/api/logfolders", tags=["logs"])
+    async def log_folders() -> list[str]:
+        """The log folder ("") and its subfolders that hold recorded sorties."""
+        return await asyncio.to_thread(logs.folders)
+
+    # a log's name may hold its subfolder ("static-n10/x.mcap"): the routes with a suffix
+    # come before the bare one, which would otherwise take "x.mcap/series" for a name
+    @r.get("/api/logs/{name:path}/series", tags=["logs"])
     async def log_series(name: str) -> dict[str, Any]:
         """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns,
         every numeric /control field, the timeline's markers and who the sortie is."""
         return (await asyncio.to_thread(player, name)).series()
 
-    @r.get("/api/logs/{name}/file", tags=["logs"])
+    @r.get("/api/logs/{name:path}/file", tags=["logs"])
     async def download_log(name: str) -> FileResponse:
         path = log_path(name)
         return FileResponse(path, media_type="application/octet-stream", filename=path.name)
 
-    @r.delete("/api/logs/{name}", tags=["logs"])
+    @r.get("/api/logs/{name:path}", tags=["logs"])
+    async def log_info(name: str) -> dict[str, Any]:
+        log_path(name)  # 400 for a bad name, 404 for none
+        try:
+            return {**logs.info(name).to_json_dict(), "name": name}
+        except LogError as exc:
+            raise HTTPException(422, str(exc)) from None
+
+    @r.delete("/api/logs/{name:path}", tags=["logs"])
     async def delete_log(name: str, confirm: str = "") -> Deleted:
         path = log_path(name)
         if confirm != name:
@@ -77,7 +90,7 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
     async def replay_open(name: Annotated[str, Body(embed=True)]) -> Status:
         path = log_path(name)
         try:
-            await asyncio.to_thread(session.open_replay, path)
+            await asyncio.to_thread(session.open_replay, path, name)
         except (LogError, ValueError) as exc:
             raise HTTPException(422, str(exc)) from None
         return session.status()
@@ -86,7 +99,7 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
     async def replay_compare(name: Annotated[str, Body(embed=True)]) -> Status:
         path = log_path(name)
         try:
-            await asyncio.to_thread(session.compare_with, path)
+            await asyncio.to_thread(session.compare_with, path, name)
         except (LogError, ValueError) as exc:
             raise HTTPException(422, str(exc)) from None
         except SessionError as exc:
@@ -104,7 +117,7 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(422, "seek needs a finite t_s")
         return command(session, session.replay_command, action, t_s)
 
-    @r.post("/api/logs/{name}/refly", tags=["logs"])
+    @r.post("/api/logs/{name:path}/refly", tags=["logs"])
     async def refly(name: str, req: ReflyRequest) -> Status:
         """Fly the recorded target track again (another law, seed or gains), recorded, with
         the old sortie overlaid."""
@@ -123,6 +136,6 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
         seed = req.seed if req.seed is not None else (rp.info.seed or 0)
         config = SortieConfig(scenario, req.law, seed, camera, req.speed)
         command(session, session.start, config, (rp.tt, rp.tp))
-        return command(session, session.compare_with, rp.path)
+        return command(session, session.compare_with, rp.path, rp.name)
 
     return r

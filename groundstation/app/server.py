@@ -28,9 +28,10 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
+from ..campaigns.tune import default_storage_url
 from ..recording.reader import LogIndex
 from ..scenario import ScenarioError
-from . import routes_gains, routes_logs, routes_scenarios, routes_sortie
+from . import routes_gains, routes_logs, routes_scenarios, routes_sortie, routes_studies
 from .auth import TokenAuthMiddleware, is_loopback, new_token
 from .gainsets import GainSetStore, default_data_dir
 from .scene import SceneView
@@ -90,6 +91,7 @@ def create_app(
     viser_port: int,
     gainsets: GainSetStore,
     logs: LogIndex | None = None,
+    studies_url: str | None = None,
 ) -> FastAPI:
     logs = logs or LogIndex(Path("logs"))
 
@@ -221,6 +223,9 @@ def create_app(
     app.include_router(routes_gains.router(session, gainsets))
     app.include_router(routes_sortie.router(session))
     app.include_router(routes_logs.router(session, logs))
+    if studies_url is not None:
+        log_dir = getattr(session, "log_dir", None)
+        app.include_router(routes_studies.router(session, studies_url, log_dir))
 
     _declare_errors(app)
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
@@ -313,7 +318,8 @@ class GroundStation:
 
             self.session.video = VideoReceiver(*video)
             self.session.video.start()
-        self.gainsets = GainSetStore((data_dir or default_data_dir()) / "gainsets")
+        self.data_dir = data_dir or default_data_dir()
+        self.gainsets = GainSetStore(self.data_dir / "gainsets")
         self.app = create_app(
             self.session,
             self.hub,
@@ -321,6 +327,8 @@ class GroundStation:
             self.viser_port,
             self.gainsets,
             LogIndex(log_dir or Path("logs")),
+            # where `groundstation tune` keeps its studies by default (same data folder)
+            default_storage_url(self.data_dir),
         )
         self.server = uvicorn.Server(
             uvicorn.Config(

@@ -13,7 +13,6 @@ replaces base and edits, and :meth:`SimSession.status` says so in ``gains_note``
 
 from __future__ import annotations
 
-import base64
 import dataclasses
 import math
 import queue
@@ -25,26 +24,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
-
 from onboard.gains import Gains
 
 from ..recording.writer import SortieRecorder
 from ..scenario import Scenario, WindSpec, load_scenario, with_changes
 from ..sim.simulation import Simulation
+from .errors import SessionError
 from .replay import ReplayPlayer
-from .scene import SceneState
-from .snapshot import frame_snapshot
+from .session_replay import SessionReplay
+from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_history
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
-PUBLISH_HZ = 40.0  # telemetry snapshots per second (each viewer shows >= 30 of them)
-SCENE_EVERY = 8  # update the 3D scene with every 8th snapshot (5 Hz): every scene change
-# costs each viewer a WebGL render, which software GL on a laptop without GPU cannot afford
-FRAME_EVERY = 5  # publish a camera frame with every 5th snapshot (8 Hz, rendered mode)
 TRAIL_EVERY_S = 0.1
-HISTORY_EVERY_S = 0.02  # the sortie's plot series kept for a page that (re)loads mid-sortie
+BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is behind the clock
 MAX_EVENTS = 200
-REPLAY_MAX_X = 50.0
 
 
 @dataclass(frozen=True)
@@ -56,11 +49,13 @@ class SortieConfig:
     speed: str = "1"
 
 
-class SessionError(ValueError):
-    """A command that cannot be carried out in the session's present state."""
+__all__ = ["SPEEDS", "SessionError", "SimSession", "SortieConfig", "with_wind"]
 
 
-class SimSession:
+class SimSession(SessionView, SessionReplay):
+    """The operator's simulator: commands and the paced thread here; what the page sees in
+    :class:`~.session_view.SessionView`, replay in :class:`~.session_replay.SessionReplay`."""
+
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
 
     def __init__(
@@ -290,12 +285,6 @@ class SimSession:
         if len(self.events) < MAX_EVENTS:
             self.events.append([t_s, kind, text])
 
-    def series(self) -> dict[str, Any]:
-        """The sortie on screen so far, in the shape of a recorded sortie's series."""
-        with self._lock:
-            h = {k: list(v) for k, v in self.history.items()}
-        return {"t_s": h.pop("t_s"), "columns": h, "events": list(self.events)}
-
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)
@@ -307,70 +296,6 @@ class SimSession:
         if self.sim is not None:
             self.sim.close(reason)
         self.replay = self.compare = None
-
-    @property
-    def recording(self) -> dict[str, Any] | None:
-        rec = None if self.sim is None else self.recorder
-        if rec is None or rec.path is None:
-            return None
-        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
-
-    # ------------------------------------------------------------------ replay
-    def open_replay(self, path: Path) -> None:
-        player = ReplayPlayer(path)  # read (and validated) here, not on the sim thread
-
-        def go():
-            self._close_current("the operator opened a recorded sortie")
-            self.sim = None
-            self.replay, self.compare = player, None
-            self.replay_t, self.replay_playing = 0.0, False
-            self.state = "replay"
-            self._new_epoch()
-            self.speed = 1.0  # a recorded sortie opens at 1x, whatever the last sortie flew at
-            self.config = dataclasses.replace(self.config, speed="1")
-            self._trail_vehicle, self._trail_target = [], []
-            if self.scene is not None:
-                self.scene.reset(player.camera, player.diameter_m, player.scene_state(0.0))
-            self._force_frame = True
-            self._publish(force=True)
-
-        self.submit(go)
-
-    def compare_with(self, path: Path) -> None:
-        other = ReplayPlayer(path)
-
-        def go():
-            if self.replay is None and self.sim is None:
-                raise SessionError("open a sortie (or run one) before comparing")
-            self.compare = other
-            if self.scene is not None:
-                self.scene.overlay(*other.trails(other.duration_s))
-            self._publish(force=True)
-
-        self.submit(go)
-
-    def replay_command(self, action: str, t_s: float | None = None) -> None:
-        def go():
-            if self.replay is None:
-                raise SessionError("no recorded sortie is open")
-            if action == "play":
-                if self.replay_t >= self.replay.duration_s - 1e-6:
-                    self.replay_t = 0.0
-                self.replay_playing = True
-            elif action == "pause":
-                self.replay_playing = False
-            elif action == "seek":
-                self.replay_t = min(max(float(t_s), 0.0), self.replay.duration_s)
-                self._force_frame = True
-            elif action == "closest":
-                self.replay_t = self.replay.closest_time_s
-                self.replay_playing = False
-                self._force_frame = True
-            else:
-                raise SessionError(f"unknown replay action {action!r}")
-            self._publish(force=True)
-
-        self.submit(go)
 
     # ------------------------------------------------------------------ the thread
     def _advance_one(self) -> None:
@@ -409,29 +334,11 @@ class SimSession:
             self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
             self._trail_target.append([round(c, 3) for c in sim.target.p])
 
-    def _record_history(self) -> None:
-        """One row of the plots' series, from the frame through the one snapshot builder."""
-        sim = self.sim
-        snap = frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m)
-        e = snap["e_est_px"]
-        row = {
-            "t_s": snap["t"],
-            "normal_accel_m_s2": snap["normal_accel_m_s2"],
-            "speed_m_s": snap["speed_m_s"],
-            "normal_vel_m_s": snap["normal_vel_m_s"],
-            "e_x_px": None if e is None else float(e[0]),
-            "e_y_px": None if e is None else float(e[1]),
-            "range_m": snap["range_m"],
-        }
-        with self._lock:
-            for k, val in row.items():
-                self.history[k].append(val)
-
     def _run(self) -> None:
         next_publish = 0.0
         last_wall = time.perf_counter()
         last_wall_replay = last_wall
-        was_running = False
+        was_running = behind = False
         while not self._stop.is_set():
             now = time.perf_counter()
             if was_running:  # charge the whole last iteration (stepping, publishing, sleeping)
@@ -446,16 +353,20 @@ class SimSession:
             if self.state == "running" and self.sim is not None:
                 sim = self.sim
                 t_before = sim.time_s
+                # step until the sortie is where the clock says or the next snapshot is due,
+                # whichever comes first: a simulator that falls behind (a loaded machine, the
+                # rendered camera) still publishes, at BEHIND_PUBLISH_HZ (it published once
+                # per 100 ticks, about 1 Hz), and keeps most of its time for catching up
+                deadline = max(next_publish, now + 0.002)
                 if math.isinf(self.speed):
-                    deadline = now + 0.02
+                    behind = False
                     while not sim.done and time.perf_counter() < deadline:
                         self._advance_one()
                 else:
                     target = self._anchor_sim + (now - self._anchor_wall) * self.speed
-                    n = 0
-                    while not sim.done and sim.time_s < target and n < 100:
+                    while not sim.done and sim.time_s < target and time.perf_counter() < deadline:
                         self._advance_one()
-                        n += 1
+                    behind = sim.time_s < target
                 self.run_sim_s += sim.time_s - t_before
                 if sim.done:
                     self.state = "finished"
@@ -472,155 +383,11 @@ class SimSession:
             now2 = time.perf_counter()
             if now2 >= next_publish:
                 self._publish()
-                next_publish = now2 + self.publish_period_s
-            self._stop.wait(0.002 if was_running else 0.01)
-
-    def _publish(self, force: bool = False) -> None:
-        snap = self.snapshot()
-        scene_due = force or self._publish_count % SCENE_EVERY == 0 or self.state != "running"
-        if self.scene is not None and self.replay is not None and scene_due:
-            try:
-                self.scene.update(
-                    self.replay.scene_state(self.replay_t), *self.replay.trails(self.replay_t)
-                )
-            except Exception as exc:  # a viewer problem must never stop the replay
-                self.scene_errors += 1
-                self.last_scene_error = f"{type(exc).__name__}: {exc}"
-        elif self.scene is not None and self.sim is not None and scene_due:
-            try:
-                self.scene.update(self._scene_state(), self._trail_vehicle, self._trail_target)
-            except Exception as exc:  # a viewer problem must never stop the sortie
-                self.scene_errors += 1
-                self.last_scene_error = f"{type(exc).__name__}: {exc}"
-        if self._on_snapshot is not None:
-            self._on_snapshot(snap)
-
-    def _scene_state(self) -> SceneState:
-        sim = self.sim
-        closest = None
-        if sim.done:
-            tp = sim.target.p
-            closest = tuple(tp[i] - sim.closest_rel_m[i] for i in range(3))
-        return SceneState(
-            sim.time_s,
-            tuple(sim.vehicle.p),
-            tuple(sim.vehicle.q),
-            tuple(sim.target.p),
-            closest,
-            f"{sim.outcome.value} miss {sim.miss_m:.3f} m" if sim.done else "",
-        )
-
-    # ------------------------------------------------------------------ observations
-    def replay_speed(self) -> float:
-        """Recorded seconds played per wall second ("max" plays at REPLAY_MAX_X)."""
-        return REPLAY_MAX_X if math.isinf(self.speed) else self.speed
-
-    def loop_rate_hz(self) -> float:
-        """Control ticks run per wall-clock second, over the last second."""
-        if self.state != "running":
-            return 0.0
-        now = time.perf_counter()
-        # read-only here: status() is also called from the web server's thread
-        recent = sum(1 for t in tuple(self._tick_walls) if t >= now - 1.0)
-        return recent / min(1.0, max(now - self._anchor_wall, 1e-3))
-
-    def status(self) -> dict[str, Any]:
-        sim = self.sim
-        out: dict[str, Any] = {
-            "state": self.state,
-            "scenario": self.config.scenario.name,
-            "law": self.config.law,
-            "seed": self.config.seed,
-            "camera": self.config.camera,
-            "speed": self.config.speed,
-            "time_s": 0.0 if sim is None else round(sim.time_s, 4),
-            "outcome": None,
-            "miss_m": None,
-            "loop_rate_hz": round(self.loop_rate_hz(), 1),
-            "gains_applied_time_s": self.gains_applied_time_s,
-            "gains_pending": self._gains_pending is not None,
-            "gains_source": self.gains_source,
-            "gains_edited": self.gains_edited(),
-            "gains_note": self.gains_note,
-            "epoch": self.epoch,
-            "compare": None if self.compare is None else self.compare.describe(),
-            "real_time_ratio": (self.run_sim_s / self.run_wall_s) if self.run_wall_s > 0 else None,
-            "scene_errors": self.scene_errors,
-            "recording": self.recording,
-            "replay": None
-            if self.replay is None
-            else {
-                "file": self.replay.path.name,
-                "t_s": round(self.replay_t, 4),
-                "duration_s": round(self.replay.duration_s, 4),
-                "playing": self.replay_playing,
-                "speed_x": self.replay_speed(),
-                "closest_time_s": round(self.replay.closest_time_s, 4),
-                "status": self.replay.info.status,
-                "compare": None if self.compare is None else self.compare.path.name,
-            },
-        }
-        rp = self.replay
-        if rp is not None:  # what is on screen is the recorded sortie
-            at_end = self.replay_t >= rp.duration_s - 1e-6
-            out.update(
-                scenario=rp.info.scenario,
-                law=rp.info.law,
-                seed=rp.info.seed,
-                camera=rp.info.camera,
-                time_s=round(self.replay_t, 4),
-                outcome=rp.info.outcome if at_end else None,
-                miss_m=rp.info.miss_m if at_end else None,
-            )
-        if sim is not None:
-            dkf = sim.loop.dkf
-            est = dkf.estimate()
-            out["dkf"] = {
-                "acquired": sim.loop.acquired,
-                "lost": dkf.lost(sim.time_s),
-                "time_since_detection_s": None
-                if est is None
-                else round(est.time_since_detection_s, 3),
-            }
-            if sim.done:
-                out["outcome"] = sim.outcome.value
-                out["miss_m"] = round(sim.miss_m, 4)
-                out["intercept_time_s"] = round(sim.closest_time_s, 3)
-        return out
-
-    def snapshot(self) -> dict[str, Any]:
-        self._publish_count += 1
-        snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
-        snap["events"] = self.events if self.replay is None else self.replay.timeline
-        if self.replay is not None:
-            rp = self.replay
-            snap.update(
-                frame_snapshot(rp.frame(self.replay_t), rp.camera, rp.diameter_m, t_s=self.replay_t)
-            )
-            if self._force_frame or (
-                self.replay_playing and self._publish_count % FRAME_EVERY == 0
-            ):
-                self._force_frame = False
-                frame = rp.frame_b64(self.replay_t)
-                if frame:
-                    snap["frame_jpeg_b64"] = frame
-            return snap
-        sim = self.sim
-        if sim is None:
-            return snap
-        snap.update(frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m))
-        frame = sim.camera.last_frame
-        if frame is not None and (self._force_frame or self._publish_count % FRAME_EVERY == 0):
-            self._force_frame = False
-            ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 70])
-            if ok:
-                snap["frame_jpeg_b64"] = base64.b64encode(jpg.tobytes()).decode("ascii")
-        return snap
-
-
-def _empty_history() -> dict[str, list]:
-    keys = ("t_s", "normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px")
-    return {k: [] for k in (*keys, "range_m")}
+                slow = was_running and behind
+                next_publish = now2 + (1.0 / BEHIND_PUBLISH_HZ if slow else self.publish_period_s)
+            # behind the clock: no nap (the 2 ms nap otherwise lets the web server's thread,
+            # which needs the GIL for every send, fan the snapshots out)
+            self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)
 
 
 def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):

@@ -165,52 +165,101 @@ def inspect_log(path: Path) -> LogInfo:
 
 
 class LogIndex:
-    """Listing of a log folder; each file's inspection is cached by (size, mtime)."""
+    """Listing of a log folder and its subfolders (a campaign's ``--log logs/NAME``); each
+    file's inspection is cached by (size, mtime). A log's name is its path relative to the
+    folder (``x.mcap``, ``static-n10/y.mcap``); nothing outside the folder is ever named."""
+
+    MAX_DEPTH = 3  # subfolder levels listed
 
     def __init__(self, directory: Path) -> None:
         self.directory = Path(directory)
         self._cache: dict[str, tuple[tuple[int, int], LogInfo | str]] = {}
 
+    def _inside(self, rel: str, what: str) -> Path:
+        """``rel`` (``a/b``) under the folder, refusing anything that would leave it."""
+        parts = rel.split("/") if rel else []
+        if (
+            "\\" in rel
+            or "\x00" in rel
+            or len(parts) > self.MAX_DEPTH + 1
+            or any(not p or p.startswith(".") for p in parts)
+        ):
+            raise LogError(f"bad {what} {rel!r}")
+        root = self.directory.resolve()
+        path = (root / rel).resolve()
+        if path != root and not path.is_relative_to(root):
+            raise LogError(f"bad {what} {rel!r}")
+        return path
+
     def resolve(self, name: str) -> Path:
         """The path of log ``name``, refusing anything that would leave the folder."""
-        if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
+        if not name:
             raise LogError(f"bad log name {name!r}")
-        path = (self.directory / name).resolve()
-        if path.parent != self.directory.resolve() or path.suffix != ".mcap":
+        path = self._inside(name, "log name")
+        if path.suffix != ".mcap":
             raise LogError(f"bad log name {name!r}")
         return path
 
-    def list(self) -> list[dict[str, Any]]:
-        out = []
-        if not self.directory.is_dir():
+    def folders(self) -> list[str]:
+        """The folder ("") and its subfolders that hold recorded sorties, as relative names."""
+        out: list[str] = []
+        root = self.directory.resolve()
+        if not root.is_dir():
             return out
-        for path in sorted(self.directory.glob("*.mcap")):
+
+        def walk(d: Path, depth: int) -> None:
+            try:
+                entries = sorted(d.iterdir())
+            except OSError:
+                return
+            if any(e.suffix == ".mcap" and e.is_file() for e in entries) or d == root:
+                out.append(d.relative_to(root).as_posix() if d != root else "")
+            if depth < self.MAX_DEPTH:
+                for e in entries:
+                    if e.is_dir() and not e.name.startswith(".") and not e.is_symlink():
+                        walk(e, depth + 1)
+
+        walk(root, 0)
+        return out
+
+    def list(self, folder: str = "") -> list[dict[str, Any]]:
+        """The sorties recorded in ``folder`` (relative to the log folder; "" itself)."""
+        out = []
+        d = self._inside(folder, "folder")
+        if not d.is_dir():
+            if folder:
+                raise LogError(f"no folder {folder!r} in the log folder")
+            return out
+        prefix = f"{folder}/" if folder else ""
+        for path in sorted(d.glob("*.mcap")):
+            name = prefix + path.name
             try:
                 st = path.stat()
             except OSError:  # deleted since the glob
                 continue
             key = (st.st_size, st.st_mtime_ns)
-            cached = self._cache.get(path.name)
+            cached = self._cache.get(name)
             if cached is None or cached[0] != key:
                 try:
                     value: LogInfo | str = inspect_log(path)
                 except (LogError, OSError) as exc:  # one bad file never fails the listing
                     value = str(exc) if isinstance(exc, LogError) else f"{path.name}: {exc}"
-                self._cache[path.name] = (key, value)
-            value = self._cache[path.name][1]
+                self._cache[name] = (key, value)
+            value = self._cache[name][1]
             if isinstance(value, str):
                 out.append(
                     {
-                        "name": path.name,
+                        "name": name,
                         "size_bytes": st.st_size,
                         "status": "not_mcap",
                         "problem": value,
                     }
                 )
             else:
-                d = value.to_json_dict()
-                d.pop("metadata")
-                out.append(d)
+                d_ = value.to_json_dict()
+                d_.pop("metadata")
+                d_["name"] = name
+                out.append(d_)
         return out
 
     def info(self, name: str) -> LogInfo:
