@@ -134,7 +134,7 @@ def test_converges_on_range_and_target_velocity(target_vel, accel):
         if dv is None:
             return
         P = dv[2]
-        assert_allclose(P, P.T, atol=0.0)
+        assert_allclose(P, P.T, rtol=0.0, atol=1e-12 * np.abs(P).max())
         assert np.linalg.eigvalsh(P).min() > -1e-12 * np.abs(P).max()
         if t > 2.0:
             rng_m = float(np.linalg.norm(rel))
@@ -259,3 +259,36 @@ def test_gyro_flow_moves_estimate_between_detections():
 def test_config_validated(bad):
     with pytest.raises(ValueError, match="DkfConfig"):
         DkfConfig(**bad)
+
+
+@pytest.mark.parametrize("with_size", [False, True])
+def test_update_equals_filterpy_joseph_update(with_size):
+    """The closed-form update is filterpy's Joseph-form EKF update (point, then size)."""
+    from filterpy.kalman import update as kf_update
+
+    from onboard.estimation.dkf import _Meas
+
+    dkf = DelayedKalmanFilter(CAM)
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(6, 6)) * 0.1
+    P = A @ A.T + np.diag([1e-5, 1e-5, 1e-4, 1.0, 1.0, 1.0])
+    x = np.array([0.05, -0.1, 0.05, 0.5, -0.2, 0.1])
+    m = _Meas(0.0, np.array([0.051, -0.099]), 2.3 if with_size else None)
+    x1, P1, ok = dkf._update(x.copy(), P.copy(), m)
+    assert ok
+    r = (dkf.config.meas_noise_px / CAM.f_px) ** 2
+    H = np.zeros((2, 6))
+    H[0, 0] = H[1, 1] = 1.0
+    x2, P2 = kf_update(x.copy(), P.copy(), m.z, np.eye(2) * r, H)
+    if with_size:
+        R, f = dkf.config.target_diameter_m / 2, CAM.f_px
+        xn, yn, rho = x2[:3]
+        n2 = 1 + xn**2 + yn**2 - (R * rho) ** 2
+        h = f * R * rho / math.sqrt(n2)
+        d = f * R / n2**1.5
+        hs = np.array([[-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0]])
+        var = dkf.config.size_noise_px**2 + (dkf.config.size_noise_rel * 2.3) ** 2
+        z = np.array([2.3 - h + float((hs @ x2)[0])])
+        x2, P2 = kf_update(x2, P2, z, np.array([[var]]), hs)
+    assert_allclose(x1, x2, rtol=1e-10, atol=1e-12)
+    assert_allclose(P1, P2, rtol=1e-9, atol=1e-15)

@@ -33,8 +33,9 @@ Without size the depth starts from ``init_range_m`` with a wide prior.
 
 Delay: every prediction is buffered as (time, inputs, x, P, F). A detection captured at t_c is
 fused at t_c: the filter takes the buffered state just before t_c, propagates to t_c with the
-buffered inputs, updates (Joseph form, filterpy), propagates to the next buffered time, and
-carries the correction forward to now through the buffered transition matrices:
+buffered inputs, updates (Joseph form in closed form, equal to filterpy's ``update``),
+propagates to the next buffered time, and carries the correction forward to now through the
+buffered transition matrices:
 x_k += Phi_k dx, P_k += Phi_k dP Phi_k^T with Phi_k = F_k ... F_{j+2}. That is the replay of
 the linearised filter at a few small matrix products per fusion instead of a full predict per
 buffered step. A detection captured before one already fused (out of order) is fused by a full
@@ -42,7 +43,8 @@ replay in capture order (every step re-propagated with the buffered inputs). Eve
 state is written back. The delay comes from timestamps only.
 
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
-(Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every step,
+(Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every update
+and every replay,
 rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves the view
 by more than ~76 degrees or turns non-finite.
 """
@@ -56,7 +58,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import update as kf_update
 
 from ..camera_model import CameraModel
 from ..datatypes import Detection
@@ -64,8 +65,6 @@ from ..datatypes import Detection
 _TIME_EPS_S = 1e-9
 _N = 6  # state size
 _I6 = np.eye(_N)
-_H_POINT = np.zeros((2, _N))
-_H_POINT[0, 0] = _H_POINT[1, 1] = 1.0
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
 
@@ -160,7 +159,7 @@ class DelayedKalmanFilter:
     def config(self, config: DkfConfig) -> None:
         self._config = config
         c, f = config, self._f
-        self._R_point = np.eye(2) * (c.meas_noise_px / f) ** 2
+        self._r_point = (c.meas_noise_px / f) ** 2
         self._gate2_point = c.gate_sigma**2
         self._q_img = (c.flow_noise_px_s / f) ** 2
         self._q_v = c.target_accel_noise_m_s2**2
@@ -200,15 +199,9 @@ class DelayedKalmanFilter:
                 [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
             ]
         )  # fmt: skip
-        P1 = F @ P @ F.T
+        P1 = F @ P @ F.T  # symmetric to rounding; symmetrised at every update and replay
         qi, qv = self._q_img * dt, self._q_v * dt
-        P1[0, 0] += qi
-        P1[1, 1] += qi
-        P1[2, 2] += self._q_rho_rel * rho1 * rho1 * dt
-        P1[3, 3] += qv
-        P1[4, 4] += qv
-        P1[5, 5] += qv
-        P1 = 0.5 * (P1 + P1.T)
+        P1.flat[::7] += (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
         return np.array([x1, y1, rho1, vE, vN, vU]), P1, F
 
     def predict(
@@ -257,12 +250,14 @@ class DelayedKalmanFilter:
 
     @staticmethod
     def _valid(x: np.ndarray, P: np.ndarray) -> bool:
-        """Finite, in front of the camera and within ~76 degrees of the axis."""
+        """Finite, in front of the camera and within ~76 degrees of the axis (a NaN anywhere in
+        P reaches its trace within a step)."""
+        xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
         return (
-            abs(x[0]) < _MAX_ABS_N
-            and abs(x[1]) < _MAX_ABS_N
-            and x[2] > 0.0
-            and bool(np.isfinite(x).all() and np.isfinite(P).all())
+            abs(xn) < _MAX_ABS_N
+            and abs(yn) < _MAX_ABS_N
+            and rho > 0.0
+            and math.isfinite(float(x[3]) + float(x[4]) + float(x[5]) + float(P.trace()))
         )
 
     # ----------------------------------------------------------------- fusion
@@ -395,15 +390,13 @@ class DelayedKalmanFilter:
         for k in range(n):
             Phi = buf[j + 2 + k].F @ Phi
             phis[k] = Phi
-        xs = phis @ dx
-        Ps = phis @ dP @ phis.transpose(0, 2, 1)
-        rho_max = self._rho_max
-        for k in range(n):
-            e = buf[j + 2 + k]
-            xk = e.x + xs[k]
-            xk[2] = min(max(xk[2], 1e-6), rho_max)
-            Pk = e.P + Ps[k]
-            e.x, e.P = xk, 0.5 * (Pk + Pk.T)
+        entries = [buf[j + 2 + k] for k in range(n)]
+        xs = np.array([e.x for e in entries]) + phis @ dx
+        np.clip(xs[:, 2], 1e-6, self._rho_max, out=xs[:, 2])
+        Ps = np.array([e.P for e in entries]) + phis @ dP @ phis.transpose(0, 2, 1)
+        Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
+        for e, xk, Pk in zip(entries, xs, Ps, strict=True):
+            e.x, e.P = xk, Pk
         last = buf[-1]
         if not self._valid(last.x, last.P):
             self._drop_track()
@@ -436,34 +429,40 @@ class DelayedKalmanFilter:
         return new_accepted
 
     def _update(self, x: np.ndarray, P: np.ndarray, m: _Meas):
-        """Gated EKF update with the image point and, if usable, the apparent radius."""
-        y = m.z - x[:2]
-        S = P[:2, :2] + self._R_point
-        d2 = float(y @ np.linalg.solve(S, y))
+        """Gated EKF update with the image point, then (sequentially, relinearised at the
+        updated state) the apparent radius if usable and within its own gate. Joseph form in
+        closed form for the 2-D and the scalar measurement (equal to filterpy's ``update``;
+        tested), cheap enough for every replayed fusion."""
+        r = self._r_point
+        y0, y1 = float(m.z[0] - x[0]), float(m.z[1] - x[1])
+        s00, s01, s11 = float(P[0, 0]) + r, float(P[0, 1]), float(P[1, 1]) + r
+        det = s00 * s11 - s01 * s01
+        if not det > 0.0:
+            return x, P, False
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+        d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
         if not d2 <= self._gate2_point:
             return x, P, False
-        if m.r_px is None:
-            x, P = kf_update(x, P, m.z, self._R_point, _H_POINT)
-        else:
+        K = P[:, :2] @ np.array([[i00, i01], [i01, i11]])
+        x = x + K @ np.array([y0, y1])
+        A = P - K @ P[:2, :]  # (I - K H) P
+        P = A - A[:, :2] @ K.T + r * (K @ K.T)
+        if m.r_px is not None:
             xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
             R, f = self._radius_m, self._f
             n2 = max(1.0 + xn * xn + yn * yn - (R * rho) ** 2, 1e-6)
-            h = f * R * rho / math.sqrt(n2)
             d = f * R / (n2 * math.sqrt(n2))
             hs = np.array([-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0])
             c = self.config
             var_s = c.size_noise_px**2 + (c.size_noise_rel * m.r_px) ** 2
-            ys = m.r_px - h
-            ss = float(hs @ P @ hs) + var_s
+            ys = m.r_px - f * R * rho / math.sqrt(n2)
+            Ph = P @ hs
+            ss = float(hs @ Ph) + var_s
             if ys * ys <= self._gate2_point * ss:
-                H = np.vstack([_H_POINT, hs])
-                Rm = np.zeros((3, 3))
-                Rm[:2, :2] = self._R_point
-                Rm[2, 2] = var_s
-                z = np.array([m.z[0], m.z[1], ys + float(hs @ x)])
-                x, P = kf_update(x, P, z, Rm, H)
-            else:
-                x, P = kf_update(x, P, m.z, self._R_point, _H_POINT)
+                k = Ph / ss
+                x = x + k * ys
+                A = P - np.outer(k, Ph)
+                P = A - np.outer(A @ hs, k) + var_s * np.outer(k, k)
         x[2] = min(max(x[2], 1e-6), self._rho_max)
         return x, 0.5 * (P + P.T), True
 
