@@ -292,3 +292,36 @@ def test_update_equals_filterpy_joseph_update(with_size):
         x2, P2 = kf_update(x2, P2, z, np.array([[var]]), hs)
     assert_allclose(x1, x2, rtol=1e-10, atol=1e-12)
     assert_allclose(P1, P2, rtol=1e-9, atol=1e-15)
+
+
+def test_garbage_detections_are_refused_and_change_nothing():
+    dets = [_det(0.2 + 0.033 * i, 330 + i, 250) for i in range(6)]
+    dkf, _ = _filter_with(dets, range(6))
+    before, counts = dkf.estimate(), dict(dkf.counts)
+    garbage = [
+        Detection(0.58, (math.inf, 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, (320.0, math.nan), (0, 0, 4, 4), 16.0),
+        Detection(math.nan, (320.0, 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, ("a", 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, (1e9, 240.0), (0, 0, 4, 4), 16.0),  # far outside any view
+    ]
+    for det in garbage:
+        assert dkf.fuse(det) == FusionResult.GATED
+    assert dkf.estimate() == before
+    assert dkf.counts[FusionResult.GATED] == counts[FusionResult.GATED] + len(garbage)
+
+
+def test_bad_size_falls_back_to_the_point_and_bad_inputs_are_held():
+    """A detection with a non-finite area or bbox still gives its centre; a non-finite gyro,
+    velocity or attitude is replaced by the previous one, so the state stays finite."""
+    dkf, _ = _filter_with([_det(0.2 + 0.033 * i, 330, 250) for i in range(4)], range(4))
+    assert dkf.fuse(Detection(0.55, (331.0, 250.0), (math.nan,) * 4, math.nan)) == (
+        FusionResult.ACCEPTED
+    )
+    nan3 = np.full(3, math.nan)
+    dkf.predict(0.61, nan3, nan3, np.full((3, 3), math.nan))
+    dkf.predict(0.62, np.array([0.0, 0.0, 0.3]), np.zeros(3), np.eye(3) @ CAM.R_BC)
+    state, cov = dkf.state_vector()
+    assert np.all(np.isfinite(state)) and np.all(np.isfinite(cov)) and np.all(cov > 0)
+    rng_m, vel, P = dkf.depth_velocity()
+    assert math.isfinite(rng_m) and np.all(np.isfinite(vel)) and np.all(np.isfinite(P))
