@@ -64,9 +64,23 @@ from ..datatypes import Detection
 
 _TIME_EPS_S = 1e-9
 _N = 6  # state size
-_I6 = np.eye(_N)
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
+
+
+def _floats3(v) -> tuple[float, float, float]:
+    """Three floats from a 3-vector (ndarray or sequence)."""
+    out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
+    if len(out) != 3:
+        raise ValueError(f"expected 3 numbers, got {len(out)}")
+    return (float(out[0]), float(out[1]), float(out[2]))
+
+
+def _rows3(m) -> list:
+    rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
+    if len(rows) != 3:
+        raise ValueError("expected a 3x3 matrix")
+    return rows
 
 
 @dataclass(frozen=True)
@@ -145,6 +159,7 @@ class DelayedKalmanFilter:
         self.config = config or DkfConfig()
         # default inputs for callers that give only the gyro: vehicle still, body = world
         self._R_CW_default = tuple(camera.R_BC.T.ravel().tolist())
+        self._R_CB = self._R_CW_default  # body -> camera, the same numbers
         self._buf: deque[_Entry] = deque()
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
@@ -217,19 +232,26 @@ class DelayedKalmanFilter:
         if self._buf and time_s <= self._buf[-1].t + _TIME_EPS_S:
             return
         prev = self._buf[-1] if self._buf else None
-        w = self.camera.R_BC.T @ np.asarray(gyro_rates_flu_rad_s, dtype=float).reshape(3)
-        w = tuple(w.tolist())
-        v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else velocity_enu_m_s
-        v_c = tuple(float(c) for c in np.asarray(v_c, dtype=float).reshape(3))
-        R_CW = self._R_CW_default if R_WC is None else np.asarray(R_WC, dtype=float).reshape(3, 3)
-        if R_WC is not None:
-            R_CW = tuple(R_CW.T.ravel().tolist())
+        # plain floats from here on: a handful of numpy calls per tick is the filter's cost
+        g0, g1, g2 = _floats3(gyro_rates_flu_rad_s)
+        c = self._R_CB
+        w = (
+            c[0] * g0 + c[1] * g1 + c[2] * g2,
+            c[3] * g0 + c[4] * g1 + c[5] * g2,
+            c[6] * g0 + c[7] * g1 + c[8] * g2,
+        )
+        v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else _floats3(velocity_enu_m_s)
+        if R_WC is None:
+            R_CW = self._R_CW_default
+        else:
+            a0, a1, a2 = (_floats3(row) for row in _rows3(R_WC))
+            R_CW = (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
         # a non-finite input is not used: hold the previous one (the filter never sees NaN)
-        if not all(map(math.isfinite, w)):
+        if not math.isfinite(sum(w)):
             w = prev.w if prev is not None else (0.0, 0.0, 0.0)
-        if not all(map(math.isfinite, v_c)):
+        if not math.isfinite(sum(v_c)):
             v_c = prev.v_c if prev is not None else (0.0, 0.0, 0.0)
-        if not all(map(math.isfinite, R_CW)):
+        if not math.isfinite(sum(R_CW)):
             R_CW = prev.R_CW if prev is not None else self._R_CW_default
         entry = _Entry(time_s, w, v_c, R_CW, None, None, None)
         if self._initialised:
@@ -385,12 +407,14 @@ class DelayedKalmanFilter:
         n = len(buf) - j - 2
         if n <= 0:
             return True
-        Phi = _I6
-        phis = np.empty((n, _N, _N))
-        for k in range(n):
-            Phi = buf[j + 2 + k].F @ Phi
-            phis[k] = Phi
         entries = [buf[j + 2 + k] for k in range(n)]
+        # Phi_k = F_k ... F_{j+2} for every k at once: a prefix product in log2(n) batched
+        # matrix products (Hillis-Steele scan; the right-hand side is evaluated first)
+        phis = np.array([e.F for e in entries])
+        d = 1
+        while d < n:
+            phis[d:] = phis[d:] @ phis[:-d]
+            d *= 2
         xs = np.array([e.x for e in entries]) + phis @ dx
         np.clip(xs[:, 2], 1e-6, self._rho_max, out=xs[:, 2])
         Ps = np.array([e.P for e in entries]) + phis @ dP @ phis.transpose(0, 2, 1)
