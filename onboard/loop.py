@@ -103,16 +103,16 @@ class InterceptionLoop:
         gyro = self._gyro_sum / self._gyro_n if self._gyro_n else state.body_rates_flu_rad_s
         self._gyro_sum = np.zeros(3)
         self._gyro_n = 0
-        self.dkf.predict(t, gyro)
+        R_WB = quat_to_rotmat(state.attitude_wxyz)
+        R_WC = R_WB @ self.camera.R_BC
+        v = state.velocity_enu_m_s
+        self.dkf.predict(t, gyro, v, R_WC)
         self.last_fusion = []
         if self._detections:
             for det in sorted(self._detections, key=lambda d: d.capture_time_s):
                 self.last_fusion.append(self.dkf.fuse(det))
             self._detections.clear()
 
-        R_WB = quat_to_rotmat(state.attitude_wxyz)
-        R_WC = R_WB @ self.camera.R_BC
-        v = state.velocity_enu_m_s
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan

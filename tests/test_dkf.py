@@ -1,4 +1,4 @@
-"""Delayed Kalman filter (DESIGN.md §4)."""
+"""Delayed Kalman filter (DESIGN.md §4): image point, inverse depth and target velocity."""
 
 import math
 
@@ -12,23 +12,41 @@ from onboard.estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult
 from onboard.geometry import attitude_from_yaw_pitch_roll, hat
 
 CAM = CameraModel()
+DIAM_M = 0.3
 
 
 def _det(t, u, v):
     return Detection(t, (u, v), (u - 2, v - 2, 4, 4), 16.0)
 
 
-def _approach(delay_s=0.08, rate_hz=30, dt=0.005, duration_s=4.0, seed=1):
-    """A manoeuvring approach: vehicle closing at 5 m/s while its attitude swings (rates up to
-    ~1 rad/s on every axis); 1 px detection noise, detections `delay_s` late."""
+def _det_sized(t, u, v, range_m):
+    """A detection of a 0.3 m sphere at ``range_m``, its blob as the projected camera gives."""
+    r = CAM.f_px * DIAM_M / 2 / math.sqrt(range_m**2 - (DIAM_M / 2) ** 2)
+    return Detection(t, (u, v), (u - r, v - r, 2 * r, 2 * r), math.pi * r * r)
+
+
+def _approach(
+    delay_s=0.08,
+    rate_hz=30,
+    dt=0.005,
+    duration_s=4.0,
+    seed=1,
+    target_vel=(0.0, 0.0, 0.0),
+    swing=1.0,
+    accel=(0.0, 0.0, 0.0),
+):
+    """A manoeuvring approach: vehicle closing at 5 m/s (plus ``accel``) while its attitude
+    swings (rates up to ~``swing`` rad/s on every axis); 1 px detection noise, detections
+    ``delay_s`` late. Yields (t, gyro, vehicle velocity, R_WC, truth uv, detection or None,
+    arrival time, target velocity)."""
     rng = np.random.default_rng(seed)
     R = attitude_from_yaw_pitch_roll(math.pi / 2)
     p, v = np.array([0.0, 0.0, 10.0]), np.array([0.0, 5.0, 0.0])
-    target = np.array([1.0, 25.0, 11.0])
+    target, vt = np.array([1.0, 25.0, 11.0]), np.array(target_vel, dtype=float)
     every = round(1 / rate_hz / dt)
     for k in range(int(duration_s / dt)):
         t = k * dt
-        w = np.array(
+        w = swing * np.array(
             [
                 0.8 * math.sin(2 * math.pi * 0.7 * t),
                 0.6 * math.sin(2 * math.pi * 0.5 * t + 1),
@@ -37,21 +55,41 @@ def _approach(delay_s=0.08, rate_hz=30, dt=0.005, duration_s=4.0, seed=1):
         )
         if k:
             th = np.linalg.norm(w) * dt
-            K = hat(w / np.linalg.norm(w))
-            R = R @ (np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K)
+            if th > 0:
+                K = hat(w / np.linalg.norm(w))
+                R = R @ (np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K)
+            v = v + np.asarray(accel) * dt
             p = p + v * dt
-        uv = CAM.project((R @ CAM.R_BC).T @ (target - p))
+            target = target + vt * dt
+        R_WC = R @ CAM.R_BC
+        rel = target - p
+        uv = CAM.project(R_WC.T @ rel)
         det = None
         if k % every == 0:
-            det = _det(t, uv[0] + rng.normal(), uv[1] + rng.normal())
-        yield t, w, uv, det, t + delay_s
+            noise = rng.normal(size=2)
+            det = _det_sized(t, uv[0] + noise[0], uv[1] + noise[1], float(np.linalg.norm(rel)))
+        yield t, w, v.copy(), R_WC, uv, det, t + delay_s, rel
+
+
+def _run(dkf, steps, check=None):
+    """Feed an _approach to the filter, fusing each detection when it arrives."""
+    pending = []
+    for t, w, v, R_WC, uv, det, arrival, rel in steps:
+        dkf.predict(t, w, v, R_WC)
+        if det is not None:
+            pending.append((arrival, det))
+        for item in [x for x in pending if x[0] <= t + 1e-9]:
+            pending.remove(item)
+            assert dkf.fuse(item[1]) in (FusionResult.ACCEPTED, FusionResult.INITIALISED)
+        if check is not None:
+            check(dkf, t, uv, rel)
 
 
 def test_dkf_beats_latest_delayed_detection_by_3x():
     dkf = DelayedKalmanFilter(CAM)
     pending, err_dkf, err_raw, latest = [], [], [], None
-    for t, w, uv, det, arrival in _approach():
-        dkf.predict(t, w)
+    for t, w, v, R_WC, uv, det, arrival, _ in _approach():
+        dkf.predict(t, w, v, R_WC)
         if det is not None:
             pending.append((arrival, det))
         for item in [x for x in pending if x[0] <= t + 1e-9]:
@@ -70,7 +108,73 @@ def test_dkf_beats_latest_delayed_detection_by_3x():
     ratio = rms(err_raw) / rms(err_dkf)
     print(f"RMS latest detection {rms(err_raw):.2f} px, DKF {rms(err_dkf):.2f} px, x{ratio:.1f}")
     assert rms(err_raw) > 10.0  # the delay really hurts in this manoeuvre
-    assert ratio >= 3.0
+    assert ratio >= 5.0
+
+
+def _truth_flow_px_s(t, dt, uv_prev, uv):
+    return (np.subtract(uv, uv_prev)) / dt
+
+
+@pytest.mark.parametrize(
+    "target_vel, accel",
+    [((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)), ((2.0, 0.0, -1.0), (0.0, 0.0, 0.0))],
+    ids=["static", "moving"],
+)
+def test_converges_on_range_and_target_velocity(target_vel, accel):
+    """Static target approached with the speed ramp's acceleration, and a target crossing at
+    2.2 m/s: after 2 s the range is within 5 %, the target velocity within 0.3 m/s per axis
+    and the image error within 2 px of the truth (RMS, with 1 px detection noise, 80 ms
+    late, closing to 5 m while swinging at 1 rad/s), the covariance symmetric and positive
+    semi-definite at every step."""
+    dkf = DelayedKalmanFilter(CAM)
+    range_err, vel_err, e_err = [], [], []
+
+    def check(dkf, t, uv, rel):
+        dv = dkf.depth_velocity()
+        if dv is None:
+            return
+        P = dv[2]
+        assert_allclose(P, P.T, rtol=0.0, atol=1e-12 * np.abs(P).max())
+        assert np.linalg.eigvalsh(P).min() > -1e-12 * np.abs(P).max()
+        if t > 2.0:
+            rng_m = float(np.linalg.norm(rel))
+            range_err.append(dv[0] / rng_m - 1.0)
+            vel_err.append(dv[1] - np.asarray(target_vel))
+            e_err.append(np.subtract(dkf.estimate().e_px, CAM.error_px(*uv)))
+
+    _run(dkf, _approach(target_vel=target_vel, accel=accel, duration_s=3.0), check)
+    range_err, vel_err, e_err = map(np.array, (range_err, vel_err, e_err))
+    print(
+        f"range err max {np.abs(range_err).max():.3f}, vel err max {np.abs(vel_err).max():.3f}"
+        f" m/s, e RMS {math.sqrt(np.mean(np.sum(e_err**2, axis=1))):.3f} px"
+    )
+    assert np.abs(range_err).max() < 0.05
+    assert np.abs(vel_err).max() < 0.3
+    assert math.sqrt(np.mean(np.sum(e_err**2, axis=1))) < 2.0
+
+
+def test_delayed_replay_matches_undelayed_run():
+    """The same detections fused 80 ms late (buffered replay, written back) and at capture
+    (no delay): the late filter's replay-corrected buffered estimate at every time t equals
+    the prompt filter's estimate at t, up to the replay's linearisation."""
+    steps = dict(duration_s=3.0, target_vel=(1.0, 0.0, 0.0))
+    prompt_e = {}
+
+    def record(dkf, t, uv, rel):
+        est = dkf.estimate()
+        if est is not None:
+            prompt_e[round(t, 6)] = est.e_px
+
+    late, prompt = DelayedKalmanFilter(CAM), DelayedKalmanFilter(CAM)
+    _run(prompt, _approach(delay_s=0.0, **steps), record)
+    _run(late, _approach(delay_s=0.08, **steps))
+    # every detection captured up to t_end - 0.08 has been fused by the late filter
+    t_end = late.time_s
+    times = [t for t in prompt_e if t_end - 0.5 < t <= t_end - 0.085]
+    assert len(times) > 50
+    diff = np.array([np.subtract(late.e_px_at(t), prompt_e[t]) for t in times])
+    print(f"max |late - prompt| {np.abs(diff).max():.4f} px over {len(times)} ticks")
+    assert np.abs(diff).max() < 0.05
 
 
 def _filter_with(dets, order):
@@ -90,8 +194,9 @@ def test_out_of_order_detections_fuse_in_capture_order():
     assert r1[0] == r2[0] == FusionResult.INITIALISED
     assert all(r == FusionResult.ACCEPTED for r in r1[1:] + r2[1:])
     a, b = in_order.estimate(), shuffled.estimate()
-    assert_allclose(a.e_px, b.e_px, atol=1e-9)
-    assert_allclose(a.e_rate_px_s, b.e_rate_px_s, atol=1e-9)
+    # in order: linearised replay through the buffered F; out of order: full re-propagation
+    assert_allclose(a.e_px, b.e_px, atol=0.1)
+    assert_allclose(a.e_rate_px_s, b.e_rate_px_s, atol=1.0)
 
 
 def test_duplicate_detection_is_rejected_and_changes_nothing():
@@ -154,3 +259,69 @@ def test_gyro_flow_moves_estimate_between_detections():
 def test_config_validated(bad):
     with pytest.raises(ValueError, match="DkfConfig"):
         DkfConfig(**bad)
+
+
+@pytest.mark.parametrize("with_size", [False, True])
+def test_update_equals_filterpy_joseph_update(with_size):
+    """The closed-form update is filterpy's Joseph-form EKF update (point, then size)."""
+    from filterpy.kalman import update as kf_update
+
+    from onboard.estimation.dkf import _Meas
+
+    dkf = DelayedKalmanFilter(CAM)
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(6, 6)) * 0.1
+    P = A @ A.T + np.diag([1e-5, 1e-5, 1e-4, 1.0, 1.0, 1.0])
+    x = np.array([0.05, -0.1, 0.05, 0.5, -0.2, 0.1])
+    m = _Meas(0.0, np.array([0.051, -0.099]), 2.3 if with_size else None)
+    x1, P1, ok = dkf._update(x.copy(), P.copy(), m)
+    assert ok
+    r = (dkf.config.meas_noise_px / CAM.f_px) ** 2
+    H = np.zeros((2, 6))
+    H[0, 0] = H[1, 1] = 1.0
+    x2, P2 = kf_update(x.copy(), P.copy(), m.z, np.eye(2) * r, H)
+    if with_size:
+        R, f = dkf.config.target_diameter_m / 2, CAM.f_px
+        xn, yn, rho = x2[:3]
+        n2 = 1 + xn**2 + yn**2 - (R * rho) ** 2
+        h = f * R * rho / math.sqrt(n2)
+        d = f * R / n2**1.5
+        hs = np.array([[-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0]])
+        var = dkf.config.size_noise_px**2 + (dkf.config.size_noise_rel * 2.3) ** 2
+        z = np.array([2.3 - h + float((hs @ x2)[0])])
+        x2, P2 = kf_update(x2, P2, z, np.array([[var]]), hs)
+    assert_allclose(x1, x2, rtol=1e-10, atol=1e-12)
+    assert_allclose(P1, P2, rtol=1e-9, atol=1e-15)
+
+
+def test_garbage_detections_are_refused_and_change_nothing():
+    dets = [_det(0.2 + 0.033 * i, 330 + i, 250) for i in range(6)]
+    dkf, _ = _filter_with(dets, range(6))
+    before, counts = dkf.estimate(), dict(dkf.counts)
+    garbage = [
+        Detection(0.58, (math.inf, 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, (320.0, math.nan), (0, 0, 4, 4), 16.0),
+        Detection(math.nan, (320.0, 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, ("a", 240.0), (0, 0, 4, 4), 16.0),
+        Detection(0.58, (1e9, 240.0), (0, 0, 4, 4), 16.0),  # far outside any view
+    ]
+    for det in garbage:
+        assert dkf.fuse(det) == FusionResult.GATED
+    assert dkf.estimate() == before
+    assert dkf.counts[FusionResult.GATED] == counts[FusionResult.GATED] + len(garbage)
+
+
+def test_bad_size_falls_back_to_the_point_and_bad_inputs_are_held():
+    """A detection with a non-finite area or bbox still gives its centre; a non-finite gyro,
+    velocity or attitude is replaced by the previous one, so the state stays finite."""
+    dkf, _ = _filter_with([_det(0.2 + 0.033 * i, 330, 250) for i in range(4)], range(4))
+    assert dkf.fuse(Detection(0.55, (331.0, 250.0), (math.nan,) * 4, math.nan)) == (
+        FusionResult.ACCEPTED
+    )
+    nan3 = np.full(3, math.nan)
+    dkf.predict(0.61, nan3, nan3, np.full((3, 3), math.nan))
+    dkf.predict(0.62, np.array([0.0, 0.0, 0.3]), np.zeros(3), np.eye(3) @ CAM.R_BC)
+    state, cov = dkf.state_vector()
+    assert np.all(np.isfinite(state)) and np.all(np.isfinite(cov)) and np.all(cov > 0)
+    rng_m, vel, P = dkf.depth_velocity()
+    assert math.isfinite(rng_m) and np.all(np.isfinite(vel)) and np.all(np.isfinite(P))

@@ -38,7 +38,12 @@ def test_tracks_after_detection_and_yaws_toward_target():
     tel = loop.tick(_state(0.01))
     assert tel.mode is LoopMode.TRACKING
     assert loop.last_fusion[0].value == "initialised"
-    assert_allclose(tel.yaw_rate_cmd_rad_s, -0.03 * 100.0, atol=1e-9)
+    # flying at 3 m/s toward a 0.3 m balloon 10 px in radius (4.6 m deep) 100 px right of
+    # centre: the DKF predicts the outward translational flow f rho x_n |v| = 65.5 px/s
+    e_x, e_rate_x = tel.e_est_px[0], tel.e_rate_est_px_s[0]
+    assert_allclose(e_rate_x, 65.5, atol=1.5)
+    assert_allclose(e_x, 100.0 + 0.01 * e_rate_x, atol=0.1)
+    assert_allclose(tel.yaw_rate_cmd_rad_s, -(0.03 * e_x + 0.01 * e_rate_x), atol=1e-9)
     assert tel.los_azim_rad > 0.0
 
 

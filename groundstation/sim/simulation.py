@@ -19,6 +19,7 @@ import numpy as np
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample
 from onboard.enums import Outcome
+from onboard.estimation.dkf import DkfConfig
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
@@ -131,6 +132,7 @@ class Simulation:
             gains if gains is not None else scenario.gains_obj(),
             law=law,
             control_rate_hz=sim.control_rate_hz,
+            dkf_config=DkfConfig(target_diameter_m=scenario.target.diameter_m),
         )
         self.hit_radius_m = 0.5 * (scenario.target.diameter_m + scenario.interceptor.size_m)
         self.step_index = 0

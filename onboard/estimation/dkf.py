@@ -1,16 +1,52 @@
-"""Delayed Kalman filter (DKF) for the target's image point (DESIGN.md §4).
+"""Delayed Kalman filter (DKF) for the target's image point, depth and velocity (DESIGN.md §4).
 
-State x = (e_x, e_y, r_x, r_y): the image error in pixels and the part of its rate that the
-camera's rotation does not explain (translation and target motion), in px/s. Prediction adds
-the rotational image flow from the gyro (rotational columns of L_s, paper eq. 4); r follows a
-white-noise-acceleration model.
+State (normalised image coordinates, internal)::
 
-Detections arrive late. Every prediction is stored in a ring buffer as (time, gyro, x, P).
-A detection captured at t_c is fused at t_c: the filter goes back to the last buffered state
-at or before t_c, propagates to t_c with the buffered gyro input, updates, and re-propagates
-to now, writing every re-propagated state back into the buffer. Detections that arrive out of
-order are fused in capture order by the same replay. The delay comes from timestamps only.
-The predict/update algebra is filterpy's.
+    x = (x_n, y_n, rho, v_tE, v_tN, v_tU)
+
+x_n = X/Z, y_n = Y/Z the target's normalised image point (pixels / f_px; paper eq. 3), rho = 1/Z
+the inverse depth along the optical axis (1/m), v_t the target's velocity in ENU (m/s). It is
+the authors' 8-state idea (relative position, relative velocity, image point) written in
+inverse-depth form, so the image point stays a state the detector measures directly and the
+target's velocity is a world-frame random walk: a static target is v_t = 0, a moving one is
+whatever the image flow says it is.
+
+Process (one control step dt, inputs held over the step: gyro omega_c in the camera frame,
+vehicle velocity v_c in ENU, camera attitude R_WC). With s = (x_n, y_n, 1) = rho p_c and
+u = R_WC^T (v_t - v_c) the target's velocity relative to the camera, in the camera frame::
+
+    s' = s + dt (rho u - omega_c x s),   x_n' = s'_x / s'_z,  y_n' = s'_y / s'_z,  rho' = rho / s'_z
+
+which is exact for the translation over the step (Cartesian Euler of a constant velocity) and
+first order in the rotation; its image-point rate is the full interaction matrix L_s (paper
+eq. 4): the rotational columns times omega_c plus the translational columns times u with
+depth 1/rho. F is the exact Jacobian of that map. v_t is a random walk
+(``target_accel_noise_m_s2``); small white noise on the image rate and on rho covers the
+unmodelled (camera offset from the centre of mass, gyro noise).
+
+Measurements: the image point (1.5 px), and, when the detection's blob is whole (not touching
+the frame edge), its apparent radius r = sqrt(area / pi) ~ f R rho / sqrt(1 + x_n^2 + y_n^2 -
+R^2 rho^2) for a sphere of known diameter 2R (``target_diameter_m``), with a loose relative
+noise that covers a wrong diameter. The apparent size makes depth observable at once; the
+vehicle's own acceleration along and across the line of sight makes it observable over time.
+Without size the depth starts from ``init_range_m`` with a wide prior.
+
+Delay: every prediction is buffered as (time, inputs, x, P, F). A detection captured at t_c is
+fused at t_c: the filter takes the buffered state just before t_c, propagates to t_c with the
+buffered inputs, updates (Joseph form in closed form, equal to filterpy's ``update``),
+propagates to the next buffered time, and carries the correction forward to now through the
+buffered transition matrices:
+x_k += Phi_k dx, P_k += Phi_k dP Phi_k^T with Phi_k = F_k ... F_{j+2}. That is the replay of
+the linearised filter at a few small matrix products per fusion instead of a full predict per
+buffered step. A detection captured before one already fused (out of order) is fused by a full
+replay in capture order (every step re-propagated with the buffered inputs). Every replayed
+state is written back. The delay comes from timestamps only.
+
+Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
+(Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every update
+and every replay,
+rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves the view
+by more than ~76 degrees or turns non-finite.
 """
 
 from __future__ import annotations
@@ -22,37 +58,58 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import predict as kf_predict
-from filterpy.kalman import update as kf_update
 
-from ..camera_model import CameraModel, rotational_flow
+from ..camera_model import CameraModel
 from ..datatypes import Detection
 
-_H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
-_B = np.array([[1.0, 0.0], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]])
 _TIME_EPS_S = 1e-9
+_N = 6  # state size
+_MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
+_MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
+
+
+def _floats3(v) -> tuple[float, float, float]:
+    """Three floats from a 3-vector (ndarray or sequence)."""
+    out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
+    if len(out) != 3:
+        raise ValueError(f"expected 3 numbers, got {len(out)}")
+    return (float(out[0]), float(out[1]), float(out[2]))
+
+
+def _rows3(m) -> list:
+    rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
+    if len(rows) != 3:
+        raise ValueError("expected a 3x3 matrix")
+    return rows
 
 
 @dataclass(frozen=True)
 class DkfConfig:
-    meas_noise_px: float = 1.5  # detector noise, 1 sigma
-    rate_noise_px_s2: float = 100.0  # white-noise acceleration density of r, px/s^2/sqrt(Hz)
-    init_rate_std_px_s: float = 150.0
-    gate_sigma: float = 5.0  # Mahalanobis gate on the innovation
+    meas_noise_px: float = 1.5  # detector noise on the centre, 1 sigma
+    size_noise_px: float = 0.7  # detector noise on the apparent radius, 1 sigma
+    size_noise_rel: float = 0.15  # relative error of the radius model (diameter, blob shape)
+    target_diameter_m: float = 0.3  # the balloon the detector looks for
+    init_range_m: float = 20.0  # depth prior when the first detection has no usable size
+    init_target_speed_m_s: float = 3.0  # 1 sigma per ENU axis of the target's first velocity
+    target_accel_noise_m_s2: float = 1.0  # random-walk density of v_t, m/s^2 per sqrt(Hz)
+    flow_noise_px_s: float = 10.0  # white image-rate model error, px/s per sqrt(Hz)
+    depth_noise_rel: float = 0.05  # white relative rate error of rho, 1/sqrt(s)
+    min_depth_m: float = 0.1  # rho never exceeds 1 / min_depth_m
+    gate_sigma: float = 5.0  # Mahalanobis gate on the point innovation (and on the size's)
     lost_timeout_s: float = 0.5  # no accepted detection for this long -> lost
     buffer_s: float = 0.6  # history kept; a detection older than this is rejected
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
                 raise ValueError(f"DkfConfig.{name} must be a positive number, got {value!r}")
 
 
 class FusionResult(enum.Enum):
     INITIALISED = "initialised"
     ACCEPTED = "accepted"
-    GATED = "gated"  # innovation beyond the Mahalanobis gate
+    GATED = "gated"  # non-finite, or innovation beyond the Mahalanobis gate
     DUPLICATE = "duplicate"  # same capture time as one already fused
     TOO_OLD = "too_old"  # captured before the oldest buffered state
     FUTURE = "future"  # captured after the filter's current time
@@ -64,84 +121,166 @@ class ImageEstimate:
 
     time_s: float
     e_px: tuple[float, float]  # image error e = (u - c_u, v - c_v)
-    e_rate_px_s: tuple[float, float]  # total rate: rotational flow + r
+    e_rate_px_s: tuple[float, float]  # total rate: rotational + translational flow
     e_std_px: tuple[float, float]
     time_since_detection_s: float
     lost: bool
 
 
 class _Entry:
-    __slots__ = ("P", "omega_cam", "t", "x")
+    """One buffered prediction: inputs held over (previous entry, t], the state at t and the
+    transition F from the previous entry's state."""
 
-    def __init__(self, t: float, omega_cam: np.ndarray, x, P) -> None:
+    __slots__ = ("F", "P", "R_CW", "t", "v_c", "w", "x")
+
+    def __init__(self, t: float, w: tuple, v_c: tuple, R_CW: tuple, x, P, F) -> None:
         self.t = t
-        self.omega_cam = omega_cam  # camera-frame rate held over (previous entry, t]
+        self.w = w  # camera-frame angular rate (rad/s), 3 floats
+        self.v_c = v_c  # vehicle velocity ENU (m/s), 3 floats
+        self.R_CW = R_CW  # world -> camera rotation, 9 floats row-major
         self.x = x
         self.P = P
+        self.F = F
+
+
+class _Meas:
+    __slots__ = ("r_px", "t", "z")
+
+    def __init__(self, t: float, z: np.ndarray, r_px: float | None) -> None:
+        self.t = t
+        self.z = z  # normalised image point (x_n, y_n)
+        self.r_px = r_px  # apparent radius in px, or None when not usable
 
 
 class DelayedKalmanFilter:
     def __init__(self, camera: CameraModel, config: DkfConfig | None = None) -> None:
         self.camera = camera
+        self._f = camera.f_px
         self.config = config or DkfConfig()
-        self._R = np.eye(2) * self.config.meas_noise_px**2
-        self._gate2 = self.config.gate_sigma**2
-        self._max_abs_px = 4.0 * camera.f_px
-        self._fq_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        # default inputs for callers that give only the gyro: vehicle still, body = world
+        self._R_CW_default = tuple(camera.R_BC.T.ravel().tolist())
+        self._R_CB = self._R_CW_default  # body -> camera, the same numbers
         self._buf: deque[_Entry] = deque()
-        self._meas: list[tuple[float, np.ndarray]] = []  # (capture time, z) in capture order
+        self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
         self.counts: dict[FusionResult, int] = {r: 0 for r in FusionResult}
 
+    @property
+    def config(self) -> DkfConfig:
+        return self._config
+
+    @config.setter
+    def config(self, config: DkfConfig) -> None:
+        self._config = config
+        c, f = config, self._f
+        self._r_point = (c.meas_noise_px / f) ** 2
+        self._gate2_point = c.gate_sigma**2
+        self._q_img = (c.flow_noise_px_s / f) ** 2
+        self._q_v = c.target_accel_noise_m_s2**2
+        self._q_rho_rel = c.depth_noise_rel**2
+        self._rho_max = 1.0 / c.min_depth_m
+        self._radius_m = 0.5 * c.target_diameter_m
+
     # ----------------------------------------------------------------- propagation
-    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """F and Q for a step of dt seconds (cached: nearly every step is one control period)."""
-        key = round(dt, 9)
-        cached = self._fq_cache.get(key)
-        if cached is not None:
-            return cached
+    def _step(self, x: np.ndarray, P: np.ndarray, e: _Entry, dt: float):
+        """Propagate (x, P) by dt with entry e's inputs: returns (x', P', F)."""
+        xn, yn, rho, vE, vN, vU = x.tolist()
+        wx, wy, wz = e.w
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = e.R_CW
+        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
+        ux = r00 * dE + r01 * dN + r02 * dU
+        uy = r10 * dE + r11 * dN + r12 * dU
+        uz = r20 * dE + r21 * dN + r22 * dU
+        sx = xn + dt * (rho * ux - wy + wz * yn)
+        sy = yn + dt * (rho * uy - wz * xn + wx)
+        sz = 1.0 + dt * (rho * uz - wx * yn + wy * xn)
+        if sz < _MIN_SZ:
+            sz = _MIN_SZ
+        iz = 1.0 / sz
+        x1, y1, rho1 = sx * iz, sy * iz, min(rho * iz, self._rho_max)
+        # exact Jacobian of the map: d(s_i/s_z) = (ds_i - (s_i/s_z) ds_z) / s_z
+        a, b = dt * iz, dt * rho * iz
         F = np.array(
-            [[1.0, 0.0, dt, 0.0], [0.0, 1.0, 0.0, dt], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-        )
-        q = self.config.rate_noise_px_s2**2
-        q11, q12, q22 = q * dt**3 / 3.0, q * dt**2 / 2.0, q * dt
-        Q = np.array(
-            [[q11, 0.0, q12, 0.0], [0.0, q11, 0.0, q12], [q12, 0.0, q22, 0.0], [0.0, q12, 0.0, q22]]
-        )
-        if len(self._fq_cache) < 64:  # replays create odd partial steps; keep it bounded
-            self._fq_cache[key] = (F, Q)
-        return F, Q
+            [
+                [iz - x1 * a * wy, a * (wz + x1 * wx), a * (ux - x1 * uz),
+                 b * (r00 - x1 * r20), b * (r01 - x1 * r21), b * (r02 - x1 * r22)],
+                [-a * (wz + y1 * wy), iz + y1 * a * wx, a * (uy - y1 * uz),
+                 b * (r10 - y1 * r20), b * (r11 - y1 * r21), b * (r12 - y1 * r22)],
+                [-rho1 * a * wy, rho1 * a * wx, iz - rho1 * a * uz,
+                 -rho1 * b * r20, -rho1 * b * r21, -rho1 * b * r22],
+                [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+            ]
+        )  # fmt: skip
+        P1 = F @ P @ F.T  # symmetric to rounding; symmetrised at every update and replay
+        qi, qv = self._q_img * dt, self._q_v * dt
+        P1.flat[::7] += (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
+        return np.array([x1, y1, rho1, vE, vN, vU]), P1, F
 
-    def _propagate(self, x: np.ndarray, P: np.ndarray, omega_cam: np.ndarray, dt: float):
-        if dt <= 0.0:
-            return x, P
-        f = self.camera.f_px
-        fx, fy = rotational_flow(x[0] / f, x[1] / f, omega_cam)
-        F, Q = self._transition(dt)
-        return kf_predict(x, P, F, Q, np.array([fx * f * dt, fy * f * dt]), _B)
-
-    def predict(self, time_s: float, gyro_rates_flu_rad_s: np.ndarray) -> None:
-        """Advance to ``time_s`` with the body rate held since the previous call."""
-        omega_cam = self.camera.R_BC.T @ np.asarray(gyro_rates_flu_rad_s, dtype=float)
+    def predict(
+        self,
+        time_s: float,
+        gyro_rates_flu_rad_s: np.ndarray,
+        velocity_enu_m_s: np.ndarray | None = None,
+        R_WC: np.ndarray | None = None,
+    ) -> None:
+        """Advance to ``time_s`` with the body rate, vehicle velocity (ENU) and camera attitude
+        (camera -> ENU) held since the previous call. Without velocity and attitude the vehicle
+        is taken as still and level, and the target velocity state absorbs its motion."""
         if self._buf and time_s <= self._buf[-1].t + _TIME_EPS_S:
             return
-        x = P = None
+        prev = self._buf[-1] if self._buf else None
+        # plain floats from here on: a handful of numpy calls per tick is the filter's cost
+        g0, g1, g2 = _floats3(gyro_rates_flu_rad_s)
+        c = self._R_CB
+        w = (
+            c[0] * g0 + c[1] * g1 + c[2] * g2,
+            c[3] * g0 + c[4] * g1 + c[5] * g2,
+            c[6] * g0 + c[7] * g1 + c[8] * g2,
+        )
+        v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else _floats3(velocity_enu_m_s)
+        if R_WC is None:
+            R_CW = self._R_CW_default
+        else:
+            a0, a1, a2 = (_floats3(row) for row in _rows3(R_WC))
+            R_CW = (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
+        # a non-finite input is not used: hold the previous one (the filter never sees NaN)
+        if not math.isfinite(sum(w)):
+            w = prev.w if prev is not None else (0.0, 0.0, 0.0)
+        if not math.isfinite(sum(v_c)):
+            v_c = prev.v_c if prev is not None else (0.0, 0.0, 0.0)
+        if not math.isfinite(sum(R_CW)):
+            R_CW = prev.R_CW if prev is not None else self._R_CW_default
+        entry = _Entry(time_s, w, v_c, R_CW, None, None, None)
         if self._initialised:
             last = self._buf[-1]
-            x, P = self._propagate(last.x, last.P, omega_cam, time_s - last.t)
-            if not (abs(x[0]) < self._max_abs_px and abs(x[1]) < self._max_abs_px):
-                # predicted far outside the view (> ~76 deg off axis): no longer an estimate
+            x, P, F = self._step(last.x, last.P, entry, time_s - last.t)
+            if self._valid(x, P):
+                entry.x, entry.P, entry.F = x, P, F
+            else:
                 self._drop_track()
-                x = P = None
-        self._buf.append(_Entry(time_s, omega_cam, x, P))
+        self._buf.append(entry)
         horizon = time_s - self.config.buffer_s
         while len(self._buf) > 2 and self._buf[1].t <= horizon:
             self._buf.popleft()
         # measurements before the oldest buffered state can never be replayed again
-        cut = bisect.bisect_left(self._meas, self._buf[0].t, key=lambda m: m[0])
+        cut = bisect.bisect_left(self._meas, self._buf[0].t, key=lambda m: m.t)
         if cut:
             del self._meas[:cut]
+
+    @staticmethod
+    def _valid(x: np.ndarray, P: np.ndarray) -> bool:
+        """Finite, in front of the camera and within ~76 degrees of the axis (a NaN anywhere in
+        P reaches its trace within a step)."""
+        xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
+        return (
+            abs(xn) < _MAX_ABS_N
+            and abs(yn) < _MAX_ABS_N
+            and rho > 0.0
+            and math.isfinite(float(x[3]) + float(x[4]) + float(x[5]) + float(P.trace()))
+        )
 
     # ----------------------------------------------------------------- fusion
     @property
@@ -154,27 +293,61 @@ class DelayedKalmanFilter:
         self.counts[result] += 1
         return result
 
+    def _measurement(self, det: Detection) -> _Meas | None:
+        """The detection as a measurement, or None when it is not finite."""
+        cam = self.camera
+        try:
+            u, v = (float(c) for c in det.center_px)
+            t_c = float(det.capture_time_s)
+        except (TypeError, ValueError):
+            return None
+        ex, ey = cam.error_px(u, v)
+        if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(t_c)):
+            return None
+        z = np.array([ex / self._f, ey / self._f])
+        if not (abs(z[0]) < _MAX_ABS_N and abs(z[1]) < _MAX_ABS_N):
+            return None
+        r_px = None
+        try:
+            area = float(det.area_px)
+            bx, by, bw, bh = (float(c) for c in det.bbox_px)
+        except (TypeError, ValueError):
+            area = math.nan
+            bx = by = bw = bh = math.nan
+        whole = bx > 0.5 and by > 0.5 and bx + bw < cam.width_px - 0.5
+        whole = whole and by + bh < cam.height_px - 0.5
+        if math.isfinite(area) and area > 0.0 and whole:
+            r_px = math.sqrt(area / math.pi)
+        return _Meas(t_c, z, r_px)
+
     def _fuse(self, det: Detection) -> FusionResult:
         t_c = det.capture_time_s
+        if not isinstance(t_c, int | float) or not math.isfinite(t_c):
+            return FusionResult.GATED
         if not self._buf or t_c > self._buf[-1].t + _TIME_EPS_S:
             return FusionResult.FUTURE
         if t_c < self._buf[0].t - _TIME_EPS_S:
             return FusionResult.TOO_OLD
-        z = np.array(self.camera.error_px(*det.center_px))
-        if not np.all(np.isfinite(z)):
+        m = self._measurement(det)
+        if m is None:
             return FusionResult.GATED
-        if any(abs(t - t_c) < _TIME_EPS_S for t, _ in self._meas):
+        if any(abs(o.t - t_c) < _TIME_EPS_S for o in self._meas):
             return FusionResult.DUPLICATE
         now = self._buf[-1].t
         if not self._initialised or now - self._last_accepted_s > self.config.lost_timeout_s:
-            return self._initialise(t_c, z)
+            return self._initialise(m)
         # replay from the last buffered state strictly before t_c: an entry at exactly t_c
         # must come out of the replay with this measurement applied
         j = self._index_at_or_before(t_c - 2.0 * _TIME_EPS_S)
         if self._buf[j].t >= t_c - _TIME_EPS_S or self._buf[j].x is None:
             return FusionResult.TOO_OLD
-        bisect.insort(self._meas, (t_c, z), key=lambda m: m[0])
-        accepted = self._replay(j, self._buf[j].x, self._buf[j].P, self._buf[j].t, t_c)
+        if self._meas and self._meas[-1].t > t_c:
+            # out of order: full replay in capture order from just before t_c
+            bisect.insort(self._meas, m, key=lambda o: o.t)
+            b = self._buf[j]
+            accepted = self._replay(j, b.x, b.P, b.t, t_c)
+        else:
+            accepted = self._fuse_latest(j, m)
         return FusionResult.ACCEPTED if accepted else FusionResult.GATED
 
     def _index_at_or_before(self, t: float) -> int:
@@ -183,91 +356,211 @@ class DelayedKalmanFilter:
 
     def _drop_track(self) -> None:
         for e in self._buf:
-            e.x = e.P = None
+            e.x = e.P = e.F = None
         self._meas = []
         self._initialised = False
 
-    def _initialise(self, t_c: float, z: np.ndarray) -> FusionResult:
+    def _initialise(self, m: _Meas) -> FusionResult:
         self._drop_track()
-        self._meas = [(t_c, z)]
-        s_r = self.config.init_rate_std_px_s
-        x0 = np.array([z[0], z[1], 0.0, 0.0])
-        P0 = np.diag([self.config.meas_noise_px**2] * 2 + [s_r**2] * 2)
-        j = self._index_at_or_before(t_c)
-        if abs(self._buf[j].t - t_c) < _TIME_EPS_S:
+        self._meas = [m]
+        c = self.config
+        xn, yn = float(m.z[0]), float(m.z[1])
+        n2 = 1.0 + xn * xn + yn * yn
+        if m.r_px is not None:
+            # r = f R rho / sqrt(n2 - R^2 rho^2)  =>  rho = r sqrt(n2) / sqrt(f^2 R^2 + r^2 R^2)
+            R = self._radius_m
+            rho = m.r_px * math.sqrt(n2) / (R * math.hypot(self._f, m.r_px))
+            rel = math.hypot(c.size_noise_rel, c.size_noise_px / m.r_px)
+            s_rho = 2.0 * rel * rho
+        else:
+            rho = math.sqrt(n2) / c.init_range_m
+            s_rho = rho
+        rho = min(rho, self._rho_max)
+        s_n = c.meas_noise_px / self._f
+        s_v = c.init_target_speed_m_s
+        x0 = np.array([xn, yn, rho, 0.0, 0.0, 0.0])
+        P0 = np.diag([s_n**2, s_n**2, s_rho**2, s_v**2, s_v**2, s_v**2])
+        j = self._index_at_or_before(m.t)
+        if abs(self._buf[j].t - m.t) < _TIME_EPS_S:
             self._buf[j].x, self._buf[j].P = x0, P0
         self._initialised = True
-        self._last_accepted_s = t_c
+        self._last_accepted_s = m.t
         # the state at t_c is the measurement itself; replay forward from there
-        self._replay(j, x0, P0, t_c, None)
+        self._replay(j, x0, P0, m.t, None)
         return FusionResult.INITIALISED
+
+    def _fuse_latest(self, j: int, m: _Meas) -> bool:
+        """Fuse m (later than every stored measurement) captured inside buffer interval
+        (j, j+1]: exact at j+1, then the linearised correction carried to now."""
+        buf = self._buf
+        nxt = buf[j + 1]
+        x, P, _ = self._step(buf[j].x, buf[j].P, nxt, m.t - buf[j].t)
+        x, P, ok = self._update(x, P, m)
+        if not ok:
+            return False
+        self._meas.append(m)
+        self._last_accepted_s = max(self._last_accepted_s, m.t)
+        x, P, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
+        dx = x - nxt.x
+        dP = P - nxt.P
+        nxt.x, nxt.P = x, P
+        n = len(buf) - j - 2
+        if n <= 0:
+            return True
+        entries = [buf[j + 2 + k] for k in range(n)]
+        # Phi_k = F_k ... F_{j+2} for every k at once: a prefix product in log2(n) batched
+        # matrix products (Hillis-Steele scan; the right-hand side is evaluated first)
+        phis = np.array([e.F for e in entries])
+        d = 1
+        while d < n:
+            phis[d:] = phis[d:] @ phis[:-d]
+            d *= 2
+        xs = np.array([e.x for e in entries]) + phis @ dx
+        np.clip(xs[:, 2], 1e-6, self._rho_max, out=xs[:, 2])
+        Ps = np.array([e.P for e in entries]) + phis @ dP @ phis.transpose(0, 2, 1)
+        Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
+        for e, xk, Pk in zip(entries, xs, Ps, strict=True):
+            e.x, e.P = xk, Pk
+        last = buf[-1]
+        if not self._valid(last.x, last.P):
+            self._drop_track()
+        return True
 
     def _replay(self, j: int, x, P, t: float, new_t_c: float | None) -> bool:
         """From state (x, P) at time t inside buffer interval j, re-run every later buffered
         step, fusing stored measurements after t in capture order. Writes states back."""
         new_accepted = False
-        k = bisect.bisect_right(self._meas, t + _TIME_EPS_S, key=lambda m: m[0])
+        meas = self._meas
+        k = bisect.bisect_right(meas, t + _TIME_EPS_S, key=lambda o: o.t)
         buf = self._buf
         for i in range(j + 1, len(buf)):
             entry = buf[i]
-            while k < len(self._meas) and self._meas[k][0] <= entry.t + _TIME_EPS_S:
-                t_m, z = self._meas[k]
-                x, P = self._propagate(x, P, entry.omega_cam, t_m - t)
-                t = t_m
-                x, P, ok = self._update(x, P, z)
+            while k < len(meas) and meas[k].t <= entry.t + _TIME_EPS_S:
+                m = meas[k]
+                x, P, _ = self._step(x, P, entry, m.t - t)
+                t = m.t
+                x, P, ok = self._update(x, P, m)
                 if ok:
-                    self._last_accepted_s = max(self._last_accepted_s, t_m)
-                if t_m == new_t_c:
+                    self._last_accepted_s = max(self._last_accepted_s, m.t)
+                if m.t == new_t_c:
                     new_accepted = ok
                 k += 1
-            x, P = self._propagate(x, P, entry.omega_cam, entry.t - t)
+            x, P, F = self._step(x, P, entry, entry.t - t)
             t = entry.t
-            entry.x, entry.P = x, P
+            entry.x, entry.P, entry.F = x, P, F
+        if not self._valid(buf[-1].x, buf[-1].P):
+            self._drop_track()
         return new_accepted
 
-    def _update(self, x, P, z):
-        y = z - x[:2]
-        S = P[:2, :2] + self._R
-        d2 = float(y @ np.linalg.solve(S, y))
-        if d2 > self._gate2:
+    def _update(self, x: np.ndarray, P: np.ndarray, m: _Meas):
+        """Gated EKF update with the image point, then (sequentially, relinearised at the
+        updated state) the apparent radius if usable and within its own gate. Joseph form in
+        closed form for the 2-D and the scalar measurement (equal to filterpy's ``update``;
+        tested), cheap enough for every replayed fusion."""
+        r = self._r_point
+        y0, y1 = float(m.z[0] - x[0]), float(m.z[1] - x[1])
+        s00, s01, s11 = float(P[0, 0]) + r, float(P[0, 1]), float(P[1, 1]) + r
+        det = s00 * s11 - s01 * s01
+        if not det > 0.0:
             return x, P, False
-        x, P = kf_update(x, P, z, self._R, _H)
-        return x, P, True
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+        d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+        if not d2 <= self._gate2_point:
+            return x, P, False
+        K = P[:, :2] @ np.array([[i00, i01], [i01, i11]])
+        x = x + K @ np.array([y0, y1])
+        A = P - K @ P[:2, :]  # (I - K H) P
+        P = A - A[:, :2] @ K.T + r * (K @ K.T)
+        if m.r_px is not None:
+            xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
+            R, f = self._radius_m, self._f
+            n2 = max(1.0 + xn * xn + yn * yn - (R * rho) ** 2, 1e-6)
+            d = f * R / (n2 * math.sqrt(n2))
+            hs = np.array([-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0])
+            c = self.config
+            var_s = c.size_noise_px**2 + (c.size_noise_rel * m.r_px) ** 2
+            ys = m.r_px - f * R * rho / math.sqrt(n2)
+            Ph = P @ hs
+            ss = float(hs @ Ph) + var_s
+            if ys * ys <= self._gate2_point * ss:
+                k = Ph / ss
+                x = x + k * ys
+                A = P - np.outer(k, Ph)
+                P = A - np.outer(A @ hs, k) + var_s * np.outer(k, k)
+        x[2] = min(max(x[2], 1e-6), self._rho_max)
+        return x, 0.5 * (P + P.T), True
 
     # ----------------------------------------------------------------- outputs
     def lost(self, now_s: float | None = None) -> bool:
         now = self.time_s if now_s is None else now_s
         return (not self._initialised) or (now - self._last_accepted_s > self.config.lost_timeout_s)
 
+    def _flow(self, e: _Entry) -> tuple[tuple[float, float], tuple[float, float]]:
+        """Image-point rate at entry e (normalised/s): (rotational, translational)."""
+        xn, yn, rho, vE, vN, vU = e.x.tolist()
+        wx, wy, wz = e.w
+        r = e.R_CW
+        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
+        ux = r[0] * dE + r[1] * dN + r[2] * dU
+        uy = r[3] * dE + r[4] * dN + r[5] * dU
+        uz = r[6] * dE + r[7] * dN + r[8] * dU
+        rot = (
+            xn * yn * wx - (1.0 + xn * xn) * wy + yn * wz,
+            (1.0 + yn * yn) * wx - xn * yn * wy - xn * wz,
+        )
+        return rot, (rho * (ux - xn * uz), rho * (uy - yn * uz))
+
     def estimate(self) -> ImageEstimate | None:
         """Current estimate (at the last prediction time), or None before the first detection."""
         if not self._initialised or not self._buf or self._buf[-1].x is None:
             return None
         e = self._buf[-1]
-        f = self.camera.f_px
-        fx, fy = rotational_flow(e.x[0] / f, e.x[1] / f, e.omega_cam)
+        f = self._f
+        rot, tr = self._flow(e)
         since = e.t - self._last_accepted_s
         return ImageEstimate(
             time_s=e.t,
-            e_px=(float(e.x[0]), float(e.x[1])),
-            e_rate_px_s=(float(e.x[2] + fx * f), float(e.x[3] + fy * f)),
-            e_std_px=(math.sqrt(e.P[0, 0]), math.sqrt(e.P[1, 1])),
+            e_px=(float(e.x[0]) * f, float(e.x[1]) * f),
+            e_rate_px_s=((rot[0] + tr[0]) * f, (rot[1] + tr[1]) * f),
+            e_std_px=(math.sqrt(e.P[0, 0]) * f, math.sqrt(e.P[1, 1]) * f),
             time_since_detection_s=since,
             lost=since > self.config.lost_timeout_s,
         )
 
     def state_vector(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Current state (e_x, e_y, r_x, r_y) and the diagonal of its covariance, if any."""
+        """The current estimate as (e_x, e_y, r_x, r_y) in px and px/s, r being the image rate
+        the camera's rotation does not explain, and the diagonal of its covariance (r's
+        variance through the Jacobian of the translational flow)."""
         if not self._initialised or not self._buf or self._buf[-1].x is None:
             return None
         e = self._buf[-1]
-        return e.x.copy(), e.P.diagonal().copy()
+        f = self._f
+        _, tr = self._flow(e)
+        xn, yn, rho = e.x[:3].tolist()
+        R_CW = np.array(e.R_CW).reshape(3, 3)
+        u = R_CW @ (e.x[3:] - np.array(e.v_c))
+        J = np.zeros((2, _N))
+        J[0, 0], J[0, 2], J[0, 3:] = -rho * u[2], u[0] - xn * u[2], rho * (R_CW[0] - xn * R_CW[2])
+        J[1, 1], J[1, 2], J[1, 3:] = -rho * u[2], u[1] - yn * u[2], rho * (R_CW[1] - yn * R_CW[2])
+        var_r = np.einsum("ij,jk,ik->i", J, e.P, J)
+        state = np.array([xn * f, yn * f, tr[0] * f, tr[1] * f])
+        cov = np.array([e.P[0, 0], e.P[1, 1], var_r[0], var_r[1]]) * f * f
+        return state, cov
+
+    def depth_velocity(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """Current range along the line of sight (m), the target's velocity (ENU, m/s) and the
+        full 6x6 covariance of the internal state, or None without a track."""
+        if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        e = self._buf[-1]
+        xn, yn, rho = e.x[:3].tolist()
+        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, e.x[3:].copy(), e.P.copy()
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
         for e in reversed(self._buf):
             if abs(e.t - time_s) < _TIME_EPS_S:
-                return None if e.x is None else (float(e.x[0]), float(e.x[1]))
+                return None if e.x is None else (float(e.x[0]) * self._f, float(e.x[1]) * self._f)
             if e.t < time_s:
                 break
         return None
