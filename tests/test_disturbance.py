@@ -112,7 +112,7 @@ def test_manoeuvres_do_not_leak_into_the_estimate():
 def test_own_drag_in_the_model_leaves_only_the_wind():
     wind = np.array([3.0, 0.0, 0.0])
     # drag -c (v - w) = -c v + c w: with c in the model, d^ is c w
-    ts, ds = _fly(0.17 * wind, w=2.0, duration_s=4.0, manoeuvre=True, drag=0.17)
+    _ts, ds = _fly(0.17 * wind, w=2.0, duration_s=4.0, manoeuvre=True, drag=0.17)
     assert_allclose(ds[-1], 0.17 * wind, atol=0.02)
 
 
