@@ -111,8 +111,8 @@ class Simulation:
             if target_track is None
             else TrackTarget(scenario.target, *target_track)
         )
-        self.wind = Wind(scenario.wind, wind_rng)
-        self.target.settle_in_wind(scenario.wind.mean_m_s)
+        self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
+        self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
             self.camera_model,
@@ -217,9 +217,9 @@ class Simulation:
             if self._check_loop_outcome(t):
                 self._tell_finish(None)
                 return
-        wind = self.wind.velocity_m_s
-        veh.step(self.dt_s, wind)
-        self.target.advance(t + self.dt_s, self.dt_s, wind)
+        wind = self.wind  # evaluated where each body is
+        veh.step(self.dt_s, wind.at(veh.p))
+        self.target.advance(t + self.dt_s, self.dt_s, wind.at(self.target.p))
         self.wind.step(self.dt_s)
         self.step_index = k + 1
         self._check_physics_outcome(t)
