@@ -9,7 +9,8 @@ vector for the whole scene (the scene is small against the length scales), start
 stationary distribution. The defaults of the outdoor scenarios follow MIL-F-8785C's low-
 altitude model for light turbulence at h = 5 m with a 3 m/s wind at 6 m (W20): sigma_u =
 0.1 W20 / (0.177 + 0.000823 h[ft])^0.4 = 0.58 m/s, L_u = h / (0.177 + 0.000823 h)^1.2 = 37 m,
-so L_u / V = 5 s at the interceptor's 7 m/s airspeed.
+so L_u / V = 5 s at the interceptor's 7 m/s airspeed. (The same model gives sigma_w / sigma_u
+about 0.5 at 5 m; the vertical share here stays at the earlier 30 %.)
 
 Models (``wind.model``):
 
