@@ -19,6 +19,7 @@ from typing import Any
 
 import tomli_w
 
+from onboard.datatypes import GRAVITY_M_S2
 from onboard.gains import GainError, Gains
 
 if sys.version_info >= (3, 11):
@@ -110,8 +111,9 @@ class TargetSpec:
     start_s: float = 0.0  # takeoff: climb starts at this time
     diameter_m: float = 0.3
     tether_length_m: float = 1.0  # tethered
-    net_lift_n: float = 0.03  # tethered: buoyancy minus weight
-    mass_kg: float = 0.015  # tethered: balloon plus added air mass
+    net_lift_n: float = 0.0  # tethered: buoyancy minus weight; 0 = from helium physics
+    mass_kg: float = 0.0  # tethered: balloon, gas and added air mass; 0 = from physics
+    envelope_mass_kg: float = 0.0015  # tethered: the latex (a ~0.16 m party balloon)
     drag_coefficient: float = 0.47  # tethered: sphere
 
 
@@ -129,11 +131,17 @@ class CameraSpec:
     mount_roll_deg: float = 0.0
 
 
+WIND_MODELS = ("uniform", "jet")  # groundstation/sim/wind.py
+
+
 @dataclass(frozen=True)
 class WindSpec:
-    mean_m_s: Vec3 = (0.0, 0.0, 0.0)
-    gust_m_s: float = 0.0  # 1 sigma per horizontal axis (vertical: 30 %)
+    mean_m_s: Vec3 = (0.0, 0.0, 0.0)  # jet: the wind at the target's rest position
+    gust_m_s: float = 0.0  # 1 sigma per horizontal axis (vertical: 30 %); jet: at the target
     gust_time_constant_s: float = 2.0
+    model: str = "uniform"  # uniform | jet (a fan's round jet along mean_m_s)
+    jet_source_m: Vec3 = (0.0, 0.0, 0.0)  # jet: the fan's outlet centre
+    jet_diameter_m: float = 0.5  # jet: the fan's outlet diameter
 
 
 @dataclass(frozen=True)
@@ -353,8 +361,18 @@ def _validate(s: Scenario, problems: _Problems) -> None:
         check(t.max_speed_m_s > 0, "target.max_speed_m_s", "must be positive")
     if t.motion == "tethered":
         check(t.tether_length_m > 0, "target.tether_length_m", "must be positive")
-        check(t.mass_kg > 0, "target.mass_kg", "must be positive")
-        check(t.net_lift_n > 0, "target.net_lift_n", "a tethered balloon must lift")
+        check(t.mass_kg >= 0, "target.mass_kg", "must be positive (0: from the physics)")
+        check(t.net_lift_n >= 0, "target.net_lift_n", "must be positive (0: from the physics)")
+        check(t.envelope_mass_kg > 0, "target.envelope_mass_kg", "must be positive")
+        check(t.drag_coefficient > 0, "target.drag_coefficient", "must be positive")
+        if t.net_lift_n == 0 and t.diameter_m > 0 and t.envelope_mass_kg > 0:
+            gross = helium_gross_lift_n(t.diameter_m)
+            check(
+                gross > t.envelope_mass_kg * GRAVITY_M_S2,
+                "target.envelope_mass_kg",
+                f"{t.envelope_mass_kg} kg is more than a {t.diameter_m} m helium balloon lifts "
+                f"({gross / GRAVITY_M_S2 * 1000:.2f} g gross): it would not fly",
+            )
     check(t.start_s >= 0, "target.start_s", "must not be negative")
     check(i.position_m[2] > 0, "interceptor.position_m", "must start above ground (z > 0)")
     check(i.size_m > 0, "interceptor.size_m", "must be positive")
@@ -374,6 +392,12 @@ def _validate(s: Scenario, problems: _Problems) -> None:
     check(0 <= c.dropout_probability < 1, "camera.dropout_probability", "must be in [0, 1)")
     check(s.wind.gust_m_s >= 0, "wind.gust_m_s", "must not be negative")
     check(s.wind.gust_time_constant_s > 0, "wind.gust_time_constant_s", "must be > 0")
+    w = s.wind
+    check(w.model in WIND_MODELS, "wind.model", f"must be one of {', '.join(WIND_MODELS)}")
+    if w.model == "jet":
+        check(w.jet_diameter_m > 0, "wind.jet_diameter_m", "must be positive")
+        problem = jet_reference_problem(w, t.position_m) if w.jet_diameter_m > 0 else None
+        check(problem is None, "wind.jet_source_m", problem or "")
     check(sim.physics_rate_hz >= 500, "sim.physics_rate_hz", "must be at least 500")
     for key, rate in (("sim.control_rate_hz", sim.control_rate_hz), ("camera.rate_hz", c.rate_hz)):
         ratio = sim.physics_rate_hz / rate if rate > 0 else math.nan
@@ -422,6 +446,48 @@ def _validate(s: Scenario, problems: _Problems) -> None:
             s.gains_obj()
         except GainError as exc:
             problems.add("gains", str(exc))
+
+
+AIR_DENSITY_KG_M3 = 1.2  # sea level, 20 C
+HELIUM_DENSITY_KG_M3 = 0.166  # at 1 atm, 20 C (a party balloon's slight overpressure ignored)
+
+
+def helium_gross_lift_n(diameter_m: float) -> float:
+    """Buoyancy minus the helium's weight of a sphere (N): (rho_air - rho_He) V g."""
+    volume = math.pi / 6.0 * diameter_m**3
+    return (AIR_DENSITY_KG_M3 - HELIUM_DENSITY_KG_M3) * volume * GRAVITY_M_S2
+
+
+def balloon_lift_and_mass(target: TargetSpec) -> tuple[float, float]:
+    """(net lift N, effective mass kg) of a tethered helium balloon: the file's values, or
+    where they are 0 the physics: net lift = (rho_air - rho_He) V g - m_envelope g; mass =
+    m_envelope + rho_He V + rho_air V / 2, the last the added mass of a sphere accelerating in
+    air (Lamb, *Hydrodynamics* §92; Newman, *Marine Hydrodynamics* §4.13). For the paper's
+    0.16 m balloon with a 1.5 g envelope: 0.0071 N and 3.1 g."""
+    volume = math.pi / 6.0 * target.diameter_m**3
+    lift = target.net_lift_n or (
+        helium_gross_lift_n(target.diameter_m) - target.envelope_mass_kg * GRAVITY_M_S2
+    )
+    mass = target.mass_kg or (
+        target.envelope_mass_kg + HELIUM_DENSITY_KG_M3 * volume + 0.5 * AIR_DENSITY_KG_M3 * volume
+    )
+    return lift, mass
+
+
+def jet_reference_problem(wind: WindSpec, reference_m: Vec3) -> str | None:
+    """Why a fan jet cannot set its speed at ``reference_m`` (the target's rest position),
+    or None: the point must be downstream of the fan."""
+    m = wind.mean_m_s
+    speed = math.sqrt(sum(c * c for c in m))
+    if speed == 0.0:
+        return None
+    x = sum((reference_m[i] - wind.jet_source_m[i]) * m[i] for i in range(3)) / speed
+    if x <= 0.0:
+        return (
+            "the fan must be upwind of the target: the target's rest position is "
+            f"{-x:.2f} m behind the fan along wind.mean_m_s"
+        )
+    return None
 
 
 def _syntax_error(exc: Exception, source: str, text: str) -> ScenarioError:

@@ -65,6 +65,12 @@ class Gains:
         1.8, "1/s", 0.2, 200.0, "PG/IBVS baselines: velocity-loop gain (PX4's; 1/dt = eq. 17)"
     )
     k_ibvs: float = _gain(1.0, "-", 0.0, 10.0, "IBVS baseline: image-error decay per unit closing")
+    k_dob: float = _gain(
+        2.0, "1/s", 0.0, 10.0, "disturbance-observer bandwidth, feed-forward -d^ (0: off)"
+    )
+    k_drag: float = _gain(
+        0.17, "1/s", 0.0, 2.0, "airframe drag per mass in the observer model (EKF2_MCOEF)"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

@@ -11,6 +11,11 @@ import numpy as np
 
 from .camera_model import CameraModel
 from .control.attitude import attitude_command
+from .control.disturbance import (
+    DisturbanceObserver,
+    DisturbanceObserverConfig,
+    feedforward_accel,
+)
 from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
     GUIDANCE_LAWS,
@@ -70,6 +75,15 @@ class InterceptionLoop:
         self.last_fusion: list[FusionResult] = []
         self.guard_trips = 0
         self.acquired = False
+        self.disturbance = DisturbanceObserver(
+            DisturbanceObserverConfig(
+                self.gains.k_dob,
+                vehicle.mass_kg,
+                vehicle.max_thrust_n,
+                max_m_s2=self.gains.a_max,
+                drag_per_mass_1_s=self.gains.k_drag,
+            )
+        )
 
     @property
     def last_tick_time_s(self) -> float | None:
@@ -95,6 +109,8 @@ class InterceptionLoop:
         t = state.time_s
         if self._pending_gains is not None:
             self.gains, self._pending_gains = self._pending_gains, None
+            g = self.gains
+            self.disturbance.set_bandwidth(g.k_dob, g.a_max, g.k_drag)
         gains = self.gains
         dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
         if not dt > 0.0:
@@ -113,6 +129,7 @@ class InterceptionLoop:
                 self.last_fusion.append(self.dkf.fuse(det))
             self._detections.clear()
 
+        d_hat = self.disturbance.update(t, v, R_WB[:, 2])
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
@@ -145,7 +162,10 @@ class InterceptionLoop:
             e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
 
-        omega, thrust = attitude_command(a_d, R_WB, yaw_rate, gains, self.vehicle)
+        # disturbance feed-forward: the attitude loop flies a_d - d^ (normal to v in flight;
+        # the guidance limit a_max applies to a_d, |d^| is clamped to a_max by the observer)
+        a_cmd = a_d + feedforward_accel(d_hat, v, gains.v_min) if self.disturbance.enabled else a_d
+        omega, thrust = attitude_command(a_cmd, R_WB, yaw_rate, gains, self.vehicle)
         w0, w1, w2 = omega.tolist()
         finite = math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
         guard = not (finite and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
@@ -154,6 +174,7 @@ class InterceptionLoop:
             self.guard_trips += 1
             omega = np.zeros(3)
             thrust = self.vehicle.hover_thrust_normalised
+        self.disturbance.commanded(float(thrust))
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         return ControlTelemetry(

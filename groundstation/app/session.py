@@ -27,7 +27,7 @@ from typing import Any
 from onboard.gains import Gains
 
 from ..recording.writer import SortieRecorder
-from ..scenario import Scenario, WindSpec, load_scenario, with_changes
+from ..scenario import Scenario, load_scenario, with_changes
 from ..sim.simulation import Simulation
 from .errors import SessionError
 from .replay import ReplayPlayer
@@ -391,10 +391,13 @@ class SimSession(SessionView, SessionReplay):
 
 
 def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):
-    """The scenario with its wind replaced (validated)."""
+    """The scenario with its wind's mean and gust replaced (validated); the model (uniform or
+    a fan jet with its source) and the gust time constant are kept."""
     return with_changes(
         scenario,
-        wind=WindSpec(
-            tuple(float(c) for c in mean_m_s), float(gust_m_s), scenario.wind.gust_time_constant_s
+        wind=dataclasses.replace(
+            scenario.wind,
+            mean_m_s=tuple(float(c) for c in mean_m_s),
+            gust_m_s=float(gust_m_s),
         ),
     )

@@ -123,8 +123,8 @@ class Simulation:
             if target_track is None
             else TrackTarget(scenario.target, *target_track)
         )
-        self.wind = Wind(scenario.wind, wind_rng)
-        self.target.settle_in_wind(scenario.wind.mean_m_s)
+        self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
+        self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
             self.camera_model,
@@ -245,10 +245,11 @@ class Simulation:
         while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
             _, rates, thrust = cmds.popleft()
             self.vehicle.command(rates, thrust)
-        wind = self.wind.velocity_m_s
-        self.vehicle.step(dt, wind)
-        self.target.advance(t + dt, dt, wind)
-        self.wind.step(dt)
+        wind = self.wind  # evaluated where each body is
+        veh = self.vehicle
+        veh.step(dt, wind.at(veh.p))
+        self.target.advance(t + dt, dt, wind.at(self.target.p))
+        wind.step(dt)
         self.step_index = k + 1
         self._check_physics_outcome(t)
 

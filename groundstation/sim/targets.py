@@ -9,18 +9,19 @@ and ``advance(t_s, dt_s, wind)`` that moves it to time ``t_s``.
   clockwise seen from above), plus a drift velocity_m_s
 - escape: starts with velocity_m_s and accelerates with acceleration_m_s2 up to max_speed_m_s
 - takeoff: rests at position_m until start_s, then climbs at the constant velocity_m_s
-- tethered: a balloon on a rope anchored tether_length_m below position_m (its rest position
-  in still air), pulled up by its net lift and pushed by the wind's drag; it starts leaning at
-  rest in the mean wind and swings with the gusts
+- tethered: a helium balloon on a rope anchored tether_length_m below position_m (its rest
+  position in still air), pulled up by its net lift and pushed by the drag of the wind at its
+  position (quadratic, C_d 0.47), with its added air mass; lift and mass from the physics
+  unless the file gives them (scenario.balloon_lift_and_mass). It starts leaning at rest in
+  the mean wind where it floats and swings with the gusts
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 
-from ..scenario import TargetSpec
-
-AIR_DENSITY_KG_M3 = 1.2
+from ..scenario import AIR_DENSITY_KG_M3, TargetSpec, balloon_lift_and_mass
 
 
 class Target:
@@ -45,18 +46,26 @@ class Target:
         if s.motion == "tethered":
             self._anchor = (s.position_m[0], s.position_m[1], s.position_m[2] - s.tether_length_m)
             self._drag_k = 0.5 * AIR_DENSITY_KG_M3 * s.drag_coefficient * math.pi * self.radius_m**2
+            self.net_lift_n, self.mass_kg = balloon_lift_and_mass(s)
 
-    def settle_in_wind(self, wind: tuple[float, float, float]) -> None:
+    def settle_in_wind(self, wind_at: Callable[[list[float]], Sequence[float]]) -> None:
         """Tethered: start leaning at rest in the mean wind (rope along lift + drag), as a
-        balloon would be when the sortie begins; other motions are unaffected."""
+        balloon would be when the sortie begins, ``wind_at(p)`` giving the mean wind where it
+        floats (a fixed point, damped, for a wind that varies in space); other motions are
+        unaffected."""
         if self.spec.motion != "tethered":
             return
-        speed = math.sqrt(sum(c * c for c in wind))
-        f = [self._drag_k * speed * c for c in wind]
-        f[2] += self.spec.net_lift_n
-        n = math.sqrt(sum(c * c for c in f))
         length = self.spec.tether_length_m
-        self.p = [self._anchor[i] + length * f[i] / n for i in range(3)]
+        p = list(self.spec.position_m)
+        for _ in range(60):
+            wind = wind_at(p)
+            speed = math.sqrt(sum(c * c for c in wind))
+            f = [self._drag_k * speed * c for c in wind]
+            f[2] += self.net_lift_n
+            n = math.sqrt(sum(c * c for c in f))
+            new = [self._anchor[i] + length * f[i] / n for i in range(3)]
+            p = [0.5 * (a + b) for a, b in zip(p, new, strict=True)]
+        self.p = p
         self.v = [0.0, 0.0, 0.0]
 
     def advance(self, t: float, dt: float, wind: tuple[float, float, float]) -> None:
@@ -100,8 +109,8 @@ class Target:
         rel = [wind[i] - self.v[i] for i in range(3)]
         speed = math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
         f = [self._drag_k * speed * rel[i] for i in range(3)]
-        f[2] += s.net_lift_n
-        v = [self.v[i] + f[i] / s.mass_kg * dt for i in range(3)]
+        f[2] += self.net_lift_n
+        v = [self.v[i] + f[i] / self.mass_kg * dt for i in range(3)]
         p = [self.p[i] + v[i] * dt for i in range(3)]
         # the rope: project back onto the sphere and drop the outward radial velocity
         d = [p[i] - self._anchor[i] for i in range(3)]

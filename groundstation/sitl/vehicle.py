@@ -149,8 +149,8 @@ class SitlVehicle:
         if self.landed:
             self.vehicle.p[2] = 0.0
         self.target = Target(scenario.target)
-        self.wind = Wind(scenario.wind, wind_rng)
-        self.target.settle_in_wind(scenario.wind.mean_m_s)
+        self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
+        self.target.settle_in_wind(self.wind.mean_at)
         self.dt_s = 1.0 / PHYSICS_HZ
         self.step_index = 0
         self.armed = not self.opt.on_ground
@@ -309,16 +309,16 @@ class SitlVehicle:
         if self.custom_mode != MODE_OFFBOARD and k % self._hold_div == 0:
             self._nav(self._hold_div * self.dt_s)
             self._hold_command()
-        wind = self.wind.velocity_m_s
+        wind = self.wind  # evaluated where each body is
         hover_n = self.params["MPC_THR_HOVER"] * veh.params.max_thrust_n
         if self.landed and self._on_ground(t):
             self.battery.step(self.dt_s, self.armed, 0.0)
         else:
-            veh.step(self.dt_s, wind)
+            veh.step(self.dt_s, wind.at(veh.p))
             self.battery.step(self.dt_s, self.armed, veh.thrust_n / hover_n)
         if self.sortie_start_s is not None:
             ts = t - self.sortie_start_s
-            self.target.advance(ts + self.dt_s, self.dt_s, wind)
+            self.target.advance(ts + self.dt_s, self.dt_s, wind.at(self.target.p))
             self._track_closest(ts)
         if veh.p[2] <= 0.0 and not self.landed and veh.v[2] <= 0.0:
             self._touchdown(t)
