@@ -132,3 +132,16 @@ def test_scenario_override_on_the_command_line():
         text=True,
     )
     assert r.returncode == 2 and "k_a = 99.0 is outside its range" in r.stderr
+
+
+def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
+    """At contact range the balloon fills or leaves the image and the DKF may call it lost a
+    tick before the pass completes; the vehicle is on it (a balloon bursts on contact), so the
+    sortie is a hit. Out of contact the same loss ends the sortie as TARGET_LOST."""
+    sim = Simulation(load_scenario("static-ahead-20m"), law="png", seed=0)
+    sim.loop.acquired = True
+    sim.loop.dkf.lost = lambda t: True
+    sim.miss_m = 0.02  # closest approach so far: inside the hit radius
+    assert not sim._check_loop_outcome(1.0) and sim.outcome is None
+    sim.miss_m = 0.5
+    assert sim._check_loop_outcome(1.0) and sim.outcome.value == "TARGET_LOST"

@@ -306,10 +306,14 @@ class Simulation:
         out of time."""
         loop = self.loop
         never_seen = t >= ACQUIRE_TIMEOUT_S + self.scenario.camera.delay_s
-        if (loop.acquired and loop.dkf.lost(t)) or (not loop.acquired and never_seen):
+        # a balloon bursts on contact: losing it from the image with the vehicle already on
+        # it ends a hit (the pass completes in the physics), not a lost target
+        contact = self.miss_m <= self.hit_radius_m
+        lost = (loop.acquired and loop.dkf.lost(t)) or (not loop.acquired and never_seen)
+        if lost and not contact:
             self.outcome = Outcome.TARGET_LOST
         elif t >= self.scenario.duration_s - 1e-9:
-            self.outcome = Outcome.TIMEOUT
+            self.outcome = Outcome.HIT if contact else Outcome.TIMEOUT
         return self.outcome is not None
 
     def _check_physics_outcome(self, t0: float) -> None:
