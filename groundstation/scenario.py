@@ -19,7 +19,7 @@ from typing import Any
 
 import tomli_w
 
-from onboard.datatypes import GRAVITY_M_S2
+from onboard.constants import GRAVITY_M_S2
 from onboard.gains import GainError, Gains
 
 if sys.version_info >= (3, 11):

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import GRAVITY_M_S2  # declared there, imported from here too
 from .enums import LoopMode  # declared there, imported from here too
 
-GRAVITY_M_S2 = 9.81
 GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
 
 
