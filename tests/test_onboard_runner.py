@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from onboard.link.params import PARAM_SPECS
 from onboard.link.px4 import MavLink, mavlink
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
@@ -105,7 +106,7 @@ def test_parameter_protocol_read_list_and_set(tmp_path):
             values += [m for m in gcs.poll() if m.get_type() == "PARAM_VALUE"]
             time.sleep(0.005)
         total = values[0].param_count
-        assert total == 22 and {m.param_index for m in values} == set(range(total))
+        assert total == len(PARAM_SPECS) and {m.param_index for m in values} == set(range(total))
         assert sum(m.param_id == "PRG_K_Z" for m in values) == 3  # list, read by name, by index
         brake = [m.param_value for m in values if m.param_id == "PRG_K_BRAKE"]
         assert brake[-1] == 2.5 and rt.params.gains.k_brake == 2.5

@@ -122,13 +122,17 @@ def test_non_mcap_refused_and_names_cannot_leave_the_folder(tmp_path):
         "../secret.mcap",
         "..",
         "/etc/passwd",
-        "a/b.mcap",
+        "a/../../b.mcap",
+        "a/.hidden/b.mcap",
         ".hidden.mcap",
         "x.txt",
         "x\x00.mcap",
     ):
         with pytest.raises(LogError):
             index.resolve(bad)
+    # a campaign's folder inside the log folder is fine (#12 item 14): names are paths in it
+    root = (tmp_path / "logs").resolve()
+    assert index.resolve("static-n2/a.mcap") == root / "static-n2" / "a.mcap"
     r = subprocess.run(
         [sys.executable, "-m", "groundstation", "replay", str(tmp_path / "notes.mcap")],
         capture_output=True,
