@@ -2,11 +2,13 @@
 required, a sortie runs, a gain edited on the page takes effect, the outcome shows."""
 
 import re
+import time
 import urllib.request
 
 import pytest
 
 from groundstation.app.server import GroundStation
+from onboard.link.params import PARAM_SPECS
 
 from .browser_support import needs_chromium
 
@@ -203,6 +205,7 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
                        mavlink_url=f"udpin:127.0.0.1:{port}")  # fmt: skip
     gs.start_in_thread()
     fake = FakeOnboard(port)
+    n = len(PARAM_SPECS)  # the whole parameter table arrives
     page = browser.new_page(viewport={"width": 1500, "height": 1000})
     errors = []
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -212,7 +215,7 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
         assert page.is_hidden("#sim-panel")
         page.wait_for_function("document.querySelector('#lv-link').textContent === 'up'")
         page.wait_for_function(
-            "document.querySelector('#lv-params').textContent.startsWith('22/22')",
+            f"document.querySelector('#lv-params').textContent.startsWith('{n}/{n}')",
             timeout=10000,
         )
         assert page.text_content("#lv-state") == "ready"
@@ -223,6 +226,11 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
         page.wait_for_function("document.querySelectorAll('#gains input').length > 5")
         page.fill('#gains input[data-gain="k_p"]', "0.05")
         page.click("#btn-apply-gains")
+        deadline = time.monotonic() + 10.0  # the PARAM_SET reaches the vehicle, its reply us
+        while time.monotonic() < deadline and not (
+            fake.values["PRG_K_P"] == pytest.approx(0.05) and gs.session.gains.k_p == 0.05
+        ):
+            time.sleep(0.05)
         page.wait_for_function(
             "document.querySelector('#gains input[data-gain=\"k_p\"]').value === '0.05'"
             " && !document.querySelector('#gains-applied').textContent.includes('waiting')",

@@ -379,6 +379,7 @@ function setBadge(id, text, cls) {
   setText(el, text); if (el.className !== c) el.className = c;
 }
 let lastStatusParts = "";
+let lastGainsStamp = null; // gains_pending and the last applied time, as last shown
 
 function showStatus(st) {
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
@@ -410,6 +411,11 @@ function showStatus(st) {
     applied = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
   if (st.gains_pending) applied = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
   setText($("gains-applied"), applied);
+  // an edit takes effect after the PUT returns (the next tick; in live mode the vehicle's
+  // PARAM_VALUE): the panel then shows the values in force, not those read at the PUT
+  const stamp = `${!!st.gains_pending} ${st.gains_applied_time_s}`;
+  if (lastGainsStamp !== null && stamp !== lastGainsStamp && !st.gains_pending) refreshGainValues();
+  lastGainsStamp = stamp;
 }
 
 // The recording of the sortie on screen: its file, and any error as a banner that stays.
@@ -651,6 +657,17 @@ async function loadGains() {
   for (const n of names) { const o = document.createElement("option"); o.value = n; o.textContent = n; sel.appendChild(o); }
   if (names.includes(keep)) sel.value = keep;
   gainsetLink();
+}
+// The values in force into the fields, except a field the operator is editing.
+async function refreshGainValues() {
+  let g;
+  try { g = await api("GET", "/api/gains"); } catch (e) { return; }
+  gainValues = g.values;
+  document.querySelectorAll("#gains input[data-gain]").forEach((inp) => {
+    if (document.activeElement === inp || inp.classList.contains("changed")) return;
+    inp.value = gainValues[inp.dataset.gain];
+  });
+  markGains();
 }
 function markGains() {
   document.querySelectorAll("#gains tr[data-gain]").forEach((tr) => {
