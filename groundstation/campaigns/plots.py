@@ -361,7 +361,9 @@ def _envelope_plots(summary, out: Path) -> list[str]:
 
     plots: list[str] = []
     laws = list(summary["cells"])
-    fig, axes = plt.subplots(2, len(laws), figsize=(3.2 * len(laws) + 1, 9), squeeze=False)
+    fig, axes = plt.subplots(
+        2, len(laws), figsize=(4.5 * len(laws) + 1.5, 10), squeeze=False, layout="constrained"
+    )
     for k, law in enumerate(laws):
         ok, rows, cols = envelope_grid(summary, law, "success_rate")
         im = _heatmap(
@@ -384,7 +386,7 @@ def _envelope_plots(summary, out: Path) -> list[str]:
             axes[r, k].set_ylabel("elevation from the nose (deg)")
     fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8, label="HIT %")
     fig.colorbar(im2, ax=axes[1, :].tolist(), shrink=0.8, label="CEP (m, median miss)")
-    fig.suptitle("Static envelope: targets 15-25 m away, vehicle flying forward at 2 m/s")
+    fig.suptitle("Static envelope: targets 15-25 m away,\nvehicle flying forward at 2 m/s")
     fig.savefig(out / "envelope_map.png", dpi=110)
     plt.close(fig)
     plots.append("envelope_map.png")

@@ -122,11 +122,12 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
     atan(a_f / (g + a_z)) (eqs. 16, 18), and the strapdown camera pitches with it: the speed
     ramp's k_a moves a target that sits high in the image off its top edge. The guard caps
     a_f, the component of a_d along the camera's horizontal heading, at the value whose steady
-    pitch keeps the LOS ``fov_margin`` degrees below the top edge (:func:`min_pitch_rad`;
-    negative, a brake that pitches the nose up, when the target is higher than that). The
-    vertical and lateral components, which PNG turns with, are untouched; so is a target low
-    in the image (forcing a nose-down pitch would fight PNG's endgame). ``fov_margin = 0``
-    switches it off.
+    pitch keeps the LOS ``fov_margin`` degrees below the top edge (:func:`min_pitch_rad`), and
+    at no less than 0: it limits the pitch-down, it never brakes (braking bled the forward
+    speed off, the flight path went nearly vertical and its azimuth wandered). The vertical
+    and lateral components, which PNG turns with, are untouched; so is a target low in the
+    image (forcing a nose-down pitch would fight PNG's endgame); the pursuit bias
+    (:func:`pursuit_weight`) does the rest. ``fov_margin = 0`` switches it off.
     """
     if gains.fov_margin <= 0.0:
         return a_d
@@ -142,7 +143,7 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
     lo = min_pitch_rad(inp.los_elev_rad, top, math.radians(gains.fov_margin))
     a_f = float(a_d @ h)
     gz = max(GRAVITY_M_S2 + float(a_d[2]), 0.1 * GRAVITY_M_S2)
-    a_f_max = -gz * math.tan(lo)
+    a_f_max = max(-gz * math.tan(lo), 0.0)  # limit the pitch-down, never brake
     if a_f <= a_f_max:
         return a_d
     return saturate_norm(a_d + (a_f_max - a_f) * h, gains.a_max)
