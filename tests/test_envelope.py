@@ -255,7 +255,7 @@ def test_zem_of_a_straight_pass():
     assert zem == pytest.approx([0.5, 0.5, 0.5])
     m = range_metrics(trace)
     assert m["acquired"] and m["acq_range_m"] == pytest.approx(math.hypot(9.8, 0.5))
-    assert m["zem_settle_s"] == 0.0 and m["zem_max_after_m"] == pytest.approx(0.5)
+    assert m["zem_settle_s"] == 0.0 and m["zem_lead_s"] == pytest.approx(0.2)
 
 
 def test_envelope_map_of_a_tiny_campaign(tmp_path):

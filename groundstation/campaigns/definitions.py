@@ -348,8 +348,9 @@ def acquisition(trace: dict[str, Any]) -> tuple[float, float] | None:
 
 
 def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
-    """Acquisition range and the ZEM after acquisition: at acquisition, its maximum from when
-    it first falls under :data:`ZEM_LIMIT_M` to the end, and how long that took."""
+    """Acquisition range, the ZEM at acquisition, and from when on (s after acquisition) the
+    ZEM stays under :data:`ZEM_LIMIT_M` to the end of the sortie, with how long that was before
+    the end (``zem_lead_s``: the guidance's margin to spare)."""
     acq = acquisition(trace)
     if acq is None:
         return {
@@ -357,19 +358,22 @@ def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
             "acq_range_m": None,
             "zem_acq_m": None,
             "zem_settle_s": None,
-            "zem_max_after_m": None,
+            "zem_lead_s": None,
         }
     t, zem = zem_series(trace)
     i0 = int(np.searchsorted(t, acq[0]))
     after = zem[i0:]
-    under = np.nonzero(after < ZEM_LIMIT_M)[0]
-    settle = None if under.size == 0 else float(t[i0 + under[0]] - acq[0])
+    above = np.nonzero(after >= ZEM_LIMIT_M)[0]
+    if after.size == 0 or (above.size and above[-1] == after.size - 1):
+        settle = None  # still (or again) over the limit at the end
+    else:
+        settle = 0.0 if above.size == 0 else float(t[i0 + above[-1] + 1] - acq[0])
     return {
         "acquired": True,
         "acq_range_m": acq[1],
         "zem_acq_m": float(after[0]) if after.size else None,
         "zem_settle_s": settle,
-        "zem_max_after_m": None if under.size == 0 else float(after[under[0] :].max()),
+        "zem_lead_s": None if settle is None else float(t[-1] - acq[0] - settle),
     }
 
 
@@ -383,15 +387,15 @@ def _summarize_range(outcomes):
             vals = [m[key] for m in ms if m[key] is not None]
             return float(np.median(vals)) if vals else None
 
-        held = [m for m in acq if m["zem_max_after_m"] is not None]
+        settled = [m for m in acq if m["zem_settle_s"] is not None]
         cells.setdefault(str(r), {})[law] = {
             **_cell_stats(outs),
             "acquired_rate": len(acq) / len(outs),
             "acq_range_median_m": _med("acq_range_m"),
             "zem_acq_median_m": _med("zem_acq_m"),
             "zem_settle_median_s": _med("zem_settle_s"),
-            "zem_max_after_max_m": max((m["zem_max_after_m"] for m in held), default=None),
-            "zem_held_rate": (sum(m["zem_max_after_m"] < ZEM_LIMIT_M for m in held) / len(outs)),
+            "zem_lead_min_s": min((m["zem_lead_s"] for m in settled), default=None),
+            "zem_settled_rate": len(settled) / len(outs),
         }
     return {"cells": cells, "zem_limit_m": ZEM_LIMIT_M}
 

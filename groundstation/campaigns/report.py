@@ -177,7 +177,8 @@ def _md_envelope(summary) -> str:
 def _md_range(summary) -> str:
     lines = [
         "| range | law | HIT rate | CEP | acquired | acquisition range (median) | "
-        "ZEM at acquisition | time to ZEM < 1 m | max ZEM after | ZEM held < 1 m |",
+        "ZEM at acquisition (median) | ZEM < 1 m from (median, after acquisition) | "
+        "... for at least (before the end) | settled |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r, by_law in summary["cells"].items():
@@ -186,12 +187,13 @@ def _md_range(summary) -> str:
                 f"| {r} m | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
                 f"{_fmt(c['cep_m'])} m | {100 * c['acquired_rate']:.0f} % | "
                 f"{_fmt(c['acq_range_median_m'], 1)} m | {_fmt(c['zem_acq_median_m'], 2)} m | "
-                f"{_fmt(c['zem_settle_median_s'], 2)} s | {_fmt(c['zem_max_after_max_m'], 3)} m | "
-                f"{100 * c['zem_held_rate']:.0f} % |"
+                f"{_fmt(c['zem_settle_median_s'], 2)} s | {_fmt(c['zem_lead_min_s'], 2)} s | "
+                f"{100 * c['zem_settled_rate']:.0f} % |"
             )
     lines.append(
-        "\nZEM: the miss if neither vehicle nor target accelerated from then on, from the true "
-        "states; 'held' counts sorties whose ZEM, once under 1 m, stayed under it to the end."
+        "\nZEM (zero-effort miss): the miss if neither vehicle nor target accelerated from then "
+        "on, from the true states. 'Settled' counts sorties whose ZEM, from some time after "
+        "acquisition, stays under 1 m to the end; the column before is the shortest such stretch."
     )
     return "\n".join(lines)
 
