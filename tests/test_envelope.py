@@ -255,7 +255,22 @@ def test_zem_of_a_straight_pass():
     assert zem == pytest.approx([0.5, 0.5, 0.5])
     m = range_metrics(trace)
     assert m["acquired"] and m["acq_range_m"] == pytest.approx(math.hypot(9.8, 0.5))
-    assert m["zem_settle_s"] == 0.0 and m["zem_lead_s"] == pytest.approx(0.2)
+    assert m["zem_settle_s"] == 0.0 and m["zem_lead_s"] == pytest.approx(0.1)
+    # the ZEM crosses 1 m twice: it is settled from its last crossing on
+    t = [0.0, 0.1, 0.2, 0.3, 0.4]
+    trace = {
+        "t_s": t,
+        "target_pos_m": [[0.0, 10.0, 0.0]] * 5,
+        "vehicle_pos_m": [[0.0, 0.0, 0.0]] * 5,
+        "vehicle_vel_m_s": [[vx, 2.0, 0.0] for vx in (0.4, 0.0, 0.4, 0.0, 0.0)],
+        "e_norm_upright": [[0.0, 0.0]] * 5,
+    }
+    _, zem = zem_series(trace)
+    assert zem == pytest.approx(
+        [10 * 0.4 / math.hypot(0.4, 2.0), 0, 10 * 0.4 / math.hypot(0.4, 2), 0, 0]
+    )
+    m = range_metrics(trace)
+    assert m["zem_settle_s"] == pytest.approx(0.3) and m["zem_lead_s"] == pytest.approx(0.1)
 
 
 def test_envelope_map_of_a_tiny_campaign(tmp_path):
