@@ -467,6 +467,9 @@ def _wind_miss_plot(outcomes, out: Path, plots: list[str]) -> None:
         for patch in bp["boxes"]:
             patch.set_facecolor(LAW_COLOURS.get(law, "grey"))
         ax.plot([], [], "s", color=LAW_COLOURS.get(law), label=LAW_NAMES.get(law, law))
+    radii = {o.result["hit_radius_m"] for o in outcomes}
+    if len(radii) == 1:
+        ax.axhline(radii.pop(), color="k", ls="--", lw=0.8, label="hit radius")
     ax.set_yscale("log")
     ax.set_xticks(
         np.arange(len(WIND_SPEEDS_M_S)) + 0.4 - width / 2, [f"{w} m/s" for w in WIND_SPEEDS_M_S]
