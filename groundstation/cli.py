@@ -276,7 +276,7 @@ def _build_parser() -> argparse.ArgumentParser:
     )
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
-    c.add_argument("name", help="static | moving | wind | outdoor")
+    c.add_argument("name", help="static | moving | wind | outdoor | envelope | range")
     c.add_argument("--n", type=_COUNT, default=None, help="targets / seeds / tries (see README)")
     c.add_argument(
         "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"

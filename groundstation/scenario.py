@@ -129,6 +129,13 @@ class CameraSpec:
     dropout_probability: float = 0.02
     mount_pitch_deg: float = 0.0
     mount_roll_deg: float = 0.0
+    # detector realism (README "Detector realism"); each 0 switches its part off
+    min_blob_px: float = 0.0  # blobs narrower than this (diameter, px) are not detected
+    false_probability: float = 0.0  # per frame: a false red blob (clutter) is detected
+    false_blob_px: float = 5.0  # diameter of a false blob; the larger blob wins the frame
+    burst_probability: float = 0.0  # per frame: a good frame starts a drop burst
+    burst_mean_frames: float = 5.0  # mean burst length (frames), geometric
+    burst_drop_probability: float = 1.0  # drop probability inside a burst
 
 
 WIND_MODELS = ("uniform", "jet")  # groundstation/sim/wind.py
@@ -390,6 +397,12 @@ def _validate(s: Scenario, problems: _Problems) -> None:
     check(c.delay_jitter_s >= 0, "camera.delay_jitter_s", "must be >= 0")
     check(c.noise_px >= 0, "camera.noise_px", "must not be negative")
     check(0 <= c.dropout_probability < 1, "camera.dropout_probability", "must be in [0, 1)")
+    check(0 <= c.min_blob_px <= 100, "camera.min_blob_px", "must be in [0, 100] px")
+    check(0 <= c.false_probability <= 1, "camera.false_probability", "must be in [0, 1]")
+    check(0 < c.false_blob_px <= 100, "camera.false_blob_px", "must be in (0, 100] px")
+    check(0 <= c.burst_probability < 1, "camera.burst_probability", "must be in [0, 1)")
+    check(c.burst_mean_frames >= 1, "camera.burst_mean_frames", "must be at least 1 frame")
+    check(0 <= c.burst_drop_probability <= 1, "camera.burst_drop_probability", "must be in [0, 1]")
     check(s.wind.gust_m_s >= 0, "wind.gust_m_s", "must not be negative")
     check(s.wind.gust_time_constant_s > 0, "wind.gust_time_constant_s", "must be > 0")
     w = s.wind

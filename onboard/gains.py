@@ -71,6 +71,14 @@ class Gains:
     k_drag: float = _gain(
         0.17, "1/s", 0.0, 2.0, "airframe drag per mass in the observer model (EKF2_MCOEF)"
     )
+    fov_margin: float = _gain(
+        8.0, "deg", 0.0, 30.0, "PNG FOV guard: keep the LOS this far inside top/bottom (0 = off)"
+    )
+    pur_zone: float = _gain(
+        15.0, "deg", 0.0, 40.0, "PNG pursuit bias: acts within this of the top/bottom (0 = off)"
+    )
+    k_pur: float = _gain(4.0, "1/s", 0.0, 20.0, "PNG pursuit bias: heading-to-LOS rate at the edge")
+    tau_los: float = _gain(0.0, "s", 0.0, 2.0, "low-pass time constant on the LOS change (0 = off)")
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

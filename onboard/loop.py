@@ -25,6 +25,7 @@ from .control.guidance import (
     los_change,
     normal_component,
     saturate_norm,
+    smooth_los_change,
 )
 from .datatypes import (
     ControlTelemetry,
@@ -84,6 +85,15 @@ class InterceptionLoop:
                 drag_per_mass_1_s=self.gains.k_drag,
             )
         )
+        self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
+        # the image's top/bottom edges above body x (upright: a portrait camera's long side)
+        roll = math.radians(camera.mount_roll_deg)
+        half_v = math.atan(
+            (abs(math.cos(roll)) * camera.height_px + abs(math.sin(roll)) * camera.width_px)
+            / (2.0 * camera.f_px)
+        )
+        pitch = math.radians(camera.mount_pitch_deg)
+        self.fov_edges_rad = (pitch + half_v, pitch - half_v)
 
     @property
     def last_tick_time_s(self) -> float | None:
@@ -136,6 +146,7 @@ class InterceptionLoop:
         yaw_rate = 0.0
         if brake or est is None or est.lost:
             mode = LoopMode.BRAKE if brake else LoopMode.LOST if self.acquired else LoopMode.WAITING
+            self._dq_filt = _NAN2
             a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
             if est is not None and not est.lost:
                 e_est, e_rate = est.e_px, est.e_rate_px_s
@@ -153,8 +164,13 @@ class InterceptionLoop:
                 # moves both ends of the difference, so Delta q carries no correction jump
                 n_prev = line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
                 dq_y, dq_z = los_change(q_y, q_z, *direction_angles(n_prev))
+            if gains.tau_los > 0.0:
+                dq_y = smooth_los_change(self._dq_filt[0], dq_y, dt, gains.tau_los)
+                dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
+                self._dq_filt = (dq_y, dq_z)
+            e_n = (e_est[0] / f, e_est[1] / f)
             out = self._law(
-                GuidanceInput(dt, n_t, q_y, q_z, dq_y, dq_z, v, (e_est[0] / f, e_est[1] / f), R_WC),
+                GuidanceInput(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
                 gains,
             )
             a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad

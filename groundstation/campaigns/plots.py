@@ -290,6 +290,7 @@ def _wind_plots(outcomes, summary, out: Path) -> list[str]:
         axes[j].set_ylabel(f"normalised {comp}")
     fig.suptitle(f"Image-plane error by wind speed, {LAW_NAMES.get(law, law)} (paper Fig. 18)")
     _savefig(fig, out, "image_error_boxplot.png", plots)
+    _wind_miss_plot(outcomes, out, plots)
     return plots
 
 
@@ -325,3 +326,155 @@ def _outdoor_plots(outcomes, out: Path) -> list[str]:
 
 
 # ------------------------------------------------------------------------------- tables
+
+
+# ------------------------------------------------------------------------------- envelope maps
+def _heatmap(ax, values: np.ndarray, rows: list[str], cols: list[str], cmap, norm, fmt) -> None:
+    im = ax.imshow(values, cmap=cmap, norm=norm, aspect="auto", origin="lower")
+    ax.set_xticks(range(len(cols)), cols)
+    ax.set_yticks(range(len(rows)), rows)
+    for i in range(len(rows)):
+        for j in range(len(cols)):
+            v = values[i, j]
+            if math.isfinite(v):
+                ax.text(j, i, fmt(v), ha="center", va="center", fontsize=7)
+    return im
+
+
+def envelope_grid(summary, law: str, key: str) -> tuple[np.ndarray, list[str], list[str]]:
+    """``summary["cells"][law]`` as an (elevation x azimuth) array of ``key`` (nan if None),
+    with the row (elevation) and column (azimuth) labels in ascending order."""
+    by_el = summary["cells"][law]
+    rows = sorted(by_el, key=float)
+    cols = sorted({az for by_az in by_el.values() for az in by_az}, key=float)
+    grid = np.full((len(rows), len(cols)), math.nan)
+    for i, el in enumerate(rows):
+        for j, az in enumerate(cols):
+            v = by_el[el].get(az, {}).get(key)
+            if v is not None:
+                grid[i, j] = v
+    return grid, rows, cols
+
+
+def _envelope_plots(summary, out: Path) -> list[str]:
+    from matplotlib.colors import LogNorm, Normalize
+
+    plots: list[str] = []
+    laws = list(summary["cells"])
+    fig, axes = plt.subplots(
+        2, len(laws), figsize=(4.5 * len(laws) + 1.5, 10), squeeze=False, layout="constrained"
+    )
+    for k, law in enumerate(laws):
+        ok, rows, cols = envelope_grid(summary, law, "success_rate")
+        im = _heatmap(
+            axes[0, k], 100 * ok, rows, cols, "RdYlGn", Normalize(0, 100), lambda v: f"{v:.0f}"
+        )
+        axes[0, k].set_title(f"{LAW_NAMES.get(law, law)}: HIT %")
+        cep, _, _ = envelope_grid(summary, law, "cep_m")
+        im2 = _heatmap(
+            axes[1, k],
+            np.clip(cep, 1e-4, 30),
+            rows,
+            cols,
+            "viridis_r",
+            LogNorm(1e-3, 3),
+            lambda v: f"{v:.3f}" if v < 1 else f"{v:.1f}",
+        )
+        axes[1, k].set_title(f"{LAW_NAMES.get(law, law)}: CEP (m)")
+        for r in range(2):
+            axes[r, k].set_xlabel("azimuth from the nose (deg)")
+            axes[r, k].set_ylabel("elevation from the nose (deg)")
+    fig.colorbar(im, ax=axes[0, :].tolist(), shrink=0.8, label="HIT %")
+    fig.colorbar(im2, ax=axes[1, :].tolist(), shrink=0.8, label="CEP (m, median miss)")
+    fig.suptitle("Static envelope: targets 15-25 m away,\nvehicle flying forward at 2 m/s")
+    fig.savefig(out / "envelope_map.png", dpi=110)
+    plt.close(fig)
+    plots.append("envelope_map.png")
+    return plots
+
+
+def _range_plots(outcomes, summary, out: Path) -> list[str]:
+    from .definitions import ZEM_LIMIT_M, acquisition, zem_series
+
+    plots: list[str] = []
+    cells = summary["cells"]
+    ranges = sorted(cells, key=float)
+    laws = _laws_of(outcomes)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    width = 0.8 / len(laws)
+    x = np.arange(len(ranges))
+    for k, law in enumerate(laws):
+        hit = [100 * cells[r][law]["success_rate"] for r in ranges]
+        acq = [100 * cells[r][law]["acquired_rate"] for r in ranges]
+        axes[0].bar(x + k * width, hit, width, color=LAW_COLOURS.get(law), label=f"{law} HIT")
+        axes[0].plot(x + k * width, acq, "kv", ms=6, label="acquired" if k == 0 else None)
+    axes[0].set_xticks(x + 0.4 - width / 2, [f"{r} m" for r in ranges])
+    axes[0].set_ylim(0, 105)
+    axes[0].set_ylabel("%")
+    axes[0].legend(fontsize=8)
+    axes[0].set_title("Success and acquisition by initial range")
+    palette = ("tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:olive", "tab:cyan")
+    colours = {r: palette[i % len(palette)] for i, r in enumerate(ranges)}
+    law = "png" if "png" in laws else laws[0]
+    for o in outcomes:
+        if o.labels["law"] != law or not o.trace:
+            continue
+        acq = acquisition(o.trace)
+        if acq is None:
+            continue
+        t, zem = zem_series(o.trace)
+        keep = t >= acq[0]
+        axes[1].semilogy(
+            t[keep] - acq[0],
+            np.maximum(zem[keep], 1e-3),
+            color=colours[str(o.labels["range_m"])],
+            lw=0.7,
+            alpha=0.7,
+        )
+    for r in ranges:
+        axes[1].plot([], [], color=colours[r], label=f"{r} m")
+    axes[1].axhline(ZEM_LIMIT_M, color="k", ls="--", lw=0.8)
+    axes[1].set_xlabel("time since acquisition (s)")
+    axes[1].set_ylabel("zero-effort miss (m)")
+    axes[1].legend(fontsize=8)
+    axes[1].set_title(f"Predicted miss (ZEM) from true states, {LAW_NAMES.get(law, law)}")
+    _savefig(fig, out, "range_zem.png", plots)
+    return plots
+
+
+def _wind_miss_plot(outcomes, out: Path, plots: list[str]) -> None:
+    """Miss distance over wind speed, one box per law and speed (log scale)."""
+    laws = _laws_of(outcomes)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    width = 0.8 / len(laws)
+    for k, law in enumerate(laws):
+        data = [
+            [
+                max(o.result["miss_m"], 1e-4)
+                for o in outcomes
+                if o.labels["wind_m_s"] == w and o.labels["law"] == law
+            ]
+            or [math.nan]
+            for w in WIND_SPEEDS_M_S
+        ]
+        bp = ax.boxplot(
+            data,
+            positions=np.arange(len(WIND_SPEEDS_M_S)) + k * width,
+            widths=0.8 * width,
+            patch_artist=True,
+            showfliers=True,
+        )
+        for patch in bp["boxes"]:
+            patch.set_facecolor(LAW_COLOURS.get(law, "grey"))
+        ax.plot([], [], "s", color=LAW_COLOURS.get(law), label=LAW_NAMES.get(law, law))
+    radii = {o.result["hit_radius_m"] for o in outcomes}
+    if len(radii) == 1:
+        ax.axhline(radii.pop(), color="k", ls="--", lw=0.8, label="hit radius")
+    ax.set_yscale("log")
+    ax.set_xticks(
+        np.arange(len(WIND_SPEEDS_M_S)) + 0.4 - width / 2, [f"{w} m/s" for w in WIND_SPEEDS_M_S]
+    )
+    ax.set_ylabel("miss distance (m)")
+    ax.legend(fontsize=8)
+    ax.set_title("Miss over wind speed")
+    _savefig(fig, out, "miss_by_wind.png", plots)

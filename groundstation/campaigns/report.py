@@ -16,11 +16,14 @@ import numpy as np
 from .plots import (
     LAW_COLOURS,
     LAW_NAMES,
+    _envelope_plots,
     _laws_of,
     _moving_plots,
     _outdoor_plots,
+    _range_plots,
     _static_plots,
     _wind_plots,
+    envelope_grid,
 )
 from .runner import SortieOutcome
 
@@ -142,6 +145,59 @@ def _md_outdoor(summary) -> str:
     return "\n".join(lines)
 
 
+def _md_envelope(summary) -> str:
+    lines = []
+    for law in summary["cells"]:
+        ok, rows, cols = envelope_grid(summary, law, "success_rate")
+        cep, _, _ = envelope_grid(summary, law, "cep_m")
+        lines += [
+            f"{LAW_NAMES.get(law, law)}: HIT rate / CEP (m) by elevation (rows) and azimuth "
+            "(columns) from the nose, degrees",
+            "",
+            "| elevation | " + " | ".join(f"az {c}" for c in cols) + " |",
+            "|---|" + "---|" * len(cols),
+        ]
+        for i in reversed(range(len(rows))):
+            cells = [
+                "—" if not math.isfinite(ok[i, j]) else f"{100 * ok[i, j]:.0f} % / {cep[i, j]:.3f}"
+                for j in range(len(cols))
+            ]
+            lines.append(f"| {rows[i]} | " + " | ".join(cells) + " |")
+        good = summary["good_elevations_deg"][law]
+        lines += [
+            "",
+            f"Elevations where every azimuth cell meets {summary['criterion']}: "
+            + (", ".join(f"{e:g}" for e in sorted(good)) or "none")
+            + "",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def _md_range(summary) -> str:
+    lines = [
+        "| range | law | HIT rate | CEP | acquired | acquisition range (median) | "
+        "ZEM at acquisition (median) | ZEM < 1 m from (median, after acquisition) | "
+        "... for at least (before the end) | settled |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r, by_law in summary["cells"].items():
+        for law, c in by_law.items():
+            lines.append(
+                f"| {r} m | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
+                f"{_fmt(c['cep_m'])} m | {100 * c['acquired_rate']:.0f} % | "
+                f"{_fmt(c['acq_range_median_m'], 1)} m | {_fmt(c['zem_acq_median_m'], 2)} m | "
+                f"{_fmt(c['zem_settle_median_s'], 2)} s | {_fmt(c['zem_lead_min_s'], 2)} s | "
+                f"{100 * c['zem_settled_rate']:.0f} % |"
+            )
+    lines.append(
+        "\nZEM (zero-effort miss): the miss if neither vehicle nor target accelerated from then "
+        "on, from the true states. 'Settled' counts sorties whose ZEM, from some time after "
+        "acquisition, stays under 1 m to the end; the column before is the shortest such stretch."
+    )
+    return "\n".join(lines)
+
+
 def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOutcome]) -> str:
     if name == "static":
         return _md_static(summary, outcomes)
@@ -149,6 +205,10 @@ def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOut
         return _md_moving(summary)
     if name == "wind":
         return _md_wind(summary)
+    if name == "envelope":
+        return _md_envelope(summary)
+    if name == "range":
+        return _md_range(summary)
     return _md_outdoor(summary)
 
 
@@ -188,6 +248,8 @@ def write_report(
         "moving": lambda: _moving_plots(outcomes, out),
         "wind": lambda: _wind_plots(outcomes, summary, out),
         "outdoor": lambda: _outdoor_plots(outcomes, out),
+        "envelope": lambda: _envelope_plots(summary, out),
+        "range": lambda: _range_plots(outcomes, summary, out),
     }[name]()
     md = [
         f"# Campaign `{name}`",

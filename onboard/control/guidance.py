@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..datatypes import GRAVITY_M_S2
 from ..enums import GuidanceLaw as Law
 from ..gains import Gains
 from ..geometry import wrap_pi
@@ -30,6 +31,9 @@ class GuidanceInput:
     velocity_enu_m_s: np.ndarray
     e_norm: tuple[float, float]  # normalised image error e / f
     R_WC: np.ndarray  # camera -> world
+    # elevation (rad) of the image's (top, bottom) edges above the body x axis of a level
+    # body: mount pitch +- half the vertical FOV; nan switches the FOV-aware terms off
+    fov_edges_rad: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,17 +103,103 @@ def _hover_start(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     return GuidanceOutput(a_d, math.nan, math.nan, True)
 
 
+_PITCH_LIMIT_RAD = math.radians(60.0)
+
+
+def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -> float:
+    """Lowest body pitch (nose up +, rad) that keeps a LOS at elevation ``los_elev_rad`` at
+    least ``margin_rad`` below the image's top edge, which sits ``top_edge_rad`` above body x
+    (clipped to +-60 deg)."""
+    lo = los_elev_rad - (top_edge_rad - margin_rad)
+    return min(max(lo, -_PITCH_LIMIT_RAD), _PITCH_LIMIT_RAD)
+
+
+def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
+    """Field-of-view guard on a desired acceleration (not in the paper; README "Field of
+    view").
+
+    A thrust-vectoring vehicle flies a forward acceleration a_f by pitching its nose down by
+    atan(a_f / (g + a_z)) (eqs. 16, 18), and the strapdown camera pitches with it: the speed
+    ramp's k_a moves a target that sits high in the image off its top edge. The guard caps
+    a_f, the component of a_d along the camera's horizontal heading, at the value whose steady
+    pitch keeps the LOS ``fov_margin`` degrees below the top edge (:func:`min_pitch_rad`), and
+    at no less than 0: it limits the pitch-down, it never brakes (braking bled the forward
+    speed off, the flight path went nearly vertical and its azimuth wandered). The vertical
+    and lateral components, which PNG turns with, are untouched; so is a target low in the
+    image (forcing a nose-down pitch would fight PNG's endgame); the pursuit bias
+    (:func:`pursuit_weight`) does the rest. ``fov_margin = 0`` switches it off.
+    """
+    if gains.fov_margin <= 0.0:
+        return a_d
+    top = inp.fov_edges_rad[0]
+    if not math.isfinite(top):
+        return a_d
+    axis = inp.R_WC[:, 2]
+    hx, hy = float(axis[0]), float(axis[1])
+    hn = math.hypot(hx, hy)
+    if hn < 1e-6:  # camera looking straight up or down: no heading to pitch along
+        return a_d
+    h = np.array([hx / hn, hy / hn, 0.0])
+    lo = min_pitch_rad(inp.los_elev_rad, top, math.radians(gains.fov_margin))
+    a_f = float(a_d @ h)
+    gz = max(GRAVITY_M_S2 + float(a_d[2]), 0.1 * GRAVITY_M_S2)
+    a_f_max = max(-gz * math.tan(lo), 0.0)  # limit the pitch-down, never brake
+    if a_f <= a_f_max:
+        return a_d
+    return saturate_norm(a_d + (a_f_max - a_f) * h, gains.a_max)
+
+
+def edge_margin_rad(inp: GuidanceInput) -> float:
+    """Angle (rad) between the LOS and the nearer of the image's top and bottom edges, with
+    the camera's current pitch (its optical axis elevation; a level-rolled camera): negative
+    when the LOS is outside the vertical FOV, nan when the FOV edges are unknown."""
+    top, bottom = inp.fov_edges_rad
+    if not (math.isfinite(top) and math.isfinite(bottom)):
+        return math.nan
+    axis = inp.R_WC[:, 2]
+    cam_elev = math.atan2(float(axis[2]), math.hypot(float(axis[0]), float(axis[1])))
+    half = 0.5 * (top - bottom)
+    return min(cam_elev + half - inp.los_elev_rad, inp.los_elev_rad - (cam_elev - half))
+
+
+def pursuit_weight(inp: GuidanceInput, gains: Gains) -> float:
+    """Weight in [0, 1] of the pursuit bias: 0 while the LOS is more than ``pur_zone`` degrees
+    inside the top and bottom edges, rising linearly to 1 at the edge (0 if ``pur_zone`` = 0)."""
+    if gains.pur_zone <= 0.0 or gains.k_pur <= 0.0:
+        return 0.0
+    m = edge_margin_rad(inp)
+    if not math.isfinite(m):
+        return 0.0
+    return min(max(1.0 - m / math.radians(gains.pur_zone), 0.0), 1.0)
+
+
+def smooth_los_change(prev_rad: float, dq_rad: float, dt_s: float, tau_s: float) -> float:
+    """One step of a first-order low-pass on the per-tick LOS change Delta q (eq. 8's input):
+    prev + dt / (tau + dt) (dq - prev). Far away the LOS rate |v| sin(angle) / R is small and
+    Delta q is mostly image noise; ``tau_s = 0`` passes Delta q through unchanged."""
+    if tau_s <= 0.0 or not math.isfinite(prev_rad):
+        return dq_rad
+    return prev_rad + (dt_s / (tau_s + dt_s)) * (dq_rad - prev_rad)
+
+
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
     v = inp.velocity_enu_m_s
     speed = math.sqrt(float(v @ v))
     if speed < gains.v_min:
-        return _hover_start(inp, gains)
+        a_d = fov_guard(_hover_start(inp, gains).accel_desired_enu_m_s2, inp, gains)
+        return GuidanceOutput(a_d, math.nan, math.nan, True)
     sigma_y, sigma_z = direction_angles(v / speed)
     sigma_yd = sigma_y + gains.K_y * inp.d_los_elev_rad
     sigma_zd = sigma_z + gains.K_z * inp.d_los_azim_rad
-    v_d = ramped_speed(speed, gains, inp.dt_s) * direction_from_angles(sigma_yd, sigma_zd)
-    return GuidanceOutput(accel_toward_velocity(v_d, v, gains, inp.dt_s), sigma_y, sigma_z, False)
+    n_d = direction_from_angles(sigma_yd, sigma_zd)
+    w = pursuit_weight(inp, gains)
+    if w > 0.0:  # near the image's top or bottom edge: turn toward the LOS (pursuit)
+        n_d = n_d + (w * gains.k_pur * inp.dt_s) * (inp.los_enu - v / speed)
+        n_d = n_d / math.sqrt(float(n_d @ n_d))
+    v_d = ramped_speed(speed, gains, inp.dt_s) * n_d
+    a_d = fov_guard(accel_toward_velocity(v_d, v, gains, inp.dt_s), inp, gains)
+    return GuidanceOutput(a_d, sigma_y, sigma_z, False)
 
 
 def track_velocity_direction(
