@@ -1,9 +1,10 @@
 """Reference sortie outcomes for tests/test_speed_regression.py.
 
 ``python -m tests.speed_reference`` rewrites tests/data/speed_reference.json from the code as
-it is. It was computed from main (74ac5e3) before the simulator's hot path was restructured
-(#16 item 1); regenerate it only when a change is meant to alter the flown numbers (e.g. a
-new DKF), and say so in the commit.
+it is. It was first computed from main (74ac5e3) before the simulator's hot path was
+restructured (#16 item 1), and regenerated once #13's changes to what is flown had merged
+(estimate model, DKF, observer, wind, FOV-aware PNG). Regenerate it only when a change is
+meant to alter the flown numbers, and say so in the commit.
 """
 
 from __future__ import annotations
