@@ -410,7 +410,7 @@ def test_gains_panel_refusal_reverts_and_gain_sets_round_trip(station, page, tmp
     assert station.session.gains.k_d == 0.02
 
     # the search box narrows the table
-    page.fill("#gain-search", "fov")
+    page.fill("#gain-search", "yaw-rate")
     visible = page.evaluate("[...document.querySelectorAll('#gains tr[data-gain]')]"
                             ".filter(r => !r.hidden).map(r => r.dataset.gain)")  # fmt: skip
     assert visible == ["k_p", "k_d"]
