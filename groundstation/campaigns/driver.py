@@ -15,7 +15,7 @@ from typing import Any
 import tomli_w
 from tqdm import tqdm
 
-from ..scenario import parse_overrides, with_overrides
+from ..scenario.overrides import parse_overrides, with_overrides
 from ..sim.camera import CAMERA_MODES
 from .definitions import LAWS, CampaignError, build_jobs, get_campaign
 from .report import tables_markdown, write_report

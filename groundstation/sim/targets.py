@@ -12,7 +12,7 @@ and ``advance(t_s, dt_s, wind)`` that moves it to time ``t_s``.
 - tethered: a helium balloon on a rope anchored tether_length_m below position_m (its rest
   position in still air), pulled up by its net lift and pushed by the drag of the wind at its
   position (quadratic, C_d 0.47), with its added air mass; lift and mass from the physics
-  unless the file gives them (scenario.balloon_lift_and_mass). It starts leaning at rest in
+  unless the file gives them (scenario/physics.py). It starts leaning at rest in
   the mean wind where it floats and swings with the gusts
 """
 
@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-from ..scenario import AIR_DENSITY_KG_M3, TargetSpec, balloon_lift_and_mass
+from ..scenario import TargetSpec
+from ..scenario.physics import AIR_DENSITY_KG_M3, balloon_lift_and_mass
 
 
 class Target:

@@ -1,7 +1,8 @@
 """The PX4 parts of the SITL vehicle that a PX4 user's tools look at, as pure pieces the
 vehicle (:mod:`.vehicle`) wires to its link: the global position of a local ENU point around
 a home, a battery, the sensor-health bits of ``SYS_STATUS``, the autopilot parameters (with
-PX4's byte-wise INT32 encoding) and the offset/clock of ``TIMESYNC`` answers.
+PX4's byte-wise INT32 encoding), the offset/clock of ``TIMESYNC`` answers and PX4's AUTO
+modes (TAKEOFF, LAND, RTL).
 """
 
 from __future__ import annotations
@@ -10,7 +11,13 @@ import math
 import struct
 from dataclasses import dataclass
 
+from onboard.link.px4 import PX4_MAIN_AUTO, px4_custom_mode
+
 EARTH_RADIUS_M = 6_378_137.0
+PX4_SUB_AUTO_TAKEOFF, PX4_SUB_AUTO_RTL, PX4_SUB_AUTO_LAND = 2, 5, 6  # PX4's AUTO sub-modes
+MODE_TAKEOFF = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_TAKEOFF)
+MODE_LAND = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_LAND)
+MODE_RTL = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_RTL)
 
 # MAV_SYS_STATUS_SENSOR bits a healthy PX4 quadrotor reports present, enabled and healthy
 SENSOR_BITS = {

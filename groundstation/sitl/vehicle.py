@@ -25,6 +25,10 @@ behaves as PX4 does towards an offboard computer:
 The target starts moving, and the sortie clock starts, when the vehicle first enters
 offboard; the closest approach is then tracked in continuous time, and the result printed as
 one ``SITL_RESULT {json}`` line when the vehicle passes the target.
+
+This module keeps the vehicle's state, PX4's hold and AUTO modes, the physics and the
+camera; what arrives over MAVLink is handled in :mod:`.commands`, what is sent in
+:mod:`.telemetry` (both mixed into :class:`SitlVehicle`).
 """
 
 from __future__ import annotations
@@ -45,27 +49,7 @@ from onboard.control.attitude import attitude_command
 from onboard.enums import Outcome
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat, wrap_pi
-from onboard.link.px4 import (
-    AUTOPILOT_COMPONENT_ID,
-    MODE_HOLD,
-    MODE_OFFBOARD,
-    PX4_MAIN_AUTO,
-    PX4_MAIN_OFFBOARD,
-    PX4_MAIN_POSCTL,
-    PX4_SUB_AUTO_LOITER,
-    TARGET_SYSTEM_ID,
-    VEHICLE_SYSTEM_ID,
-    MavLink,
-    all_finite,
-    enu_to_ned,
-    flu_to_frd,
-    frd_to_flu,
-    mavlink,
-    param_id_str,
-    px4_custom_mode,
-    px4_mode_name,
-    quat_enu_flu_to_ned_frd,
-)
+from onboard.link.px4 import MODE_HOLD, MODE_OFFBOARD, MavLink, mavlink, px4_mode_name
 
 from ..scenario import Scenario
 from ..sim.render import FrameRenderer
@@ -73,34 +57,13 @@ from ..sim.simulation import PASS_RADIUS_M, closest_in_step
 from ..sim.targets import Target
 from ..sim.vehicle import Multicopter
 from ..sim.wind import Wind
-from .autopilot import (
-    SENSORS_HEALTHY,
-    AutopilotParams,
-    Battery,
-    Home,
-    timesync_answer,
-)
+from .autopilot import MODE_LAND, MODE_RTL, MODE_TAKEOFF, AutopilotParams, Battery, Home
 from .camera_server import CameraServer
+from .commands import SitlCommands
+from .telemetry import RATES_HZ, SitlTelemetry
 
 PHYSICS_HZ = 600
-RATES_HZ = {
-    "ATTITUDE_QUATERNION": 200.0,
-    "HIGHRES_IMU": 200.0,
-    "LOCAL_POSITION_NED": 100.0,
-    "GLOBAL_POSITION_INT": 50.0,
-    "EXTENDED_SYS_STATE": 5.0,
-    "SYS_STATUS": 2.0,
-    "BATTERY_STATUS": 2.0,
-    "HOME_POSITION": 1.0,
-}
-PX4_SUB_AUTO_TAKEOFF, PX4_SUB_AUTO_RTL, PX4_SUB_AUTO_LAND = 2, 5, 6
-MODE_TAKEOFF = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_TAKEOFF)
-MODE_LAND = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_LAND)
-MODE_RTL = px4_custom_mode(PX4_MAIN_AUTO, PX4_SUB_AUTO_RTL)
 RTL_CRUISE_M_S = 5.0  # PX4's MPC_XY_CRUISE
-TARGET_POSITION_HZ = 20.0
-OFFBOARD_STREAM_S = 0.5  # a setpoint this recent is needed to enter offboard
-MAX_RATE_CMD_RAD_S = 20.0
 
 
 @dataclass
@@ -114,7 +77,7 @@ class SitlOptions:
     on_ground: bool = False  # start disarmed and landed below the scenario's start position
 
 
-class SitlVehicle:
+class SitlVehicle(SitlCommands, SitlTelemetry):
     def __init__(
         self,
         scenario: Scenario,
@@ -381,384 +344,6 @@ class SitlVehicle:
         )
         self._n += 1
         heapq.heappush(self._frames, (t + delay, self._n, t, frame))
-
-    # ------------------------------------------------------------------ MAVLink in
-    def _handle(self, now: float) -> None:
-        for msg in self.link.poll():
-            kind = msg.get_type()
-            try:
-                if kind == "SET_ATTITUDE_TARGET":
-                    self._setpoint(msg, now)
-                elif kind == "TIMESYNC":
-                    answer = timesync_answer(msg.tc1, msg.ts1, time.perf_counter() - self._t0)
-                    if answer is not None:
-                        self.link.send(self.link.mav.timesync_encode(*answer))
-                elif (kind.startswith("PARAM_") or kind == "COMMAND_LONG") and self._for_us(msg):
-                    if kind == "COMMAND_LONG":
-                        self._command(msg, now)
-                    else:
-                        self._param(msg, kind)
-            except (ValueError, TypeError, OverflowError, KeyError):
-                self.link.bad_frames += 1  # a valid frame carrying nonsense (a NaN mode...)
-
-    @staticmethod
-    def _for_us(msg) -> bool:
-        return msg.target_system in (VEHICLE_SYSTEM_ID, 0) and msg.target_component in (
-            AUTOPILOT_COMPONENT_ID,
-            0,
-        )
-
-    def _setpoint(self, msg, now: float) -> None:
-        if msg.target_system != VEHICLE_SYSTEM_ID:
-            return
-        rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
-        ok = (
-            msg.type_mask & mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
-            and all_finite((*rates, msg.thrust))
-            and 0.0 <= msg.thrust <= 1.0
-            and all(abs(r) <= MAX_RATE_CMD_RAD_S for r in rates)
-        )
-        if not ok:
-            self.rejected_setpoints += 1
-            if self.rejected_setpoints == 1 or self.rejected_setpoints % 100 == 0:
-                self._say(mavlink.MAV_SEVERITY_ERROR, "setpoint rejected: not finite/in range")
-            return
-        self.setpoints += 1
-        self.setpoint = (frd_to_flu(rates), float(msg.thrust))
-        self.last_setpoint_s = now
-
-    def _ack(self, msg, result: int) -> None:
-        """COMMAND_ACK addressed to whoever sent the command (PX4 fills the target too)."""
-        self.link.send(
-            self.link.mav.command_ack_encode(
-                msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
-            )
-        )
-
-    def _param(self, msg, kind: str) -> None:
-        """PX4's parameter protocol on the autopilot component."""
-        names = self.params.order
-        if kind == "PARAM_REQUEST_LIST":
-            for i in range(len(names)):
-                self._send_param(i)
-        elif kind == "PARAM_REQUEST_READ":
-            name = param_id_str(msg.param_id)
-            i = names.index(name) if msg.param_index < 0 and name in names else msg.param_index
-            if 0 <= i < len(names):
-                self._send_param(i)
-        elif kind == "PARAM_SET":
-            name = param_id_str(msg.param_id)
-            if name not in self.params.specs:
-                return  # PX4 does not answer an unknown name
-            if not self.params.set_wire(name, float(msg.param_value), int(msg.param_type)):
-                self._say(mavlink.MAV_SEVERITY_WARNING, f"param {name}: value refused")
-            self._send_param(names.index(name))
-
-    def _send_param(self, i: int) -> None:
-        name = self.params.order[i]
-        value, kind = self.params.wire(name)
-        self.link.send(
-            self.link.mav.param_value_encode(
-                name.encode("ascii"), value, kind, len(self.params.order), i
-            )
-        )
-
-    def _nav_command(self, msg, mode: int) -> None:
-        """TAKEOFF (param7: altitude AMSL, NaN: MIS_TAKEOFF_ALT above home), LAND, RTL."""
-        p = list(self.vehicle.p)
-        if mode == MODE_TAKEOFF:
-            if not self.armed or not self.landed:
-                self._ack(msg, mavlink.MAV_RESULT_DENIED)
-                why = "not armed" if not self.armed else "already flying"
-                self._say(mavlink.MAV_SEVERITY_WARNING, f"takeoff refused: {why}")
-                return
-            alt = msg.param7 if msg.command == mavlink.MAV_CMD_NAV_TAKEOFF else math.nan
-            rel = (
-                self.params["MIS_TAKEOFF_ALT"]
-                if not math.isfinite(alt)
-                else alt - self.opt.home.alt_m
-            )
-            if not 0.5 <= rel <= 100.0:
-                self._ack(msg, mavlink.MAV_RESULT_DENIED)
-                return
-            self._nav_goal = [p[0], p[1], rel]
-        elif self.landed:
-            self._ack(msg, mavlink.MAV_RESULT_DENIED)
-            self._say(mavlink.MAV_SEVERITY_WARNING, "refused: landed")
-            return
-        elif mode == MODE_RTL:
-            self._nav_goal = [0.0, 0.0, max(p[2], self.params["RTL_RETURN_ALT"])]
-            self._rtl_phase = "climb"
-        else:
-            self._nav_goal = [p[0], p[1], 0.0]
-        self.custom_mode = mode
-        self.hold_p = p
-        self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-        self._say(mavlink.MAV_SEVERITY_INFO, px4_mode_name(mode))
-
-    def _request_message(self, msg) -> None:
-        name = mavlink.mavlink_map.get(int(msg.param1))
-        name = name.msgname if name is not None else None
-        if name == "AUTOPILOT_VERSION":
-            self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            self._send_version()
-        elif name in self.rates_hz:
-            self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            self._next_send[name] = 0.0  # sent at the next _send_due
-        else:
-            self._ack(msg, mavlink.MAV_RESULT_DENIED)
-
-    def _command(self, msg, now: float) -> None:
-        cmd = msg.command
-        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            if msg.param1 == 1.0:
-                self.armed = True
-                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            elif self.landed:
-                self.armed = False
-                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            else:
-                self._ack(msg, mavlink.MAV_RESULT_DENIED)  # airborne: no disarm
-                self._say(mavlink.MAV_SEVERITY_WARNING, "disarm refused: in air")
-        elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
-            self._nav_command(msg, MODE_TAKEOFF)
-        elif cmd == mavlink.MAV_CMD_NAV_LAND:
-            self._nav_command(msg, MODE_LAND)
-        elif cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            self._nav_command(msg, MODE_RTL)
-        elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            self._request_message(msg)
-        elif cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            self._send_version()
-        elif cmd == mavlink.MAV_CMD_DO_SET_MODE:
-            main, sub = int(msg.param2), int(msg.param3)
-            nav = {PX4_SUB_AUTO_TAKEOFF: MODE_TAKEOFF, PX4_SUB_AUTO_LAND: MODE_LAND,
-                   PX4_SUB_AUTO_RTL: MODE_RTL}  # fmt: skip
-            if main == PX4_MAIN_AUTO and sub in nav:
-                self._nav_command(msg, nav[sub])
-                return
-            if main == PX4_MAIN_OFFBOARD:
-                if now - self.last_setpoint_s <= OFFBOARD_STREAM_S and self.armed:
-                    if self.custom_mode != MODE_OFFBOARD:
-                        self.custom_mode = MODE_OFFBOARD
-                        if self.sortie_start_s is None:
-                            self.sortie_start_s = self.time_s
-                            self._rel = None
-                        self._say(mavlink.MAV_SEVERITY_INFO, "OFFBOARD")
-                    self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-                else:
-                    self._ack(msg, mavlink.MAV_RESULT_DENIED)
-                    self._say(mavlink.MAV_SEVERITY_WARNING, "offboard refused: no setpoints")
-            elif main == PX4_MAIN_POSCTL or (
-                main == PX4_MAIN_AUTO and sub in (0, PX4_SUB_AUTO_LOITER)
-            ):
-                if self.custom_mode != MODE_HOLD:
-                    self._enter_hold("")
-                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            else:
-                self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
-        elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            name = (
-                mavlink.mavlink_map[int(msg.param1)].msgname
-                if int(msg.param1) in mavlink.mavlink_map
-                else None
-            )
-            if name in self.rates_hz and msg.param2 > 0:
-                self.rates_hz[name] = min(1e6 / msg.param2, 500.0)
-                self._ack(msg, mavlink.MAV_RESULT_ACCEPTED)
-            else:
-                self._ack(msg, mavlink.MAV_RESULT_DENIED)
-        else:
-            self._ack(msg, mavlink.MAV_RESULT_UNSUPPORTED)
-
-    # ------------------------------------------------------------------ MAVLink out
-    def _send_due(self, now: float) -> None:
-        link, mav, veh = self.link, self.link.mav, self.vehicle
-        boot_ms = int(now * 1000) & 0xFFFFFFFF
-        if now >= self._next_hb_s:
-            self._next_hb_s = now + 1.0
-            base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-            if self.armed:
-                base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-            link.heartbeat(
-                mavlink.MAV_TYPE_QUADROTOR,
-                mavlink.MAV_AUTOPILOT_PX4,
-                base,
-                self.custom_mode,
-                mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY,
-            )
-            self._as_target(
-                lambda: link.heartbeat(
-                    mavlink.MAV_TYPE_FREE_BALLOON,
-                    mavlink.MAV_AUTOPILOT_INVALID,
-                    0,
-                    0,
-                    mavlink.MAV_STATE_ACTIVE,
-                )
-            )
-        due = self._next_send
-        if now >= due["ATTITUDE_QUATERNION"]:
-            due["ATTITUDE_QUATERNION"] = now + 1.0 / self.rates_hz["ATTITUDE_QUATERNION"]
-            q = quat_enu_flu_to_ned_frd(veh.q)
-            w = flu_to_frd(veh.w)
-            link.send(
-                mav.attitude_quaternion_encode(
-                    boot_ms, *(float(c) for c in q), float(w[0]), float(w[1]), float(w[2])
-                )
-            )
-        if now >= due["HIGHRES_IMU"]:
-            due["HIGHRES_IMU"] = now + 1.0 / self.rates_hz["HIGHRES_IMU"]
-            noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
-            g = flu_to_frd(np.array(veh.read_gyro()) + noise)
-            R = quat_to_rotmat(veh.q)
-            f_flu = R.T @ (np.array(veh.accel) + np.array([0.0, 0.0, 9.81]))
-            f = flu_to_frd(f_flu)
-            link.send(
-                mav.highres_imu_encode(
-                    int(now * 1e6),
-                    float(f[0]),
-                    float(f[1]),
-                    float(f[2]),
-                    float(g[0]),
-                    float(g[1]),
-                    float(g[2]),
-                    0.0,
-                    0.0,
-                    0.0,
-                    1013.0,
-                    0.0,
-                    float(veh.p[2]),
-                    20.0,
-                    0b1111111,
-                )
-            )
-        if now >= due["LOCAL_POSITION_NED"]:
-            due["LOCAL_POSITION_NED"] = now + 1.0 / self.rates_hz["LOCAL_POSITION_NED"]
-            p, v = enu_to_ned(veh.p), enu_to_ned(veh.v)
-            link.send(mav.local_position_ned_encode(boot_ms, *map(float, p), *map(float, v)))
-        for name, send in self._extra_senders.items():
-            if now >= due[name]:
-                due[name] = now + 1.0 / self.rates_hz[name]
-                send(boot_ms)
-        if now >= self._next_target_s:
-            self._next_target_s = now + 1.0 / TARGET_POSITION_HZ
-            tp, tv = enu_to_ned(self.target.p), enu_to_ned(self.target.v)
-            self._as_target(
-                lambda: link.send(
-                    mav.local_position_ned_encode(boot_ms, *map(float, tp), *map(float, tv))
-                )
-            )
-        while self._frames and self._frames[0][0] <= now:
-            _send_t, _, cap_t, frame = heapq.heappop(self._frames)
-            self.camera.publish(frame, cap_t, now - cap_t)
-
-    def _senders(self) -> dict:
-        return {
-            "GLOBAL_POSITION_INT": self._send_global,
-            "EXTENDED_SYS_STATE": lambda _ms: self.link.send(
-                self.link.mav.extended_sys_state_encode(
-                    mavlink.MAV_VTOL_STATE_UNDEFINED, self.landed_state
-                )
-            ),
-            "SYS_STATUS": self._send_sys_status,
-            "BATTERY_STATUS": self._send_battery,
-            "HOME_POSITION": self._send_home,
-        }
-
-    def _send_global(self, boot_ms: int) -> None:
-        veh = self.vehicle
-        lat, lon, alt = self.opt.home.to_global(veh.p)
-        v = enu_to_ned(veh.v)
-        hdg = (90.0 - math.degrees(self._yaw())) % 360.0
-        self.link.send(
-            self.link.mav.global_position_int_encode(
-                boot_ms,
-                round(lat * 1e7),
-                round(lon * 1e7),
-                round(alt * 1000.0),
-                round(veh.p[2] * 1000.0),
-                *(max(-32767, min(32767, round(100.0 * c))) for c in v),
-                round(100.0 * hdg) % 36000,
-            )
-        )
-
-    def _send_home(self, _boot_ms: int) -> None:
-        h = self.opt.home
-        self.link.send(
-            self.link.mav.home_position_encode(
-                round(h.lat_deg * 1e7),
-                round(h.lon_deg * 1e7),
-                round(h.alt_m * 1000.0),
-                0.0,
-                0.0,
-                0.0,
-                [1.0, 0.0, 0.0, 0.0],
-                0.0,
-                0.0,
-                0.0,
-                int(self.time_s * 1e6),
-            )
-        )
-
-    def _send_sys_status(self, _boot_ms: int) -> None:
-        b = self.battery
-        self.link.send(
-            self.link.mav.sys_status_encode(
-                SENSORS_HEALTHY,
-                SENSORS_HEALTHY,
-                SENSORS_HEALTHY,
-                250,
-                round(b.voltage_v * 1000.0),
-                round(b.current_a * 100.0),
-                round(100.0 * b.remaining),
-                0,
-                0,
-                0,
-                0,
-                0,
-                0,
-            )
-        )
-
-    def _send_battery(self, _boot_ms: int) -> None:
-        b = self.battery
-        self.link.send(
-            self.link.mav.battery_status_encode(
-                0,
-                mavlink.MAV_BATTERY_FUNCTION_ALL,
-                mavlink.MAV_BATTERY_TYPE_LIPO,
-                2500,
-                b.cell_voltages_mv,
-                round(b.current_a * 100.0),
-                round(b.consumed_mah),
-                -1,
-                round(100.0 * b.remaining),
-                0,
-                mavlink.MAV_BATTERY_CHARGE_STATE_OK,
-            )
-        )
-
-    def _send_version(self) -> None:
-        caps = (
-            mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-            | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
-            | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-        )
-        self.link.send(
-            self.link.mav.autopilot_version_encode(
-                caps, 0x010F0000, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1
-            )
-        )
-
-    def _as_target(self, send) -> None:
-        mav = self.link.mav
-        mav.srcSystem = TARGET_SYSTEM_ID
-        try:
-            send()
-        finally:
-            mav.srcSystem = VEHICLE_SYSTEM_ID
 
     # ------------------------------------------------------------------ run
     def stop(self) -> None:

@@ -1,0 +1,142 @@
+"""The scenario's sections as typed dataclasses: their fields are the keys a scenario file
+may hold, fields without a default are required, and the annotation gives the type. Angles are
+degrees in the file and stay so named (``yaw_deg``); they are converted where used."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from onboard.gains import Gains
+
+Vec3 = tuple[float, float, float]
+MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tethered")
+SCENARIO_DIR = Path(__file__).parent.parent / "scenarios"
+
+
+CAMERA_MODES = ("projected", "rendered")  # how the simulated camera sees the target
+
+
+@dataclass(frozen=True)
+class InterceptorSpec:
+    position_m: Vec3
+    velocity_m_s: Vec3 = (0.0, 0.0, 0.0)
+    yaw_deg: float = 90.0  # heading of body x from +x toward +y
+    size_m: float = 0.3  # diameter used for the hit test
+    mass_kg: float = 1.5
+    thrust_to_weight: float = 3.0
+    drag_n_s_m: float = 0.25  # linear drag on air-relative velocity
+    rate_time_constant_s: float = 0.05
+    thrust_time_constant_s: float = 0.03
+    max_rate_deg_s: float = 229.18  # 4 rad/s
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    motion: str
+    position_m: Vec3  # start position (tethered: rest position)
+    velocity_m_s: Vec3 = (0.0, 0.0, 0.0)  # cv, ca, sinusoid drift, escape start, takeoff climb
+    acceleration_m_s2: Vec3 = (0.0, 0.0, 0.0)  # ca, escape
+    amplitude_m: Vec3 = (0.0, 0.0, 0.0)  # sinusoid
+    period_s: float = 0.0  # sinusoid, circle (negative: clockwise circle)
+    radius_m: float = 0.0  # circle
+    max_speed_m_s: float = 30.0  # escape
+    start_s: float = 0.0  # takeoff: climb starts at this time
+    diameter_m: float = 0.3
+    tether_length_m: float = 1.0  # tethered
+    net_lift_n: float = 0.0  # tethered: buoyancy minus weight; 0 = from helium physics
+    mass_kg: float = 0.0  # tethered: balloon, gas and added air mass; 0 = from physics
+    envelope_mass_kg: float = 0.0015  # tethered: the latex (a ~0.16 m party balloon)
+    drag_coefficient: float = 0.47  # tethered: sphere
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    width_px: int = 640
+    height_px: int = 480
+    hfov_deg: float = 90.0
+    rate_hz: float = 30.0
+    delay_s: float = 0.08  # capture to result
+    delay_jitter_s: float = 0.005  # 1 sigma
+    noise_px: float = 1.0  # 1 sigma, projected mode
+    dropout_probability: float = 0.02
+    mount_pitch_deg: float = 0.0
+    mount_roll_deg: float = 0.0
+    # detector realism (README "Detector realism"); each 0 switches its part off
+    min_blob_px: float = 0.0  # blobs narrower than this (diameter, px) are not detected
+    false_probability: float = 0.0  # per frame: a false red blob (clutter) is detected
+    false_blob_px: float = 5.0  # diameter of a false blob; the larger blob wins the frame
+    burst_probability: float = 0.0  # per frame: a good frame starts a drop burst
+    burst_mean_frames: float = 5.0  # mean burst length (frames), geometric
+    burst_drop_probability: float = 1.0  # drop probability inside a burst
+
+
+WIND_MODELS = ("uniform", "jet")  # groundstation/sim/wind.py
+
+
+@dataclass(frozen=True)
+class WindSpec:
+    mean_m_s: Vec3 = (0.0, 0.0, 0.0)  # jet: the wind at the target's rest position
+    gust_m_s: float = 0.0  # 1 sigma per horizontal axis (vertical: 30 %); jet: at the target
+    gust_time_constant_s: float = 2.0
+    model: str = "uniform"  # uniform | jet (a fan's round jet along mean_m_s)
+    jet_source_m: Vec3 = (0.0, 0.0, 0.0)  # jet: the fan's outlet centre
+    jet_diameter_m: float = 0.5  # jet: the fan's outlet diameter
+
+
+@dataclass(frozen=True)
+class SimSpec:
+    physics_rate_hz: int = 600
+    control_rate_hz: int = 100
+    gyro_noise_rad_s: float = 0.003
+
+
+@dataclass(frozen=True)
+class EstimateSpec:
+    """What the loop is handed instead of the truth (``groundstation/sim/estimate.py`` gives
+    the model and the sources of each default). Sigmas are 1-sigma per axis."""
+
+    enabled: bool = True  # false: ideal sensors (the loop sees the truth)
+    pos_noise_m: float = 0.05  # Gauss-Markov position error
+    pos_time_constant_s: float = 2.0
+    vel_noise_m_s: float = 0.05  # Gauss-Markov velocity error
+    vel_time_constant_s: float = 1.0
+    att_noise_deg: float = 0.2  # Gauss-Markov attitude error (small rotation, body axes)
+    att_time_constant_s: float = 2.0
+    lag_s: float = 0.02  # the position and velocity estimates are the vehicle this long ago
+    att_lag_s: float = 0.01  # the attitude estimate is the vehicle this long ago
+    gyro_bias_rad_s: float = 0.003  # turn-on bias left after calibration
+    gyro_bias_walk_rad_s_sqrt_s: float = 0.0001  # bias random walk
+    camera_time_offset_s: float = 0.005  # camera-IMU stamp offset, drawn once a sortie
+    camera_stamp_jitter_s: float = 0.001  # per frame, on top of the offset
+    thrust_scale_sigma: float = 0.02  # true / modelled thrust, drawn once a sortie
+    command_delay_s: float = 0.005  # command to actuators (MAVLink + PX4 scheduling)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    duration_s: float
+    interceptor: InterceptorSpec
+    target: TargetSpec
+    description: str = ""
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    wind: WindSpec = field(default_factory=WindSpec)
+    sim: SimSpec = field(default_factory=SimSpec)
+    estimate: EstimateSpec = field(default_factory=EstimateSpec)
+    gains: dict[str, float] = field(default_factory=dict)
+    source: str = "<memory>"
+    text: str = ""  # the file as read, for recording alongside a sortie
+
+    def gains_obj(self) -> Gains:
+        return Gains.from_mapping(self.gains, source=f"{self.source}: [gains]")
+
+
+SECTIONS = {
+    "interceptor": InterceptorSpec,
+    "target": TargetSpec,
+    "camera": CameraSpec,
+    "wind": WindSpec,
+    "sim": SimSpec,
+    "estimate": EstimateSpec,
+}
