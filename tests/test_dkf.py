@@ -325,3 +325,16 @@ def test_bad_size_falls_back_to_the_point_and_bad_inputs_are_held():
     assert np.all(np.isfinite(state)) and np.all(np.isfinite(cov)) and np.all(cov > 0)
     rng_m, vel, P = dkf.depth_velocity()
     assert math.isfinite(rng_m) and np.all(np.isfinite(vel)) and np.all(np.isfinite(P))
+
+
+def test_a_stamp_a_few_ms_ahead_is_fused_at_the_filters_time():
+    """Camera and IMU clocks disagree by milliseconds: with no camera delay a detection can be
+    stamped just after the filter's time. Within the tolerance it is fused now; beyond, it is
+    refused and changes nothing."""
+    dkf = DelayedKalmanFilter(CAM, DkfConfig(future_tolerance_s=0.02))
+    for k in range(100):
+        dkf.predict(k * 0.01, np.zeros(3))  # the filter is at t = 0.99 s
+    assert dkf.fuse(_det(1.0, 320, 240)) == FusionResult.INITIALISED  # 10 ms ahead
+    before = dkf.estimate()
+    assert dkf.fuse(_det(1.05, 330, 240)) == FusionResult.FUTURE  # 60 ms ahead
+    assert dkf.estimate() == before

@@ -52,6 +52,7 @@ by more than ~76 degrees or turns non-finite.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import enum
 import math
 from collections import deque
@@ -98,6 +99,9 @@ class DkfConfig:
     gate_sigma: float = 5.0  # Mahalanobis gate on the point innovation (and on the size's)
     lost_timeout_s: float = 0.5  # no accepted detection for this long -> lost
     buffer_s: float = 0.6  # history kept; a detection older than this is rejected
+    # a detection stamped up to this far after the filter's time (camera and IMU clocks a few
+    # ms apart; with no camera delay the stamp can lead) is fused at the filter's time
+    future_tolerance_s: float = 0.02
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -324,8 +328,11 @@ class DelayedKalmanFilter:
         t_c = det.capture_time_s
         if not isinstance(t_c, int | float) or not math.isfinite(t_c):
             return FusionResult.GATED
-        if not self._buf or t_c > self._buf[-1].t + _TIME_EPS_S:
+        if not self._buf or t_c > self._buf[-1].t + self.config.future_tolerance_s:
             return FusionResult.FUTURE
+        if t_c > self._buf[-1].t:
+            t_c = self._buf[-1].t
+            det = dataclasses.replace(det, capture_time_s=t_c)
         if t_c < self._buf[0].t - _TIME_EPS_S:
             return FusionResult.TOO_OLD
         m = self._measurement(det)
