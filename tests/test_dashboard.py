@@ -201,6 +201,11 @@ def test_refly_runs_at_1x_with_the_old_sortie_overlaid_and_a_legend(station, pag
     rate = (status(station)["time_s"] - t0) / (time.monotonic() - w0)
     assert 0.5 < rate < 1.3, rate  # at 1x it can be watched (main: max, over at once)
     page.wait_for_selector("#cmp-legend:not([hidden])")
+    # B's gains are told against A's, which the page reads from /api/gains
+    page.wait_for_function(
+        "document.querySelector('#cmp-legend').textContent.includes('gains: same as A')",
+        timeout=10000,
+    )
     legend = page.text_content("#cmp-legend")
     assert "A (solid)" in legend and "· pg" in legend
     assert f"B (dashed): {name}" in legend and "png" in legend and "gains: same as A" in legend

@@ -634,6 +634,7 @@ let gainValues = {}, gainSpecs = {};
 async function loadGains() {
   const g = await api("GET", "/api/gains");
   gainValues = g.values;
+  if (PV.cmp) showCompareLegend(); // B's gains are told against A's: the legend needs these
   const tb = document.querySelector("#gains tbody"); tb.innerHTML = "";
   let group = null;
   for (const s of g.specs) {
@@ -663,6 +664,7 @@ async function refreshGainValues() {
   let g;
   try { g = await api("GET", "/api/gains"); } catch (e) { return; }
   gainValues = g.values;
+  if (PV.cmp) showCompareLegend();
   document.querySelectorAll("#gains input[data-gain]").forEach((inp) => {
     if (document.activeElement === inp || inp.classList.contains("changed")) return;
     inp.value = gainValues[inp.dataset.gain];
