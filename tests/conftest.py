@@ -33,3 +33,23 @@ def pytest_terminal_summary(terminalreporter) -> None:
 def R_north() -> np.ndarray:
     """Level vehicle facing +y (north)."""
     return attitude_from_yaw_pitch_roll(math.pi / 2)
+
+
+@pytest.fixture
+def gs(tmp_path):
+    """A ground station in simulator mode with its data and logs under tmp_path."""
+    from groundstation.app.server import GroundStation
+
+    ground = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
+    yield ground
+    ground.close()
+
+
+@pytest.fixture
+def client(gs):
+    """An authorised HTTP client of ``gs``'s API (FastAPI's TestClient)."""
+    from fastapi.testclient import TestClient
+
+    with TestClient(gs.app, base_url="http://127.0.0.1") as c:
+        c.headers["Authorization"] = f"Bearer {gs.token}"
+        yield c

@@ -1,22 +1,6 @@
 """The REST API's models: a bad option is refused by validation with the choices named, and
 /docs (OpenAPI) shows what each route takes and returns."""
 
-import pytest
-from fastapi.testclient import TestClient
-
-from groundstation.app.server import GroundStation
-
-
-@pytest.fixture
-def client(tmp_path):
-    gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
-    try:
-        with TestClient(gs.app, base_url="http://127.0.0.1") as c:
-            c.headers["Authorization"] = f"Bearer {gs.token}"
-            yield c
-    finally:
-        gs.close()
-
 
 def test_a_bad_option_is_refused_with_the_choices_and_nothing_starts(client):
     for field, bad in (("law", "pn"), ("camera", "fisheye"), ("speed", "3")):

@@ -16,20 +16,6 @@ from groundstation.app.server import GroundStation
 from onboard.gains import Gains
 
 
-@pytest.fixture
-def gs(tmp_path):
-    station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
-    yield station
-    station.close()
-
-
-@pytest.fixture
-def client(gs):
-    with TestClient(gs.app, base_url="http://127.0.0.1") as c:
-        c.headers["Authorization"] = f"Bearer {gs.token}"
-        yield c
-
-
 def _wait(client, pred, timeout_s=20.0):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

@@ -8,7 +8,6 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from groundstation.app.server import GroundStation
 from groundstation.campaigns.tune import GainRange, TuneDefinition, default_storage_url
 from onboard.gains import Gains
 
@@ -48,20 +47,6 @@ def make_study(data_dir: Path, name: str = "static-try") -> None:
             )
         )
     study.add_trial(optuna.trial.create_trial(state=optuna.trial.TrialState.FAIL))
-
-
-@pytest.fixture
-def gs(tmp_path):
-    station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
-    yield station
-    station.close()
-
-
-@pytest.fixture
-def client(gs):
-    with TestClient(gs.app, base_url="http://127.0.0.1") as c:
-        c.headers["Authorization"] = f"Bearer {gs.token}"
-        yield c
 
 
 def test_no_study_lists_nothing_and_creates_nothing(client, tmp_path):
