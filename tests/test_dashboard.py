@@ -103,10 +103,10 @@ def test_gain_edited_between_sorties_is_flown_at_start(station, page):
     # a scenario that carries its own gains replaces the edits, and the page says so
     page.select_option("#scenario", "outdoor-static")
     page.click("#btn-start")
-    page.wait_for_function(
+    page.wait_for_function(  # the note names the edit the scenario's gains replaced
         "document.querySelector('#gains-note').textContent.includes('carries its own gains')"
+        " && document.querySelector('#gains-note').textContent.includes('K_y')"
     )
-    assert "K_y" in page.text_content("#gains-note")
     assert station.session.sim.loop.gains.K_y == 3.0
     assert station.session.sim.loop.gains.a_max == load_scenario("outdoor-static").gains["a_max"]
     assert page.text_content("#st-gains").startswith("gains: scenario outdoor-static")
