@@ -438,7 +438,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         return 2
     foxglove = None
     if args.foxglove is not None:
-        from .recording.live import FoxgloveLive
+        from onboard.channels.live import FoxgloveLive
 
         try:
             foxglove = FoxgloveLive(port=args.foxglove[1], host=args.foxglove[0])

@@ -87,6 +87,7 @@ def _run(args) -> int:
             log_dir=Path(args.log) if args.log else None,
             realtime_priority=args.realtime,
             video=video,
+            foxglove=args.foxglove,
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -175,6 +176,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         const=("127.0.0.1", 5600),
         help="stream the camera as H.264 over RTP/UDP to HOST:PORT (alone: 127.0.0.1:5600, "
         "what QGroundControl's UDP h.264 video and groundstation serve --video receive)",
+    )
+    r.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        type=_host_port(8765),
+        nargs="?",
+        const=("127.0.0.1", 8765),
+        help="publish the recording's channels over Foxglove's WebSocket protocol on "
+        "HOST:PORT (alone: 127.0.0.1:8765, loopback; open it in Foxglove as a Foxglove "
+        "WebSocket connection)",
     )
     r.add_argument(
         "--video-overlay",

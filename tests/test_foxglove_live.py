@@ -11,13 +11,13 @@ import struct
 
 import pytest
 
-from groundstation.frames import FrameList
-from groundstation.recording.schemas import CHANNELS, schema_bytes
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
+from onboard.channels.schemas import CHANNELS, schema_bytes
+from onboard.frames import FrameList
 
 websockets = pytest.importorskip("websockets")
-live_mod = pytest.importorskip("groundstation.recording.live")
+live_mod = pytest.importorskip("onboard.channels.live")
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01  # binary opcode: subscription id u32, log time u64, payload
@@ -94,9 +94,10 @@ def test_live_refuses_a_port_in_use():
 
 def test_the_simulator_session_publishes_to_foxglove_and_records(tmp_path):
     """serve --foxglove: each sortie the operator starts is observed by the recorder and by
-    a Foxglove publisher (the same recorder class over a FoxgloveSink)."""
+    a Foxglove publisher (the recorder's channel builder over a FoxgloveSink)."""
     from groundstation.app.session import SimSession, SortieConfig
     from groundstation.recording.writer import SortieRecorder
+    from onboard.channels.builder import ChannelBuilder
 
     live = live_mod.FoxgloveLive(port=0)
     session = SimSession(log_dir=tmp_path)
@@ -104,7 +105,7 @@ def test_the_simulator_session_publishes_to_foxglove_and_records(tmp_path):
     try:
         session.start(SortieConfig(load_scenario("static-ahead-20m")))
         kinds = [(type(o), type(o._given_sink)) for o in session.sim.observers]
-        assert kinds == [(SortieRecorder, type(None)), (SortieRecorder, live_mod.FoxgloveSink)]
+        assert kinds == [(SortieRecorder, type(None)), (ChannelBuilder, live_mod.FoxgloveSink)]
     finally:
         session.close()
         live.stop()

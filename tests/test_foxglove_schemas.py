@@ -10,12 +10,12 @@ import pytest
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
 
-from groundstation.recording import official_schemas
-from groundstation.recording.official_schemas import official_schema
-from groundstation.recording.schemas import CHANNELS, SCHEMAS
 from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
+from onboard.channels import official_schemas
+from onboard.channels.official_schemas import official_schema
+from onboard.channels.schemas import CHANNELS, SCHEMAS
 
 PER_TOPIC = 300  # messages validated per channel (all of the slow ones)
 

@@ -16,10 +16,10 @@ import pytest
 from groundstation.app.live import TARGET_DIAMETER_M, LiveSession
 from groundstation.app.replay import ReplayPlayer
 from groundstation.app.snapshot import frame_snapshot
-from groundstation.frames import Frame, FrameList
 from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
+from onboard.frames import Frame, FrameList
 from onboard.link import telemetry as tm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -199,12 +199,13 @@ def _imports(package: Path) -> set[str]:
 
 
 def test_producers_and_consumers_stand_side_by_side():
-    """sim/ and recording/ share only frames.py; onboard never imports the ground station."""
+    """sim/ and recording/ share only the frames (onboard/frames.py); onboard never imports
+    the ground station."""
     sim, recording = (
         _imports(ROOT / "groundstation" / "sim"),
         _imports(ROOT / "groundstation" / "recording"),
     )
     assert not any(m.startswith("groundstation.recording") for m in sim), sim
     assert not any(m.startswith("groundstation.sim") for m in recording), recording
-    assert "groundstation.frames" in sim and "groundstation.frames" in recording
+    assert "onboard.frames" in sim and "onboard.channels.builder" in recording
     assert not any(m.startswith("groundstation") for m in _imports(ROOT / "onboard"))

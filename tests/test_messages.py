@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from groundstation.app.live_frames import live_frame, telemetry_from_values
-from groundstation.recording import encode as enc
-from groundstation.recording.schemas import SCHEMAS
 from onboard import messages
 from onboard.camera_model import CameraModel
+from onboard.channels import encode as enc
+from onboard.channels.schemas import SCHEMAS
 from onboard.datatypes import ControlTelemetry, LoopMode, RateThrustCommand
 from onboard.gains import Gains
 from onboard.link import telemetry as tm

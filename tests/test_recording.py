@@ -12,10 +12,10 @@ import pytest
 from mcap.reader import make_reader
 
 from groundstation.recording.reader import LogError, LogIndex, inspect_log, iter_messages
-from groundstation.recording.schemas import CHANNELS
 from groundstation.recording.writer import SortieRecorder, open_new_log
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
+from onboard.channels.schemas import CHANNELS
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ Gain edits go out as ``PARAM_SET`` and count as applied only when the matching
 ``COMMAND_ACK``. A sortie is recorded to MCAP from the accepted start until the onboard
 component reports it finished (or the link is lost).
 
-Each telemetry message becomes a :class:`~groundstation.frames.Frame`
+Each telemetry message becomes a :class:`~onboard.frames.Frame`
 (:mod:`.live_frames`): the recorder observes those frames, and the dashboard's snapshot is
 built from the latest by the builder the simulator and replay use (:mod:`.snapshot`).
 """
@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from onboard.enums import RuntimeState
+from onboard.frames import Frame, SortieStart
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
 from onboard.link.params import PARAM_IDS, PARAM_SPECS
@@ -35,7 +36,6 @@ from onboard.link.px4 import (
     mavlink,
 )
 
-from ..frames import Frame, SortieStart
 from .live_frames import live_frame, pose_from_values
 from .live_link import LINK_TIMEOUT_S, LinkState
 from .live_recording import LiveRecording

@@ -1,6 +1,6 @@
 """Live mode's frames: the onboard component's telemetry (one ``DEBUG_FLOAT_ARRAY``, layout in
 :mod:`onboard.link.telemetry`, unpacked to a name -> value dict) and the poses the ground
-link reports, as a :class:`~groundstation.frames.Frame`. Pure: the live session owns the link.
+link reports, as a :class:`~onboard.frames.Frame`. Pure: the live session owns the link.
 """
 
 from __future__ import annotations
@@ -11,11 +11,10 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.frames import Frame, SortieEvent, Vec3
 from onboard.gains import Gains
 from onboard.link import telemetry as tm
 from onboard.messages import CONTROL, DKF, LINK, MessageField, by_name
-
-from ..frames import Frame, SortieEvent, Vec3
 
 Values = dict[str, float | None]
 _C, _D, _L = by_name(CONTROL), by_name(DKF), by_name(LINK)

@@ -9,14 +9,15 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..frames import Frame, SortieEvent, SortieStart
+from onboard.frames import Frame, SortieEvent, SortieStart
+
 from ..recording.writer import SortieRecorder
 from ..sim.simulation import closest_in_step
 
 
 class LiveRecording:
     def __init__(self, log_dir: Path, start: SortieStart, foxglove=None) -> None:
-        """``foxglove``: a :class:`~groundstation.recording.live.FoxgloveLive` that publishes
+        """``foxglove``: a :class:`~onboard.channels.live.FoxgloveLive` that publishes
         the same channels as the file, or None."""
         self.law = start.law
         self.t0_s = self.last_s = start.t0_s  # onboard clock: start, last recorded frame

@@ -1,6 +1,6 @@
 """Replaying a recorded sortie through the dashboard's views: the overview (poses, control,
 DKF, gains, events) is read once when the log is opened; :meth:`ReplayPlayer.frame` rebuilds
-the sortie's :class:`~groundstation.frames.Frame` at any time from it (the same frame the
+the sortie's :class:`~onboard.frames.Frame` at any time from it (the same frame the
 simulator or live mode produced, to the recording's precision); each seek fetches the camera
 frame near that time through the MCAP index, so scrubbing a long sortie does not read the
 whole file."""
@@ -18,9 +18,9 @@ import numpy as np
 from onboard import messages
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.frames import Frame
 from onboard.gains import GainError, Gains
 
-from ..frames import Frame
 from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from .scene import SceneState

@@ -280,7 +280,7 @@ class GroundStation:
         foxglove=None,
         video: tuple[str, int] | None = None,
     ) -> None:
-        """``foxglove``: a :class:`~groundstation.recording.live.FoxgloveLive` to publish
+        """``foxglove``: a :class:`~onboard.channels.live.FoxgloveLive` to publish
         every sortie's channels on (None: none); ``video``: (host, port) to receive the
         vehicle's RTP video on (live mode)."""
         if no_auth and not is_loopback(host):

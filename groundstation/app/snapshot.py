@@ -9,8 +9,7 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.control.guidance import normal_component
-
-from ..frames import Frame
+from onboard.frames import Frame
 
 
 def frame_snapshot(

@@ -26,9 +26,10 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
+from onboard.channels.encode import RAW, encode
+from onboard.channels.schemas import CHANNELS, schema_bytes
+
 from .. import __version__ as gs_version
-from .encode import RAW, encode
-from .schemas import CHANNELS, schema_bytes
 
 CHUNK_BYTES = 256 * 1024
 BATCH = 64  # messages per hand-over: small, so little is left to write at the finish

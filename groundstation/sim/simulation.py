@@ -20,11 +20,11 @@ from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample
 from onboard.enums import Outcome
 from onboard.estimation.dkf import DkfConfig
+from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
 
-from ..frames import Frame, SortieObserver, SortieStart
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
 from .estimate import StateEstimateModel

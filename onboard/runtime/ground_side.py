@@ -42,7 +42,10 @@ class GroundSide:
     def _flush_events(self) -> None:
         while self._events:
             severity, text = self._events.popleft()
-            self.log(f"[{self.clock.now():8.3f}] {severity.upper()}: {text}")
+            now = self.clock.now()
+            self.log(f"[{now:8.3f}] {severity.upper()}: {text}")
+            if self.foxglove is not None:
+                self.foxglove.event(now, severity, text)
             if self.gcs is not None:
                 self.gcs.statustext(SEVERITY.get(severity, mavlink.MAV_SEVERITY_INFO), text)
 
@@ -138,7 +141,8 @@ class GroundSide:
             )
         )
 
-    def _telemetry(self, now: float, tel) -> None:
+    def _telemetry(self, now: float, tel, dkf=None) -> None:
+        """``dkf``: the filter's ``state_vector()`` at this tick (None before it starts)."""
         if self.gcs is None:
             return
         loop = self.loop
@@ -167,9 +171,8 @@ class GroundSide:
                 guard_trips=loop.guard_trips,
             )
             vals.update(tm.detection_values(self._last_det, cam))
-            state = loop.dkf.state_vector()
-            if state is not None:
-                vals.update(tm.dkf_values(state[0], state[1]))
+            if dkf is not None:
+                vals.update(tm.dkf_values(dkf[0], dkf[1]))
         if tel is not None:
             vals.update(tm.loop_values(tel))
         vals.update(tm.pose_values(f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz))

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera_model import CameraModel
+from ..channels.live import FoxgloveLive
 from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams, VehicleState
 from ..estimation.dkf import DkfConfig
 from ..link import ftp
@@ -47,6 +48,7 @@ from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .fc_side import FcState, FlightControllerSide
+from .foxglove import FoxglovePublisher
 from .ground_side import TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
@@ -70,6 +72,7 @@ class RuntimeConfig:
     log_dir: Path | None = None  # every MAVLink frame in and out, as a .tlog
     realtime_priority: int | None = None  # SCHED_FIFO priority of the control thread (1-99)
     video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
+    foxglove: tuple[str, int] | None = None  # (host, port): Foxglove live (onboard run --foxglove)
 
 
 class OnboardRuntime(FlightControllerSide, GroundSide):
@@ -142,6 +145,18 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._event("warning", note)
         self.video_overlay = Overlay()
         self.video = None if config.video is None else runtime_streamer(self)
+        self.foxglove: FoxglovePublisher | None = None
+        if config.foxglove is not None:
+            host, port = config.foxglove
+            try:
+                live = FoxgloveLive(port=port, host=host)
+            except Exception as exc:  # the SDK's bind error: one clear line
+                raise OSError(f"--foxglove: cannot listen on {host}:{port}: {exc}") from None
+            self.foxglove = FoxglovePublisher(
+                live,
+                self._latest_image,
+                on_error=lambda msg: self._event("warning", msg),
+            )
 
     # ------------------------------------------------------------------ the loop object
     def _build_loop(self, width: int, height: int) -> None:
@@ -157,6 +172,15 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             dkf_config=DkfConfig(lost_timeout_s=rt.TGT_LOST_S),
         )
         self._event("info", f"camera {width}x{height}, law {rt.law}: loop ready")
+        if self.foxglove is not None:
+            self.foxglove.new_sortie(
+                self.clock.now(), rt.law, cam, self.params.gains, self.config.control_rate_hz
+            )
+
+    def _latest_image(self):
+        """The camera thread's newest (capture time s, image), for Foxglove live."""
+        f = self.camera.last_frame
+        return None if f is None else (f.capture_time_s, f.image)
 
     def _heartbeats(self, now: float) -> None:
         if now - self._last_hb_sent < 1.0:
@@ -203,6 +227,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             if self.timesync.min_rtt_s is None
             else 1000 * self.timesync.min_rtt_s,
             "timesync_accepted": self.timesync.accepted,
+            "foxglove": None if self.foxglove is None else self.foxglove.stats(),
         }
 
     # ------------------------------------------------------------------ the tick
@@ -295,7 +320,16 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._next_timesync_s = now + TIMESYNC_EVERY_S
             send_request(self.fc, self.clock.now())
         if self._tick_n % TELEMETRY_EVERY == 0:
-            self._telemetry(now, tel)
+            fox = self.foxglove
+            dkf = None
+            if loop is not None and (self.gcs is not None or fox is not None):
+                dkf = loop.dkf.state_vector()
+            self._telemetry(now, tel, dkf)
+            if fox is not None and tel is not None:  # references only: never waits
+                fox.offer(
+                    now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, tel, self._last_det, dkf,
+                    self.params.gains, loop.guard_trips,
+                )  # fmt: skip
         self._flush_events()
         self._tick_n += 1
 
@@ -313,6 +347,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self.camera.start()
         if self.video is not None:
             self.video.start()
+        if self.foxglove is not None:
+            self.foxglove.start()
+            self._event("info", f"Foxglove live on {self.foxglove.live.url()}")
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         end = None if duration_s is None else time.perf_counter() + duration_s
         try:
@@ -337,6 +374,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.camera.stop()
             if self.video is not None:
                 self.video.stop()
+            if self.foxglove is not None:
+                self.foxglove.stop()
+                self.foxglove.join(timeout=2.5)
+                self.foxglove.live.stop()
             if self.camera.is_alive():
                 self.camera.join(timeout=2.5)  # a blocked read ends by its own timeout
             self._event("info", f"onboard stopping ({self.sm.state.value})")

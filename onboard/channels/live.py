@@ -2,8 +2,9 @@
 (foxglove-sdk's server), so an engineer opens Foxglove on a running sortie.
 
 The channels are :data:`~.schemas.CHANNELS` with the recording's schemas, and the messages
-are built by the recorder itself (:class:`~.writer.SortieRecorder` with a
+are built by the recorder's builder (:class:`~.builder.ChannelBuilder` with a
 :class:`FoxgloveSink` in place of a file): live and recorded channels are one definition.
+Used by ``groundstation serve --foxglove`` and ``onboard run --foxglove``.
 Message contents equal the file's (timestamps on the sortie's clock); log times are the wall
 clock at publication, as Foxglove expects of a live source. Loopback by default.
 """
@@ -12,9 +13,9 @@ from __future__ import annotations
 
 import foxglove
 
+from .builder import ChannelBuilder
 from .encode import encode
 from .schemas import CHANNELS, schema_bytes
-from .writer import SortieRecorder
 
 DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket data source
 
@@ -43,10 +44,10 @@ class FoxgloveLive:
     def url(self) -> str:
         return f"ws://{self.host}:{self.port}"
 
-    def observer(self, **rates: int) -> SortieRecorder:
+    def observer(self, **rates: int) -> ChannelBuilder:
         """A sortie observer publishing here (``rates``: the recorder's ``record_every``,
         ``annotate_every``, ``frame_every``; its defaults otherwise)."""
-        return SortieRecorder(None, sink=FoxgloveSink(self), **rates)
+        return ChannelBuilder(sink=FoxgloveSink(self), **rates)
 
     def publish(self, ti: int, data: bytes) -> None:
         """One encoded message on channel ``ti`` (an index of CHANNELS)."""
@@ -57,7 +58,7 @@ class FoxgloveLive:
 
 
 class FoxgloveSink:
-    """The recorder's sink interface (see :mod:`.sink`) over a :class:`FoxgloveLive`:
+    """The builder's sink interface (see :mod:`.builder`) over a :class:`FoxgloveLive`:
     messages are encoded here and published at once; metadata and attachments are files'
     only."""
 
