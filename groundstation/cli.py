@@ -325,6 +325,13 @@ def _build_parser() -> argparse.ArgumentParser:
         "here: glass-to-glass latency",
     )
     b.add_argument(
+        "--foxglove",
+        dest="foxglove_client",
+        action="store_true",
+        help="--sitl: the onboard process also publishes to Foxglove (onboard run --foxglove), "
+        "a client here subscribed to every channel: what it costs the control tick",
+    )
+    b.add_argument(
         "--dashboard",
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
@@ -575,6 +582,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     as_json=args.json,
                     realtime_priority=args.realtime,
                     video=args.video,
+                    foxglove=args.foxglove_client,
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

@@ -8,12 +8,13 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
+import time
 
 import pytest
 
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
-from onboard.channels.schemas import CHANNELS, schema_bytes
+from onboard.channels.schemas import CHANNELS, SCHEMAS, schema_bytes
 from onboard.frames import FrameList
 
 websockets = pytest.importorskip("websockets")
@@ -149,3 +150,107 @@ def test_a_live_mode_sortie_publishes_what_it_records(tmp_path):
     assert (fox.record_every, fox.annotate_every) == (file_rec.record_every, 1)
     topics = {CHANNELS[ti][0] for ti in published}
     assert {"/world/vehicle", "/control", "/dkf", "/events", "/camera/annotations"} <= topics
+
+
+# ---------------------------------------------------------------------- onboard run --foxglove
+async def _collect_onboard(rig, url: str) -> tuple[dict, dict[str, list[dict]]]:
+    """Connect (retrying while ``onboard run`` starts), subscribe to every channel, rebuild
+    the loop once (a new sortie: calibration and gains again), start the intercept and
+    collect until every channel the vehicle can fill has arrived with a tracked target."""
+    from onboard.link.px4 import mavlink
+
+    end = time.monotonic() + 30
+    while True:
+        try:
+            ws = await websockets.connect(
+                url, subprotocols=SUBPROTOCOLS, open_timeout=5, close_timeout=1
+            )
+            break
+        except OSError:
+            rig.check_alive()
+            if time.monotonic() > end:
+                raise
+            await asyncio.sleep(0.2)
+    async with ws:
+        advertised: dict[str, dict] = {}
+        while len(advertised) < len(CHANNELS):
+            msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            if msg["op"] == "advertise":
+                advertised.update({c["topic"]: c for c in msg["channels"]})
+        by_sub = {k: c["topic"] for k, c in enumerate(advertised.values())}
+        subs = [{"id": k, "channelId": c["id"]} for k, c in enumerate(advertised.values())]
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+        got: dict[str, list[dict]] = {}
+
+        async def until(pred, timeout_s: float, what: str) -> None:
+            deadline = time.monotonic() + timeout_s
+            while not pred():
+                if time.monotonic() > deadline:
+                    raise AssertionError(f"no {what}: got {sorted(got)}\n{rig.logs()}")
+                try:
+                    data = await asyncio.wait_for(ws.recv(), 0.2)
+                except TimeoutError:
+                    data = None
+                rig.pump()
+                if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
+                    sub_id, _ = struct.unpack_from("<IQ", data, 1)
+                    got.setdefault(by_sub[sub_id], []).append(json.loads(data[13:]))
+
+        await until(lambda: "/control" in got, 20, "/control from the running loop")
+        rig.wait_text("target in view")
+        # a law parameter (its value unchanged) rebuilds the loop: a new sortie on Foxglove
+        n = len(rig.texts)
+        assert rig.param_set("PRG_LAW", 0.0) == 0.0
+        await until(lambda: "/camera/calibration" in got and "/gains" in got, 10, "new sortie")
+        rig.wait_text("target in view", after=n)
+        assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
+        await until(
+            lambda: (
+                any(m["acquired"] for m in got.get("/dkf", []))
+                and any(m["points"] for m in got.get("/camera/annotations", []))
+                and "/camera/image" in got
+                and len(got["/control"]) >= 50
+            ),  # a second of the loop's ticks, tracking
+            15,
+            "a tracked target",
+        )
+        return advertised, got
+
+
+def test_onboard_run_publishes_the_recordings_channels_against_sitl(tmp_path):
+    """``onboard run --foxglove`` against ``groundstation sitl``: a Foxglove client sees the
+    recording's channels advertised (topics, schema names, schemas) and every message
+    received validates against its schema (foxglove.* against Foxglove's official ones)."""
+    import socket
+
+    from jsonschema import Draft202012Validator
+
+    from onboard.channels.official_schemas import official_schema
+
+    from .sitl_rig import Rig, free_port
+
+    port = free_port(socket.SOCK_STREAM)
+    rig = Rig(tmp_path, onboard_args=("--foxglove", str(port)))
+    try:
+        advertised, got = asyncio.run(_collect_onboard(rig, f"ws://127.0.0.1:{port}"))
+    finally:
+        stats = rig.close()
+    assert {t: c["schemaName"] for t, c in advertised.items()} == dict(CHANNELS)
+    for topic, name in CHANNELS:
+        c = advertised[topic]
+        assert c["encoding"] == "json" and c["schemaEncoding"] == "jsonschema"
+        assert json.loads(c["schema"]) == json.loads(schema_bytes(name))
+    # no target position onboard: every other channel arrived
+    assert set(got) == {t for t, _ in CHANNELS} - {"/world/target", "/scene"}
+    names = dict(CHANNELS)
+    for topic, msgs in got.items():
+        name = names[topic]
+        schema = official_schema(name) if name.startswith("foxglove.") else SCHEMAS[name]
+        v = Draft202012Validator(schema)
+        for m in msgs:
+            errors = [e.message for e in v.iter_errors(m)]
+            assert not errors, (topic, errors[:3], m)
+    events = [m["message"] for m in got.get("/events", [])]
+    assert any("loop ready" in e for e in events), events
+    assert stats is not None and stats["foxglove"]["published_frames"] > 0
+    assert stats["foxglove"]["error"] is None

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import socket
 import struct
 import subprocess
@@ -209,18 +208,45 @@ def test_pymavlink_mavftp_downloads_parameters_and_metadata(onboard, tmp_path):
         master.close()
 
 
-@pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")
-def test_mavproxy_fetches_over_ftp_shows_and_sets_a_gain(onboard, tmp_path):
-    """MAVProxy with its default modules, driven on stdin as an operator would type. Not in
-    the test extra (``pip install MAVProxy`` pulls opencv-python and VTK, which replace the
-    project's opencv-python-headless): runs where it is installed, skipped elsewhere."""
+# MAVProxy itself, pinned, and the pure-Python modules it imports to run on a console with
+# its default modules (no map, console or other GUI module): its own requirements add
+# opencv-python, VTK and matplotlib, and opencv-python would replace the project's
+# opencv-python-headless, so it is installed apart, without them.
+MAVPROXY = ("MAVProxy==1.8.75", "pyserial==3.5", "defusedxml==0.7.1")
+
+
+@pytest.fixture(scope="session")
+def mavproxy(tmp_path_factory) -> tuple[list[str], dict[str, str]]:
+    """(command, environment) running the pinned MAVProxy from a directory of its own
+    (``pip install --no-deps --target``), with this environment's pymavlink and numpy. An
+    install failure fails the test under CI and skips it elsewhere (offline)."""
+    target = tmp_path_factory.mktemp("mavproxy")
+    got = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-compile",
+         "--target", str(target), *MAVPROXY],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    if got.returncode != 0:
+        why = f"pip install {' '.join(MAVPROXY)} failed: {got.stderr.strip()[-500:]}"
+        if os.environ.get("CI"):
+            pytest.fail(why)
+        pytest.skip(why)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(target), env.get("PYTHONPATH")]))
+    return [sys.executable, str(target / "bin" / "mavproxy.py")], env
+
+
+def test_mavproxy_fetches_over_ftp_shows_and_sets_a_gain(onboard, tmp_path, mavproxy):
+    """MAVProxy with its default modules, driven on stdin as an operator would type (the
+    pinned release, installed apart: see :data:`MAVPROXY`)."""
     port, params, _ = onboard
+    command, env = mavproxy
     proc = subprocess.Popen(
-        ["mavproxy.py", f"--master=udpin:127.0.0.1:{port}", "--source-system=255",
+        [*command, f"--master=udpin:127.0.0.1:{port}", "--source-system=255",
          "--target-system=1", "--target-component=191", "--nowait",
          f"--state-basedir={tmp_path}"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        cwd=tmp_path, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        cwd=tmp_path, env=env,
     )  # fmt: skip
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)

@@ -45,6 +45,7 @@ def run_sitl_bench(
     as_json: bool = False,
     realtime_priority: int | None = None,
     video: bool = False,
+    foxglove: bool = False,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -54,7 +55,9 @@ def run_sitl_bench(
     under SCHED_FIFO too. The load average is printed with the figures: the machine is
     shared. ``video``: the onboard process also streams its camera (``--video``) to a
     receiver here (:mod:`groundstation.app.video`): glass-to-glass latency, from the SITL
-    camera's capture to the decoded frame."""
+    camera's capture to the decoded frame. ``foxglove``: the onboard process also publishes
+    its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
+    them: what that costs the control tick."""
     import socket
     import subprocess
     import sys
@@ -73,6 +76,11 @@ def run_sitl_bench(
     for sock in socks:  # held together, so the three ports differ
         sock.bind(("127.0.0.1", 0))
     fc, gcs, cam = (sock.getsockname()[1] for sock in socks)
+    fox_port = None
+    if foxglove:
+        socks.append(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+        socks[-1].bind(("127.0.0.1", 0))
+        fox_port = socks[-1].getsockname()[1]
     for sock in socks:
         sock.close()
     delay_s = load_scenario("cv-top-to-bottom").camera.delay_s
@@ -93,9 +101,11 @@ def run_sitl_bench(
              "--camera", f"sitl://127.0.0.1:{cam}", "--gcs", f"udpout:127.0.0.1:{gcs}",
              "--sitl-auto-start", "--duration", str(seconds), "--stats", str(stats_path),
              *rt_args,
-             *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else [])],
+             *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else []),
+             *(["--foxglove", f"127.0.0.1:{fox_port}"] if fox_port else [])],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
+        fox_client = None if fox_port is None else _FoxgloveClient(fox_port)
         t0 = time.perf_counter()
         cpu = peak = None
         received = 0
@@ -108,6 +118,8 @@ def run_sitl_bench(
         sitl.terminate()
         sitl.wait(10)
         ground.close()
+        if fox_client is not None:
+            fox_client.stop()
         stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
         result = sitl_zero = None
         for line in sitl_log.read_text().splitlines():
@@ -150,6 +162,9 @@ def run_sitl_bench(
         "timesync_min_rtt_ms": stats.get("timesync_min_rtt_ms"),
         "timesync_samples": stats.get("timesync_accepted"),
         "video": vid,
+        "foxglove": None
+        if fox_client is None
+        else {"messages_received": fox_client.messages, **(stats.get("foxglove") or {})},
     }
     if as_json:
         print(json.dumps(figures, indent=2))
@@ -208,9 +223,66 @@ def run_sitl_bench(
             f"{f(vid['latency_p95_ms'], 1)} ms, of which the camera's own delay "
             f"{1000 * delay_s:.0f} ms; {vid['packets_lost']} packets lost"
         )
+    fox = figures["foxglove"]
+    if fox is not None:
+        print(
+            f"  Foxglove live: {fox['messages_received']} messages received here (every channel "
+            f"subscribed), {fox.get('published_frames')} frames published, "
+            f"{fox.get('dropped')} dropped by the control thread's queue"
+        )
     if result:
         print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")
     return 0
+
+
+class _FoxgloveClient:
+    """A Foxglove WebSocket client in a thread: connects (retrying while ``onboard run``
+    starts), subscribes to every advertised channel and counts the messages."""
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        self.port = port
+        self.messages = 0
+        self._halt = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="foxglove-client", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from websockets.sync.client import connect
+
+        while not self._halt.is_set():
+            try:
+                ws = connect(f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"])
+                break
+            except OSError:
+                self._halt.wait(0.2)
+        else:
+            return
+        with ws:
+            subscribed = 0
+            while not self._halt.is_set():
+                try:
+                    data = ws.recv(timeout=0.2)
+                except TimeoutError:
+                    continue
+                except Exception:  # the server stopped
+                    return
+                if isinstance(data, bytes):
+                    self.messages += 1
+                    continue
+                msg = json.loads(data)
+                if msg.get("op") == "advertise":
+                    subs = [
+                        {"id": subscribed + k, "channelId": c["id"]}
+                        for k, c in enumerate(msg["channels"])
+                    ]
+                    subscribed += len(subs)
+                    ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+    def stop(self) -> None:
+        self._halt.set()
+        self._thread.join(timeout=2)
 
 
 def timesync_error(stats: dict, sitl_zero_monotonic_s: float | None) -> float | None:
