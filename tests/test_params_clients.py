@@ -1,7 +1,7 @@
 """The onboard component's parameters as third-party ground stations see them: PX4-style ids,
 old params files still loading, MAVLink FTP (param.pck, component metadata), and real
-clients from PyPI (pymavlink's mavutil/mavparm and mavftp; MAVProxy when installed) against an
-``onboard run`` process."""
+clients from PyPI (pymavlink's mavutil/mavparm and mavftp; the pinned MAVProxy, installed
+apart) against an ``onboard run`` process."""
 
 from __future__ import annotations
 

@@ -228,7 +228,9 @@ def run_sitl_bench(
         print(
             f"  Foxglove live: {fox['messages_received']} messages received here (every channel "
             f"subscribed), {fox.get('published_frames')} frames published, "
-            f"{fox.get('dropped')} dropped by the control thread's queue"
+            f"{fox.get('dropped')} dropped by the control thread's queue; the publishing "
+            f"thread's CPU {f(1000 * fox['cpu_s'] / seconds if fox.get('cpu_s') else None, 1)}"
+            " ms per second"
         )
     if result:
         print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from collections import deque
 
 import numpy as np
@@ -56,6 +57,7 @@ class FoxglovePublisher(threading.Thread):
         self.offered = 0
         self.dropped = 0
         self.published_frames = 0
+        self.cpu_s = 0.0  # this thread's CPU time
         self.error: str | None = None
 
     # ------------------------------------------------------------------ the control thread
@@ -151,6 +153,7 @@ class FoxglovePublisher(threading.Thread):
                     if got is not None:
                         next_image_s = last_t + IMAGE_EVERY_S
                         builder.image(*got)
+                self.cpu_s = time.thread_time()
             if builder is not None:
                 builder.finish(last_t or 0.0, None, "onboard stopped")
         except Exception as exc:  # publishing ends, never the flight
@@ -163,5 +166,6 @@ class FoxglovePublisher(threading.Thread):
             "offered": self.offered,
             "dropped": self.dropped,
             "published_frames": self.published_frames,
+            "cpu_s": self.cpu_s,
             "error": self.error,
         }
