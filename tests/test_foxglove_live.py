@@ -9,6 +9,7 @@ import asyncio
 import json
 import struct
 import time
+from types import SimpleNamespace
 
 import pytest
 
@@ -138,6 +139,7 @@ def test_a_live_mode_sortie_publishes_what_it_records(tmp_path):
     live = live_mod.FoxgloveLive(port=0)
     published: list[int] = []
     live.publish = lambda ti, data: published.append(ti)  # count what reaches the server
+    live.channels = [SimpleNamespace(has_sinks=lambda: True) for _ in CHANNELS]  # all wanted
     try:
         rec = LiveRecording(tmp_path, frames.info, foxglove=live)
         for f in frames.frames[:100]:
@@ -196,12 +198,17 @@ async def _collect_onboard(rig, url: str) -> tuple[dict, dict[str, list[dict]]]:
                     sub_id, _ = struct.unpack_from("<IQ", data, 1)
                     got.setdefault(by_sub[sub_id], []).append(json.loads(data[13:]))
 
-        await until(lambda: "/control" in got, 20, "/control from the running loop")
+        # joining mid-sortie: the calibration and gains (sent once a sortie) come again
+        await until(
+            lambda: {"/control", "/camera/calibration", "/gains"} <= set(got),
+            20,
+            "the running loop's channels",
+        )
         rig.wait_text("target in view")
         # a law parameter (its value unchanged) rebuilds the loop: a new sortie on Foxglove
         n = len(rig.texts)
         assert rig.param_set("PRG_LAW", 0.0) == 0.0
-        await until(lambda: "/camera/calibration" in got and "/gains" in got, 10, "new sortie")
+        await until(lambda: len(got["/camera/calibration"]) >= 2, 10, "a new sortie")
         rig.wait_text("target in view", after=n)
         assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
         await until(
@@ -254,3 +261,56 @@ def test_onboard_run_publishes_the_recordings_channels_against_sitl(tmp_path):
     assert any("loop ready" in e for e in events), events
     assert stats is not None and stats["foxglove"]["published_frames"] > 0
     assert stats["foxglove"]["error"] is None
+
+
+def test_a_client_joining_mid_sortie_gets_the_calibration_and_the_gains():
+    """They are sent once a sortie; the onboard publisher sends them again to a client that
+    subscribes later (an engineer opening Foxglove on a running sortie)."""
+    import numpy as np
+
+    from onboard.runtime.foxglove import FoxglovePublisher
+
+    frames = FrameList()
+    Simulation(load_scenario("static-ahead-20m"), keep_records=False, observers=[frames]).run()
+    live = live_mod.FoxgloveLive(port=0)
+    pub = FoxglovePublisher(live)
+    pub.start()
+    try:
+        info = frames.info
+        pub.new_sortie(info.t0_s, info.law, info.camera_model, info.gains, info.control_rate_hz)
+        for f in frames.frames[:50]:
+            pub.offer(
+                f.time_s, np.array(f.vehicle_p_enu_m), np.array(f.vehicle_v_enu_m_s),
+                np.array(f.vehicle_q_wxyz), f.telemetry, f.detection, None, f.gains, 0,
+            )  # fmt: skip
+        end = time.monotonic() + 10
+        while pub.published_frames < 50 and time.monotonic() < end:
+            time.sleep(0.01)
+        assert pub.published_frames == 50 and pub.dropped == 0
+
+        async def join() -> dict[str, dict]:
+            async with websockets.connect(live.url(), subprotocols=SUBPROTOCOLS) as ws:
+                adv: dict[str, dict] = {}
+                while len(adv) < len(CHANNELS):
+                    msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+                    if msg["op"] == "advertise":
+                        adv.update({c["topic"]: c for c in msg["channels"]})
+                topics = ["/camera/calibration", "/gains"]
+                subs = [{"id": k, "channelId": adv[t]["id"]} for k, t in enumerate(topics)]
+                await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                got: dict[str, dict] = {}
+                while len(got) < 2:
+                    data = await asyncio.wait_for(ws.recv(), 10)
+                    if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
+                        got[topics[struct.unpack_from("<I", data, 1)[0]]] = json.loads(data[13:])
+                return got
+
+        got = asyncio.run(join())
+    finally:
+        pub.stop()
+        pub.join(5)
+        live.stop()
+    assert got["/gains"] == info.gains.to_dict()
+    cam = info.camera_model
+    assert got["/camera/calibration"]["K"][0] == pytest.approx(cam.f_px)
+    assert pub.error is None

@@ -169,6 +169,16 @@ class ChannelBuilder:
             },
         )
 
+    def republish(self) -> None:
+        """The calibration and the gains in force again, at the last frame's time: a Foxglove
+        client that subscribes mid-sortie gets them too (they are sent once otherwise)."""
+        if self.closed or self.info is None or self._sink is None:
+            return
+        t_s = 0.0 if self._last is None else max(self._last.time_s - self._t0, 0.0)
+        self._calibration(t_s)
+        if self._last_gains is not None:
+            self._json("/gains", t_s, self._last_gains.to_dict())
+
     def _calibration(self, t_s: float) -> None:
         cam = self.info.camera_model
         f, cu, cv = cam.f_px, cam.cu_px, cam.cv_px

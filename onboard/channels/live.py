@@ -36,6 +36,7 @@ class FoxgloveLive:
             name="peregrine", host=host, port=port, context=self._ctx
         )
         self.host = host
+        self._index = {topic: i for i, (topic, _) in enumerate(CHANNELS)}
 
     @property
     def port(self) -> int:
@@ -48,6 +49,10 @@ class FoxgloveLive:
         """A sortie observer publishing here (``rates``: the recorder's ``record_every``,
         ``annotate_every``, ``frame_every``; its defaults otherwise)."""
         return ChannelBuilder(sink=FoxgloveSink(self), **rates)
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether any client subscribes to ``topic`` now."""
+        return self.channels[self._index[topic]].has_sinks()
 
     def publish(self, ti: int, data: bytes) -> None:
         """One encoded message on channel ``ti`` (an index of CHANNELS)."""
@@ -69,8 +74,11 @@ class FoxgloveSink:
         self.live.publish(ti, data)
 
     def add_many(self, ns: int, items) -> None:
+        """Encoded only for a channel some client subscribes to."""
+        channels = self.live.channels
         for ti, enc, payload in items:
-            self.live.publish(ti, encode(enc, payload))
+            if channels[ti].has_sinks():
+                self.live.publish(ti, encode(enc, payload))
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         pass

@@ -9,8 +9,9 @@ latest detection, the DKF estimate) to a bounded deque, O(1) and lock-free; a fu
 its oldest sample (``dropped`` counts them). :class:`FoxglovePublisher`, a thread at a lower
 scheduling priority (nice +10, as the video's), builds the frames, encodes the messages
 (camera JPEGs included, at 5 Hz) and hands them to foxglove-sdk's server, which queues per
-client and drops for a slow one. Events (STATUSTEXT) go through their own bounded deque and
-ride on the next frame built.
+client and drops for a slow one. Only channels a client subscribes to are encoded; the
+calibration and the gains, sent once per sortie, are sent again when a client subscribes.
+Events (STATUSTEXT) go through their own bounded deque and ride on the next frame built.
 
 A "sortie" here is the life of one loop: it starts when the loop is built (the first camera
 frame, or a rebuild after a camera, airframe or law parameter changed) and finishes when the
@@ -103,6 +104,7 @@ class FoxglovePublisher(threading.Thread):
         prev_v: tuple[float, np.ndarray] | None = None
         next_image_s = 0.0
         last_t = None
+        had_static = False  # a client subscribed to the calibration or the gains
         try:
             while not self._halt.wait(0.01):
                 start, self._start = self._start, None
@@ -115,6 +117,12 @@ class FoxglovePublisher(threading.Thread):
                 if builder is None:
                     self._samples.clear()
                     continue
+                has_static = self.live.subscribed("/camera/calibration") or self.live.subscribed(
+                    "/gains"
+                )
+                if has_static and not had_static and start is None:
+                    builder.republish()  # a client joined mid-sortie
+                had_static = has_static
                 while self._samples:
                     t_s, p, v, q, tel, det, dkf, gains, trips = self._samples.popleft()
                     if p is None or q is None or tel is None:
@@ -152,7 +160,11 @@ class FoxglovePublisher(threading.Thread):
                     got = self.latest_image()
                     if got is not None:
                         next_image_s = last_t + IMAGE_EVERY_S
-                        builder.image(*got)
+                        t_img, image = got
+                        # no JPEG encoded for nobody
+                        builder.image(
+                            t_img, image if self.live.subscribed("/camera/image") else None
+                        )
                 self.cpu_s = time.thread_time()
             if builder is not None:
                 builder.finish(last_t or 0.0, None, "onboard stopped")
