@@ -1,8 +1,8 @@
 """The controller's messages, defined once: each field's name, JSON type, unit, meaning and
 its floats on the MAVLink link. Everything else is derived from these definitions:
 
-- the MCAP schemas of ``/control`` and ``/dkf`` (groundstation/recording/schemas.py; tests hold
-  the encoders in groundstation/recording/encode.py to them);
+- the schemas of the ``/control`` and ``/dkf`` channels (onboard/channels/schemas.py; tests
+  hold the encoders in onboard/channels/encode.py to them);
 - the live telemetry's layout, :data:`onboard.link.telemetry.FIELDS` (one ``DEBUG_FLOAT_ARRAY``
   ``PRG_CTRL``): :data:`TELEMETRY` lists which fields it carries in which order, each
   field's ``wire`` names its floats;
