@@ -314,3 +314,27 @@ def test_a_client_joining_mid_sortie_gets_the_calibration_and_the_gains():
     cam = info.camera_model
     assert got["/camera/calibration"]["K"][0] == pytest.approx(cam.f_px)
     assert pub.error is None
+
+
+def test_onboard_run_foxglove_options_are_checked(capsys):
+    from onboard.cli import main
+
+    for argv, needle in (
+        (["--foxglove", "127.0.0.1:99999"], "argument --foxglove: '127.0.0.1:99999'"),
+        (["--foxglove", ":8765"], "argument --foxglove: ':8765': no host"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["run", "--camera", "sitl://127.0.0.1:9", *argv])
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and needle in err, (argv, err)
+    live = live_mod.FoxgloveLive(port=0)
+    port = live.port
+    try:  # a port in use: one clear line, exit 2
+        code = main(
+            ["run", "--camera", "sitl://127.0.0.1:9", "--gcs", "", "--mavlink",
+             "udpout:127.0.0.1:9", "--foxglove", str(port)]
+        )  # fmt: skip
+    finally:
+        live.stop()
+    err = capsys.readouterr().err
+    assert code == 2 and f"--foxglove: cannot listen on 127.0.0.1:{port}" in err, err
