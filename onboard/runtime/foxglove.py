@@ -25,15 +25,18 @@ import os
 import threading
 import time
 from collections import deque
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..camera_model import CameraModel
-from ..channels.live import FoxgloveLive
 from ..control.guidance import normal_component
 from ..datatypes import LoopMode
 from ..frames import Frame, SortieEvent, SortieStart
 from ..gains import Gains
+
+if TYPE_CHECKING:
+    from ..channels.live import FoxgloveLive
 
 QUEUE = 64  # samples (about 1.3 s at 50 Hz) before the oldest is dropped
 PUBLISH_NICE = 10  # below the control thread (Linux)

@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from ..camera_model import CameraModel
-from ..channels.live import FoxgloveLive
 from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams, VehicleState
 from ..estimation.dkf import DkfConfig
 from ..link import ftp
@@ -48,7 +47,6 @@ from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .fc_side import FcState, FlightControllerSide
-from .foxglove import FoxglovePublisher
 from .ground_side import TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
@@ -145,13 +143,17 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._event("warning", note)
         self.video_overlay = Overlay()
         self.video = None if config.video is None else runtime_streamer(self)
-        self.foxglove: FoxglovePublisher | None = None
+        self.foxglove = None  # a FoxglovePublisher (onboard run --foxglove)
         if config.foxglove is not None:
+            from ..channels.live import FoxgloveLive  # foxglove-sdk only when asked for
+
             host, port = config.foxglove
             try:
                 live = FoxgloveLive(port=port, host=host)
             except Exception as exc:  # the SDK's bind error: one clear line
                 raise OSError(f"--foxglove: cannot listen on {host}:{port}: {exc}") from None
+            from .foxglove import FoxglovePublisher
+
             self.foxglove = FoxglovePublisher(
                 live,
                 self._latest_image,
