@@ -278,11 +278,15 @@ def test_a_client_joining_mid_sortie_gets_the_calibration_and_the_gains():
     try:
         info = frames.info
         pub.new_sortie(info.t0_s, info.law, info.camera_model, info.gains, info.control_rate_hz)
-        for f in frames.frames[:50]:
-            pub.offer(
-                f.time_s, np.array(f.vehicle_p_enu_m), np.array(f.vehicle_v_enu_m_s),
-                np.array(f.vehicle_q_wxyz), f.telemetry, f.detection, None, f.gains, 0,
-            )  # fmt: skip
+
+        def offer(part) -> None:
+            for f in part:
+                pub.offer(
+                    f.time_s, np.array(f.vehicle_p_enu_m), np.array(f.vehicle_v_enu_m_s),
+                    np.array(f.vehicle_q_wxyz), f.telemetry, f.detection, None, f.gains, 0,
+                )  # fmt: skip
+
+        offer(frames.frames[:50])
         end = time.monotonic() + 10
         while pub.published_frames < 50 and time.monotonic() < end:
             time.sleep(0.01)
@@ -298,6 +302,8 @@ def test_a_client_joining_mid_sortie_gets_the_calibration_and_the_gains():
                 topics = ["/camera/calibration", "/gains"]
                 subs = [{"id": k, "channelId": adv[t]["id"]} for k, t in enumerate(topics)]
                 await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                await asyncio.sleep(0.2)  # the server takes the subscription
+                offer(frames.frames[50:60])  # the sortie goes on
                 got: dict[str, dict] = {}
                 while len(got) < 2:
                     data = await asyncio.wait_for(ws.recv(), 10)

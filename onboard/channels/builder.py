@@ -79,6 +79,7 @@ class ChannelBuilder:
         self._was_lost = False
         self._guard_trips = 0
         self._sink = None
+        self._joined = None  # the sink's "a client just subscribed" test (Foxglove live)
         self._ch = {topic: i for i, (topic, _) in enumerate(CHANNELS)}
 
     software = f"peregrine onboard {onboard_version}"  # the "software_version" metadata
@@ -126,6 +127,7 @@ class ChannelBuilder:
                 f"seed {info.seed}, camera {info.camera}",
             )
             self._sink.started()
+            self._joined = getattr(self._sink, "joined", None)
         except OSError as exc:
             self._fail(exc)
 
@@ -171,7 +173,8 @@ class ChannelBuilder:
 
     def republish(self) -> None:
         """The calibration and the gains in force again, at the last frame's time: a Foxglove
-        client that subscribes mid-sortie gets them too (they are sent once otherwise)."""
+        client that subscribes mid-sortie gets them too (they are sent once otherwise; the
+        sink's ``joined()`` says when, checked at record ticks)."""
         if self.closed or self.info is None or self._sink is None:
             return
         t_s = 0.0 if self._last is None else max(self._last.time_s - self._t0, 0.0)
@@ -235,6 +238,8 @@ class ChannelBuilder:
         self._tick += 1
         if (self._tick - 1) % self.record_every:
             return
+        if self._joined is not None and self._joined():
+            self.republish()
         ns = _ns(t_s)
         sec, nsec = divmod(ns, 1_000_000_000)
         ch = self._ch

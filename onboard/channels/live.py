@@ -69,6 +69,17 @@ class FoxgloveSink:
 
     def __init__(self, live: FoxgloveLive) -> None:
         self.live = live
+        self._static_subscribed = False
+
+    def _static(self) -> bool:
+        return self.live.subscribed("/camera/calibration") or self.live.subscribed("/gains")
+
+    def joined(self) -> bool:
+        """True once each time a client subscribes to the calibration or the gains after the
+        sortie started (the builder then sends them again)."""
+        now = self._static()
+        joined, self._static_subscribed = now and not self._static_subscribed, now
+        return joined
 
     def add(self, ti: int, ns: int, data: bytes) -> None:
         self.live.publish(ti, data)
@@ -87,7 +98,7 @@ class FoxgloveSink:
         pass
 
     def started(self) -> None:
-        pass
+        self._static_subscribed = self._static()  # sent at the start to who is there
 
     def finish(self, outcome: dict[str, str]) -> None:
         pass

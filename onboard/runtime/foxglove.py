@@ -10,7 +10,8 @@ its oldest sample (``dropped`` counts them). :class:`FoxglovePublisher`, a threa
 scheduling priority (nice +10, as the video's), builds the frames, encodes the messages
 (camera JPEGs included, at 5 Hz) and hands them to foxglove-sdk's server, which queues per
 client and drops for a slow one. Only channels a client subscribes to are encoded; the
-calibration and the gains, sent once per sortie, are sent again when a client subscribes.
+calibration and the gains, sent once per sortie, are sent again when a client subscribes
+(:meth:`~onboard.channels.builder.ChannelBuilder.republish`).
 Events (STATUSTEXT) go through their own bounded deque and ride on the next frame built.
 
 A "sortie" here is the life of one loop: it starts when the loop is built (the first camera
@@ -107,7 +108,6 @@ class FoxglovePublisher(threading.Thread):
         prev_v: tuple[float, np.ndarray] | None = None
         next_image_s = 0.0
         last_t = None
-        had_static = False  # a client subscribed to the calibration or the gains
         try:
             while not self._halt.wait(0.01):
                 start, self._start = self._start, None
@@ -120,12 +120,6 @@ class FoxglovePublisher(threading.Thread):
                 if builder is None:
                     self._samples.clear()
                     continue
-                has_static = self.live.subscribed("/camera/calibration") or self.live.subscribed(
-                    "/gains"
-                )
-                if has_static and not had_static and start is None:
-                    builder.republish()  # a client joined mid-sortie
-                had_static = has_static
                 while self._samples:
                     t_s, p, v, q, tel, det, dkf, gains, trips = self._samples.popleft()
                     if p is None or q is None or tel is None:
