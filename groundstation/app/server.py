@@ -25,7 +25,7 @@ import websockets.asyncio.client
 from fastapi import FastAPI, WebSocket
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from ..campaigns.tune import default_storage_url
@@ -134,9 +134,15 @@ def create_app(
     async def sorties_page() -> HTMLResponse:
         return HTMLResponse((web_dir() / "sorties.html").read_text(encoding="utf-8"))
 
+    # viser's client, with web/scene3d.js run first: it draws the 3D view only as often as
+    # the eye needs (and cheaply with software WebGL), see that file
+    viser_html = VISER_INDEX.read_text(encoding="utf-8").replace(
+        "<head>", '<head><script src="/static/scene3d.js"></script>', 1
+    )
+
     @app.get("/viser/", include_in_schema=False)
-    async def viser_page() -> FileResponse:
-        return FileResponse(VISER_INDEX, media_type="text/html")
+    async def viser_page() -> HTMLResponse:
+        return HTMLResponse(viser_html)
 
     @app.websocket("/viser")
     async def viser_proxy(ws: WebSocket) -> None:
