@@ -766,24 +766,23 @@ $("gainset-upload").onchange = async (ev) => {
 
 // The 3D view only in a visible tab: a hidden one drops its viser connection (viser replays
 // the whole scene when it reconnects), so background tabs cost the machine almost nothing.
+// It is loaded from the server's 3D-view port when there is one (GET /api/scene): another
+// origin, so the browser gives it a process of its own and its WebGL never stalls this page's
+// thread (see SceneListener in groundstation/app/server.py). It draws itself only as often as
+// the eye needs and moves viser's notices out of the way: web/scene3d.js, run in its page.
+let sceneUrl = null;
 function syncSceneToVisibility() {
   const frame = $("viser");
   const visible = document.visibilityState === "visible";
-  if (visible && frame.dataset.live !== "1") { frame.src = "/viser/"; frame.dataset.live = "1"; }
+  if (sceneUrl === null) return;
+  if (visible && frame.dataset.live !== "1") { frame.src = sceneUrl; frame.dataset.live = "1"; }
   if (!visible && frame.dataset.live === "1") { frame.src = "about:blank"; frame.dataset.live = "0"; }
 }
 document.addEventListener("visibilitychange", syncSceneToVisibility);
-// The 3D view draws itself only as often as the eye needs: web/scene3d.js, run in its page.
-// viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
-// corner, where they cover neither the engagement nor the outcome label
-$("viser").addEventListener("load", () => {
-  let doc = null; try { doc = $("viser").contentDocument; } catch (e) { return; }
-  if (!doc || !doc.head || doc.getElementById("peregrine-notices")) return;
-  const st = doc.createElement("style"); st.id = "peregrine-notices";
-  st.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
-  doc.head.appendChild(st);
+api("GET", "/api/scene").then((r) => r.port, () => null).then((port) => {
+  sceneUrl = port ? `${location.protocol}//${location.hostname}:${port}/viser/` : "/viser/";
+  syncSceneToVisibility();
 });
-syncSceneToVisibility();
 
 // ------------------------------------------------------------------ gain studies
 // The Optuna studies `groundstation tune` stored: a trials table, the best-so-far loss per

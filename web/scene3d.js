@@ -1,14 +1,14 @@
 // Runs in the 3D view's page (viser's client, /viser/) before viser's own scripts: the 3D
-// view is drawn only as often as the eye needs, so it leaves the page's thread to the plots
-// and numbers, which get every telemetry message.
+// view is drawn only as often as the eye needs, so it leaves the machine to the plots and
+// numbers, which get every telemetry message.
 //
-// The 3D view shares the dashboard page's thread (same origin). Chromium without a GPU (a
-// laptop without one, a headless browser) renders its WebGL in software (SwiftShader,
-// llvmpipe) and composites in software too: each 3D frame is then read back to the CPU
-// (glReadPixels) on the page's thread, which waits there until the shared GPU process has
-// drawn it; with 5 viewers that wait was most of every page's time. With software WebGL the
-// view is therefore drawn at half resolution (viser's fixedDpr) without multisampling, at
-// SCENE_IDLE_FPS_SOFTWARE frames per second while nobody moves its camera. The scene itself
+// Chromium without a GPU (a laptop without one, a headless browser) renders WebGL in software
+// (SwiftShader, llvmpipe) and composites in software too: each 3D frame is then read back to
+// the CPU (glReadPixels) on its page's thread, which waits there until the GPU process, shared
+// by every tab, has drawn it (the dashboard therefore loads this page from another origin, in
+// a process of its own: see app.js). With software WebGL the view is drawn at half resolution
+// (viser's fixedDpr) without multisampling, at SCENE_IDLE_FPS_SOFTWARE frames per second while
+// nobody moves its camera. The scene itself
 // changes 5 times a second (SCENE_EVERY on the server), so a GPU draws it at that rate. While
 // the operator moves the camera (pointer, wheel or key in the view, for 1.5 s after the last
 // such event) it is drawn at the display's rate.
@@ -44,6 +44,11 @@
   }
   const idleFps = software ? SCENE_IDLE_FPS_SOFTWARE : SCENE_IDLE_FPS;
   window.peregrineScene = { software, idleFps };
+  // viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
+  // corner, where they cover neither the engagement nor the outcome label
+  const notices = document.createElement("style");
+  notices.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
+  document.head.appendChild(notices);
   const raf = window.requestAnimationFrame.bind(window);
   let activeUntil = 0, last = 0;
   const poke = () => { activeUntil = performance.now() + 1500; };

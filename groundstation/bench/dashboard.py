@@ -73,9 +73,11 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
             c1 = [pg.evaluate(probe) for pg in pages]
-            software = pages[0].evaluate(
-                "(() => { const f = document.getElementById('viser').contentWindow;"
-                " return f && f.peregrineScene ? f.peregrineScene.software : null; })()"
+            scene = [f for f in pages[0].frames if "/viser/" in f.url]
+            software = (
+                scene[0].evaluate("window.peregrineScene ? window.peregrineScene.software : null")
+                if scene
+                else None
             )
             browser.close()
         finally:
