@@ -179,6 +179,12 @@ def _build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
     sv.add_argument("--port", type=_PORT, default=8000, help="0: any free port")
     sv.add_argument(
+        "--scene-port",
+        type=_PORT,
+        default=0,
+        help="the 3D view's own port on the same address (default 0: any free port)",
+    )
+    sv.add_argument(
         "--no-auth",
         action="store_true",
         help="no access token (refused unless the host is a loopback address)",
@@ -468,6 +474,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             signing_key=key,
             foxglove=foxglove,
             video=args.video,
+            scene_port=args.scene_port,
         )
     except (ValueError, LinkError, OSError) as exc:
         if foxglove is not None:

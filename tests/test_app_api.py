@@ -1,6 +1,7 @@
 """The ground station's web app through FastAPI's TestClient: auth, gains, scenarios, the
 sortie lifecycle, gain sets, telemetry, and a clean stop."""
 
+import json
 import shutil
 import socket
 import subprocess
@@ -210,13 +211,45 @@ def test_telemetry_stream(client):
     assert snaps[-1]["t"] > snaps[1]["t"]
 
 
+def test_the_3d_view_has_a_port_of_its_own_with_the_same_token(tmp_path):
+    """The 3D view's listener serves viser's client (with web/scene3d.js run first) as an
+    origin-keyed agent cluster, asks for the token like the dashboard's, and serves nothing
+    else; the page learns its port from /api/scene."""
+    import urllib.error
+    import urllib.request
+
+    station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
+    station.start_in_thread()
+    try:
+        scene = station.scene_http.port
+        base = f"http://127.0.0.1:{scene}"
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(base + "/viser/", timeout=10)
+        assert refused.value.code == 401
+        with urllib.request.urlopen(f"{base}/viser/?token={station.token}", timeout=10) as r:
+            assert r.headers["Origin-Agent-Cluster"] == "?1"
+            assert '<head><script src="/static/scene3d.js"></script>' in r.read().decode()
+        for path in ("/api/status", "/", "/static/app.js"):
+            req = urllib.request.Request(base + path)
+            req.add_header("Authorization", f"Bearer {station.token}")
+            with pytest.raises(urllib.error.HTTPError) as other:
+                urllib.request.urlopen(req, timeout=10)
+            assert other.value.code == 404, path
+        req = urllib.request.Request(station.url().split("?")[0] + "api/scene")
+        req.add_header("Authorization", f"Bearer {station.token}")
+        with urllib.request.urlopen(req, timeout=10) as r:
+            assert json.loads(r.read()) == {"port": scene}
+    finally:
+        station.stop()
+
+
 def test_stopping_the_server_frees_its_ports(tmp_path):
     station = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs")
     station.start_in_thread()
-    port, viser_port = station.port, station.viser_port
-    assert port != 0
+    port, viser_port, scene_port = station.port, station.viser_port, station.scene_http.port
+    assert port != 0 and scene_port is not None
     station.stop()
-    for p in (port, viser_port):
+    for p in (port, viser_port, scene_port):
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             s.bind(("127.0.0.1", p))  # raises if still held
 

@@ -59,11 +59,18 @@ def test_operator_flies_cv_and_edits_a_gain(station, browser, tmp_path):
 
     # the views follow the sortie while it flies (the rate is `groundstation bench
     # --dashboard`'s figure, not a timed assertion here: a loaded machine must not fail it)
+    # every telemetry message of the running sortie is applied: one more point in the plots'
+    # series per message counted (`bench --dashboard` prints applied, received and painted)
+    probe = "[window.peregrine.applied, window.peregrine.plotView.own.t_s.length]"
     n0, t0 = page.evaluate("[window.peregrine.updates, window.peregrine.shownT]")
+    a0, points0 = page.evaluate(probe)
     page.wait_for_function(
         f"window.peregrine.updates >= {n0 + 5} && window.peregrine.shownT > {t0 + 0.3}",
         timeout=10000,
     )
+    a1, points1 = page.evaluate(probe)
+    assert points1 - points0 == a1 - a0 >= 1
+    assert page.evaluate("window.peregrine.received") >= a1
     page.select_option("#speed", "max")
     page.wait_for_function(
         "document.querySelector('#st-outcome').textContent.includes('miss')", timeout=30000

@@ -3,7 +3,10 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const W = (window.peregrine = { updates: 0, lastT: null, snap: null });
+// counters the benchmark reads (groundstation bench --dashboard): telemetry messages received,
+// applied (appended to the plots' series, the readouts' state updated) and painted (animation
+// frames that showed new data; updates is the same count)
+const W = (window.peregrine = { received: 0, applied: 0, updates: 0, lastT: null, snap: null });
 
 async function api(method, path, body) {
   const opts = { method, headers: {} };
@@ -275,13 +278,14 @@ async function syncPlotSources(st) {
 }
 
 function appendLive(s) { // a running sortie: one more point per telemetry message
-  if (s.status.replay || s.status.epoch !== loadedEpoch || loading) return;
+  if (s.status.replay || s.status.epoch !== loadedEpoch || loading) return false;
   const o = PV.own; const t = s.t;
-  if (o.t_s.length && t <= o.t_s[o.t_s.length - 1]) return;
+  if (o.t_s.length && t <= o.t_s[o.t_s.length - 1]) return false;
   o.t_s.push(t);
   const row = { normal_accel_m_s2: s.normal_accel_m_s2, speed_m_s: s.speed_m_s, normal_vel_m_s: s.normal_vel_m_s, e_x_px: s.e_est_px ? s.e_est_px[0] : null, e_y_px: s.e_est_px ? s.e_est_px[1] : null, range_m: s.range_m };
   for (const k of Object.keys(o.columns)) o.columns[k].push(row[k] === undefined ? null : row[k]);
   PV.dirty = true;
+  return true;
 }
 
 function fillFieldChoice(s) {
@@ -496,12 +500,13 @@ $("btn-live-abort").onclick = () => liveCommand("abort");
 // ------------------------------------------------------------------ telemetry
 // Each message is taken in at once (cheap: parse, append to the plots' data); the views are
 // redrawn at most once per animation frame, so a slow machine draws less often instead of
-// falling behind. window.peregrine.updates counts redraws that showed new data.
+// falling behind. window.peregrine counts the messages received, those applied to the plots'
+// series and readouts (every one of a running sortie) and the redraws that showed new data.
 let pending = null;
 let frameRequested = false;
 
 function takeSnapshot(s) {
-  W.received = (W.received || 0) + 1; W.snap = s;
+  W.received += 1; W.snap = s;
   if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
     if (W.lastT !== null && s.t < W.lastT) { img.track = []; img.eyStart = null; }
@@ -515,7 +520,7 @@ function takeSnapshot(s) {
       img.track.push(s.e_est_px); if (img.track.length > 60) img.track.shift();
       if (img.eyStart === null) img.eyStart = s.e_est_px[1];
     }
-    appendLive(s);
+    if (appendLive(s)) W.applied += 1;
     if (PV.tNow !== s.t) { PV.tNow = s.t; PV.dirty = true; }
   }
   pending = s;
@@ -761,43 +766,23 @@ $("gainset-upload").onchange = async (ev) => {
 
 // The 3D view only in a visible tab: a hidden one drops its viser connection (viser replays
 // the whole scene when it reconnects), so background tabs cost the machine almost nothing.
+// It is loaded from the server's 3D-view port when there is one (GET /api/scene): another
+// origin, so the browser gives it a process of its own and its WebGL never stalls this page's
+// thread (see SceneListener in groundstation/app/server.py). It draws itself only as often as
+// the eye needs and moves viser's notices out of the way: web/scene3d.js, run in its page.
+let sceneUrl = null;
 function syncSceneToVisibility() {
   const frame = $("viser");
   const visible = document.visibilityState === "visible";
-  if (visible && frame.dataset.live !== "1") { frame.src = "/viser/"; frame.dataset.live = "1"; }
+  if (sceneUrl === null) return;
+  if (visible && frame.dataset.live !== "1") { frame.src = sceneUrl; frame.dataset.live = "1"; }
   if (!visible && frame.dataset.live === "1") { frame.src = "about:blank"; frame.dataset.live = "0"; }
 }
 document.addEventListener("visibilitychange", syncSceneToVisibility);
-// The 3D view shares this page's thread (same origin). Rendered in software, drawing it at the
-// display's rate would starve the telemetry views; the scene changes 5 times a second, so it
-// is drawn as often (SCENE_IDLE_FPS), and at full rate while the operator moves the camera
-// (pointer or wheel in the view, for 1.5 s after the last such event).
-const SCENE_IDLE_FPS = 5;
-function throttleSceneFrames(win, doc) {
-  if (!win || win.__peregrineThrottled) return;
-  win.__peregrineThrottled = true;
-  const raf = win.requestAnimationFrame.bind(win);
-  let activeUntil = 0, last = 0;
-  const poke = () => { activeUntil = performance.now() + 1500; };
-  for (const ev of ["pointerdown", "pointermove", "wheel", "keydown", "touchstart"]) doc.addEventListener(ev, poke, { capture: true, passive: true });
-  win.requestAnimationFrame = (cb) => {
-    const now = performance.now();
-    if (now < activeUntil) return raf(cb);
-    const wait = Math.max(0, last + 1000 / SCENE_IDLE_FPS - now);
-    return win.setTimeout(() => raf((ts) => { last = performance.now(); cb(ts); }), wait);
-  };
-}
-// viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
-// corner, where they cover neither the engagement nor the outcome label
-$("viser").addEventListener("load", () => {
-  let doc = null; try { doc = $("viser").contentDocument; } catch (e) { return; }
-  if (!doc || !doc.head || doc.getElementById("peregrine-notices")) return;
-  throttleSceneFrames($("viser").contentWindow, doc);
-  const st = doc.createElement("style"); st.id = "peregrine-notices";
-  st.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
-  doc.head.appendChild(st);
+api("GET", "/api/scene").then((r) => r.port, () => null).then((port) => {
+  sceneUrl = port ? `${location.protocol}//${location.hostname}:${port}/viser/` : "/viser/";
+  syncSceneToVisibility();
 });
-syncSceneToVisibility();
 
 // ------------------------------------------------------------------ gain studies
 // The Optuna studies `groundstation tune` stored: a trials table, the best-so-far loss per

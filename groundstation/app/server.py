@@ -16,6 +16,7 @@ import json
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,7 @@ import websockets.asyncio.client
 from fastapi import FastAPI, WebSocket
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from ..campaigns.tune import default_storage_url
@@ -92,7 +93,10 @@ def create_app(
     gainsets: GainSetStore,
     logs: LogIndex | None = None,
     studies_url: str | None = None,
+    scene_port: Callable[[], int | None] = lambda: None,
 ) -> FastAPI:
+    """``scene_port``: the port of the 3D view's own listener (:class:`SceneListener`) once
+    it listens, None to serve the 3D view from this origin."""
     logs = logs or LogIndex(Path("logs"))
 
     @contextlib.asynccontextmanager
@@ -134,9 +138,20 @@ def create_app(
     async def sorties_page() -> HTMLResponse:
         return HTMLResponse((web_dir() / "sorties.html").read_text(encoding="utf-8"))
 
+    # viser's client, with web/scene3d.js run first: it draws the 3D view only as often as
+    # the eye needs (and cheaply with software WebGL), see that file
+    viser_html = VISER_INDEX.read_text(encoding="utf-8").replace(
+        "<head>", '<head><script src="/static/scene3d.js"></script>', 1
+    )
+
     @app.get("/viser/", include_in_schema=False)
-    async def viser_page() -> FileResponse:
-        return FileResponse(VISER_INDEX, media_type="text/html")
+    async def viser_page() -> HTMLResponse:
+        return HTMLResponse(viser_html)
+
+    @app.get("/api/scene", include_in_schema=False)
+    async def scene_location() -> dict[str, int | None]:
+        """Where the page loads its 3D view from: this host at ``port`` (None: this origin)."""
+        return {"port": scene_port()}
 
     @app.websocket("/viser")
     async def viser_proxy(ws: WebSocket) -> None:
@@ -265,6 +280,75 @@ def free_loopback_port() -> int:
         return s.getsockname()[1]
 
 
+SCENE_PATHS = ("/viser/", "/viser", "/static/scene3d.js")
+
+
+class SceneListener:
+    """The 3D view (viser's client and its websocket) on a port of its own, same address, same
+    token (the access cookie is the host's, whatever the port), nothing else served there.
+
+    Another port is another origin; with ``Origin-Agent-Cluster: ?1`` Chromium gives the 3D
+    view's frame a process of its own. Its WebGL then never stalls the dashboard's thread:
+    a browser that renders WebGL in software (no GPU) reads every 3D frame back on the thread
+    of the page that drew it, and in the page's own process that thread is the one drawing the
+    plots and numbers (5 headless viewers on 2 cores: 0.4 frames/s painted with the 3D view in
+    the page's process, 1.0-1.6 with it in its own)."""
+
+    def __init__(self, app: Any, host: str, port: int = 0) -> None:
+        async def scene_only(scope, receive, send):
+            if scope.get("path") not in SCENE_PATHS:
+                if scope["type"] == "websocket":
+                    await send({"type": "websocket.close", "code": 1008})
+                    return
+                await send({"type": "http.response.start", "status": 404, "headers": []})
+                await send({"type": "http.response.body", "body": b""})
+                return
+
+            async def send_isolated(message):
+                if message["type"] == "http.response.start":
+                    headers = [*message.get("headers", []), (b"origin-agent-cluster", b"?1")]
+                    message = {**message, "headers": headers}
+                await send(message)
+
+            await app(scope, receive, send_isolated)
+
+        self.server = uvicorn.Server(
+            uvicorn.Config(
+                scene_only,
+                host=host,
+                port=port,
+                log_level="warning",
+                ws="websockets-sansio",
+                lifespan="off",  # the dashboard's listener runs the app's lifespan
+            )
+        )
+        self._thread = threading.Thread(target=self.server.run, name="scene-http", daemon=True)
+
+    @property
+    def port(self) -> int | None:
+        """The port it listens on, None until it does (or if it could not)."""
+        if not self.server.started:
+            return None
+        for srv in getattr(self.server, "servers", []):
+            for sock in srv.sockets:
+                return sock.getsockname()[1]
+        return None
+
+    def start(self, timeout_s: float = 10.0) -> None:
+        """Listen; if it cannot (the port taken), the page serves the 3D view itself."""
+        self._thread.start()
+        deadline = time.monotonic() + timeout_s
+        while not self.server.started and self._thread.is_alive():
+            if time.monotonic() > deadline:
+                break
+            time.sleep(0.02)
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        if self._thread.is_alive():
+            self._thread.join(timeout=10.0)
+
+
 class GroundStation:
     """Everything ``serve`` starts, with a clean stop (frees both ports)."""
 
@@ -279,10 +363,12 @@ class GroundStation:
         signing_key: bytes | None = None,
         foxglove=None,
         video: tuple[str, int] | None = None,
+        scene_port: int | None = 0,
     ) -> None:
         """``foxglove``: a :class:`~onboard.channels.live.FoxgloveLive` to publish
         every sortie's channels on (None: none); ``video``: (host, port) to receive the
-        vehicle's RTP video on (live mode)."""
+        vehicle's RTP video on (live mode); ``scene_port``: the 3D view's own port
+        (:class:`SceneListener`; 0: any free one, None: served from the dashboard's origin)."""
         if no_auth and not is_loopback(host):
             raise ValueError(f"--no-auth is refused on a non-loopback address ({host})")
         if video is not None and mavlink_url is None:
@@ -329,7 +415,9 @@ class GroundStation:
             LogIndex(log_dir or Path("logs")),
             # where `groundstation tune` keeps its studies by default (same data folder)
             default_storage_url(self.data_dir),
+            scene_port=lambda: None if self.scene_http is None else self.scene_http.port,
         )
+        self.scene_http = None if scene_port is None else SceneListener(self.app, host, scene_port)
         self.server = uvicorn.Server(
             uvicorn.Config(
                 self.app,
@@ -355,6 +443,8 @@ class GroundStation:
         return base if self.token is None else f"{base}?token={self.token}"
 
     def start_in_thread(self, timeout_s: float = 10.0) -> None:
+        if self.scene_http is not None:
+            self.scene_http.start()
         self._thread = threading.Thread(target=self.server.run, daemon=True)
         self._thread.start()
         deadline = time.monotonic() + timeout_s
@@ -364,6 +454,8 @@ class GroundStation:
             time.sleep(0.02)
 
     def run_forever(self) -> None:
+        if self.scene_http is not None:
+            self.scene_http.start()
         try:
             self.server.run()
         finally:
@@ -376,6 +468,8 @@ class GroundStation:
         self.close()
 
     def close(self) -> None:
+        if self.scene_http is not None:
+            self.scene_http.stop()
         self.session.close()
         if self.session.foxglove is not None:
             self.session.foxglove.stop()
