@@ -169,8 +169,23 @@ class InterceptionLoop:
                 dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
                 self._dq_filt = (dq_y, dq_z)
             e_n = (e_est[0] / f, e_est[1] / f)
+            range_m, v_t, var_v = math.nan, None, math.nan
+            if gains.tau_zem > 0.0:
+                dv = self.dkf.depth_velocity()
+                if dv is not None:
+                    # the range the DKF is confident of: its inverse depth one sigma high
+                    # (a poorly known depth must not switch the midcourse term on)
+                    rng, v_t, P = dv
+                    rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
+                    range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                    var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             out = self._law(
-                GuidanceInput(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
+                GuidanceInput(
+                    *(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
+                    range_m=range_m,
+                    target_vel_enu_m_s=v_t,
+                    target_vel_var_m2_s2=var_v,
+                ),
                 gains,
             )
             a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad
