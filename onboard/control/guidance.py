@@ -201,7 +201,7 @@ def zem_nulling_accel(inp: GuidanceInput, gains: Gains) -> np.ndarray:
 
     With t_go = R / V_c the zero-effort miss normal to the LOS is ZEM = -v_perp t_go, so this
     is a = ZEM / (tau_zem t_go): the miss decays as exp(-t / tau_zem) whatever the range, where
-    PN (a = K V_c q') lets it decay only as (t_go / t_go0)^(K - 1). It uses absolute directions
+    PN (a = K V_c q') lets it decay only as (t_go / t_go0)^K. It uses absolute directions
     (LOS, velocity), not the LOS rate, so the attitude estimate's error enters as an angle
     (R x 0.2 deg of ZEM), not differentiated. The target's velocity is the DKF's, shrunk toward
     zero by its own uncertainty (|v_t|^2 / (|v_t|^2 + tr P_v)): far away it is barely
