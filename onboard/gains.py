@@ -82,6 +82,9 @@ class Gains:
     t_att_lag: float = _gain(
         0.0, "s", 0.0, 0.1, "attitude-estimate latency, predicted away with the gyro (0 = off)"
     )
+    t_vel_lag: float = _gain(
+        0.0, "s", 0.0, 0.1, "velocity-estimate latency, predicted with the thrust model (0 = off)"
+    )
     tau_zem: float = _gain(
         1.5, "s", 0.0, 10.0, "PNG midcourse: time constant nulling the ZEM far away (0 = off)"
     )

@@ -28,6 +28,7 @@ from .control.guidance import (
     smooth_los_change,
 )
 from .datatypes import (
+    GRAVITY_M_S2,
     ControlTelemetry,
     Detection,
     GyroSample,
@@ -98,6 +99,7 @@ class InterceptionLoop:
             )
         )
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
+        self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
         # the image's top/bottom edges above body x (upright: a portrait camera's long side)
         roll = math.radians(camera.mount_roll_deg)
         half_v = math.atan(
@@ -145,7 +147,16 @@ class InterceptionLoop:
         if gains.t_att_lag > 0.0:
             R_WB = predict_attitude(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
-        v = state.velocity_enu_m_s
+        v_est = state.velocity_enu_m_s
+        v = v_est
+        if gains.t_vel_lag > 0.0:
+            # the velocity estimate is t_vel_lag old: add the acceleration since, from the
+            # thrust last commanded along the thrust axis, gravity and the observer's d^
+            a = R_WB[:, 2] * (self._thrust_n / self.vehicle.mass_kg)
+            a[2] -= GRAVITY_M_S2
+            if self.disturbance.enabled:
+                a = a + self.disturbance.estimate_m_s2
+            v = v_est + gains.t_vel_lag * a
         self.dkf.predict(t, gyro, v, R_WC)
         self.last_fusion = []
         if self._detections:
@@ -153,7 +164,7 @@ class InterceptionLoop:
                 self.last_fusion.append(self.dkf.fuse(det))
             self._detections.clear()
 
-        d_hat = self.disturbance.update(t, v, R_WB[:, 2])
+        d_hat = self.disturbance.update(t, v_est, R_WB[:, 2])
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
@@ -220,6 +231,7 @@ class InterceptionLoop:
             omega = np.zeros(3)
             thrust = self.vehicle.hover_thrust_normalised
         self.disturbance.commanded(float(thrust))
+        self._thrust_n = float(thrust) * self.vehicle.max_thrust_n
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         return ControlTelemetry(
