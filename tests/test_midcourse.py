@@ -132,3 +132,24 @@ def test_attitude_latency_prediction():
     assert_allclose(predict_attitude(R, np.array([1.0, -2.0, 0.5]), 0.0), R, atol=1e-15)
     assert_allclose(predict_attitude(R, np.array([np.nan, 0.0, 0.0]), 0.01), R)
     assert Gains().t_att_lag == 0.0  # off by default (README "Envelope maps")
+
+
+def test_velocity_latency_prediction_in_the_loop():
+    """Waiting for a target the loop brakes, a_d = -k_brake v: with t_vel_lag the v it brakes
+    on is the estimate moved on by the lag times the thrust model's acceleration (hover thrust
+    on a thrust axis tilted 0.2 rad: g (n_f - e_z); the observer off)."""
+    from onboard.camera_model import CameraModel
+    from onboard.datatypes import GRAVITY_M_S2, VehicleParams, VehicleState
+    from onboard.geometry import rot_x, rotmat_to_quat
+    from onboard.loop import InterceptionLoop
+
+    R = rot_x(0.2)
+    v = np.array([0.5, 3.0, -0.2])
+    state = VehicleState(0.0, np.zeros(3), v, rotmat_to_quat(R), np.zeros(3))
+    ad = {}
+    for lag in (0.0, 0.05):
+        loop = InterceptionLoop(CameraModel(), VehicleParams(), Gains(k_dob=0.0, t_vel_lag=lag))
+        ad[lag] = loop.tick(state).accel_desired_enu_m_s2
+    assert_allclose(ad[0.0], -G.k_brake * v, atol=1e-12)
+    a = GRAVITY_M_S2 * (R[:, 2] - np.array([0.0, 0.0, 1.0]))
+    assert_allclose(ad[0.05], -G.k_brake * (v + 0.05 * a), atol=1e-9)
