@@ -157,7 +157,7 @@ def test_velocity_latency_prediction_in_the_loop():
 
 def test_range_sortie_nulls_the_zem_within_seconds():
     """Closed loop in the simulator: a static target 100 m ahead, ideal sensors (the range
-    campaign's with n = 1). Measured: ZEM 5.37 m at acquisition, under 1 m for good 3.04 s
+    campaign's 100 m try with n = 1). Measured: ZEM 5.37 m at acquisition, under 1 m for good 3.04 s
     after it, 88 m away (the paper's PN, tau_zem = 0: 6.88 s, 60 m away), a hit (0.014 m)."""
     import dataclasses
 
