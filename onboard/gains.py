@@ -79,6 +79,18 @@ class Gains:
     )
     k_pur: float = _gain(4.0, "1/s", 0.0, 20.0, "PNG pursuit bias: heading-to-LOS rate at the edge")
     tau_los: float = _gain(0.0, "s", 0.0, 2.0, "low-pass time constant on the LOS change (0 = off)")
+    t_att_lag: float = _gain(
+        0.0, "s", 0.0, 0.1, "attitude-estimate latency, predicted away with the gyro (0 = off)"
+    )
+    t_vel_lag: float = _gain(
+        0.0, "s", 0.0, 0.1, "velocity-estimate latency, predicted with the thrust model (0 = off)"
+    )
+    tau_zem: float = _gain(
+        1.5, "s", 0.0, 10.0, "PNG midcourse: time constant nulling the ZEM far away (0 = off)"
+    )
+    r_mid: float = _gain(
+        40.0, "m", 5.0, 1000.0, "PNG midcourse: acts beyond this range, fully beyond twice it"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

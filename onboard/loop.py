@@ -28,6 +28,7 @@ from .control.guidance import (
     smooth_los_change,
 )
 from .datatypes import (
+    GRAVITY_M_S2,
     ControlTelemetry,
     Detection,
     GyroSample,
@@ -38,9 +39,21 @@ from .datatypes import (
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult
 from .gains import Gains
-from .geometry import quat_to_rotmat
+from .geometry import quat_to_rotmat, rodrigues
 
 _NAN2 = (math.nan, math.nan)
+
+
+def predict_attitude(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:
+    """The attitude ``lag_s`` seconds after ``R_WB`` at the body rates ``rates_flu_rad_s``
+    (held): R_WB exp([w lag]x). The attitude estimate arrives late (EKF2's output predictor
+    plus the link, about 10 ms) while the image estimate is predicted to the tick: at the
+    endgame's body rates of a few rad/s that lag is a LOS error of tens of mrad."""
+    w = np.asarray(rates_flu_rad_s, dtype=float)
+    n = math.sqrt(float(w @ w))
+    if not (n > 0.0 and math.isfinite(n)):
+        return R_WB
+    return R_WB @ rodrigues(w / n, n * lag_s)
 
 
 class InterceptionLoop:
@@ -86,6 +99,7 @@ class InterceptionLoop:
             )
         )
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
+        self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
         # the image's top/bottom edges above body x (upright: a portrait camera's long side)
         roll = math.radians(camera.mount_roll_deg)
         half_v = math.atan(
@@ -130,8 +144,19 @@ class InterceptionLoop:
         self._gyro_sum = np.zeros(3)
         self._gyro_n = 0
         R_WB = quat_to_rotmat(state.attitude_wxyz)
+        if gains.t_att_lag > 0.0:
+            R_WB = predict_attitude(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
-        v = state.velocity_enu_m_s
+        v_est = state.velocity_enu_m_s
+        v = v_est
+        if gains.t_vel_lag > 0.0:
+            # the velocity estimate is t_vel_lag old: add the acceleration since, from the
+            # thrust last commanded along the thrust axis, gravity and the observer's d^
+            a = R_WB[:, 2] * (self._thrust_n / self.vehicle.mass_kg)
+            a[2] -= GRAVITY_M_S2
+            if self.disturbance.enabled:
+                a = a + self.disturbance.estimate_m_s2
+            v = v_est + gains.t_vel_lag * a
         self.dkf.predict(t, gyro, v, R_WC)
         self.last_fusion = []
         if self._detections:
@@ -139,7 +164,7 @@ class InterceptionLoop:
                 self.last_fusion.append(self.dkf.fuse(det))
             self._detections.clear()
 
-        d_hat = self.disturbance.update(t, v, R_WB[:, 2])
+        d_hat = self.disturbance.update(t, v_est, R_WB[:, 2])
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
@@ -169,8 +194,23 @@ class InterceptionLoop:
                 dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
                 self._dq_filt = (dq_y, dq_z)
             e_n = (e_est[0] / f, e_est[1] / f)
+            range_m, v_t, var_v = math.nan, None, math.nan
+            if gains.tau_zem > 0.0:
+                dv = self.dkf.depth_velocity()
+                if dv is not None:
+                    # the range the DKF is confident of: its inverse depth one sigma high
+                    # (a poorly known depth must not switch the midcourse term on)
+                    rng, v_t, P = dv
+                    rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
+                    range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                    var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             out = self._law(
-                GuidanceInput(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
+                GuidanceInput(
+                    *(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
+                    range_m=range_m,
+                    target_vel_enu_m_s=v_t,
+                    target_vel_var_m2_s2=var_v,
+                ),
                 gains,
             )
             a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad
@@ -191,6 +231,7 @@ class InterceptionLoop:
             omega = np.zeros(3)
             thrust = self.vehicle.hover_thrust_normalised
         self.disturbance.commanded(float(thrust))
+        self._thrust_n = float(thrust) * self.vehicle.max_thrust_n
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         return ControlTelemetry(

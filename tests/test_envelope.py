@@ -256,6 +256,7 @@ def test_zem_of_a_straight_pass():
     m = range_metrics(trace)
     assert m["acquired"] and m["acq_range_m"] == pytest.approx(math.hypot(9.8, 0.5))
     assert m["zem_settle_s"] == 0.0 and m["zem_lead_s"] == pytest.approx(0.1)
+    assert m["zem_settle_range_m"] == pytest.approx(math.hypot(9.8, 0.5))  # at acquisition
     # the ZEM crosses 1 m twice: it is settled from its last crossing on
     t = [0.0, 0.1, 0.2, 0.3, 0.4]
     trace = {
@@ -271,6 +272,7 @@ def test_zem_of_a_straight_pass():
     )
     m = range_metrics(trace)
     assert m["zem_settle_s"] == pytest.approx(0.3) and m["zem_lead_s"] == pytest.approx(0.1)
+    assert m["zem_settle_range_m"] == pytest.approx(10.0)
 
 
 def test_envelope_map_of_a_tiny_campaign(tmp_path):

@@ -349,8 +349,9 @@ def acquisition(trace: dict[str, Any]) -> tuple[float, float] | None:
 
 def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
     """Acquisition range, the ZEM at acquisition, and from when on (s after acquisition) the
-    ZEM stays under :data:`ZEM_LIMIT_M` to the end of the sortie, with how long that was before
-    the end (``zem_lead_s``: the guidance's margin to spare)."""
+    ZEM stays under :data:`ZEM_LIMIT_M` to the end of the sortie, the range then
+    (``zem_settle_range_m``) and how long that was before the end (``zem_lead_s``: the
+    guidance's margin to spare)."""
     acq = acquisition(trace)
     if acq is None:
         return {
@@ -358,6 +359,7 @@ def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
             "acq_range_m": None,
             "zem_acq_m": None,
             "zem_settle_s": None,
+            "zem_settle_range_m": None,
             "zem_lead_s": None,
         }
     t, zem = zem_series(trace)
@@ -368,11 +370,18 @@ def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
         settle = None  # still (or again) over the limit at the end
     else:
         settle = 0.0 if above.size == 0 else float(t[i0 + above[-1] + 1] - acq[0])
+    settle_range = None
+    if settle is not None:
+        k = i0 + (0 if above.size == 0 else int(above[-1]) + 1)
+        settle_range = float(
+            np.linalg.norm(np.subtract(trace["target_pos_m"][k], trace["vehicle_pos_m"][k]))
+        )
     return {
         "acquired": True,
         "acq_range_m": acq[1],
         "zem_acq_m": float(after[0]) if after.size else None,
         "zem_settle_s": settle,
+        "zem_settle_range_m": settle_range,
         "zem_lead_s": None if settle is None else float(t[-1] - acq[0] - settle),
     }
 
@@ -394,6 +403,7 @@ def _summarize_range(outcomes):
             "acq_range_median_m": _med("acq_range_m"),
             "zem_acq_median_m": _med("zem_acq_m"),
             "zem_settle_median_s": _med("zem_settle_s"),
+            "zem_settle_range_median_m": _med("zem_settle_range_m"),
             "zem_lead_min_s": min((m["zem_lead_s"] for m in settled), default=None),
             "zem_settled_rate": len(settled) / len(outs),
         }

@@ -178,8 +178,8 @@ def _md_range(summary) -> str:
     lines = [
         "| range | law | HIT rate | CEP | acquired | acquisition range (median) | "
         "ZEM at acquisition (median) | ZEM < 1 m from (median, after acquisition) | "
-        "... for at least (before the end) | settled |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "range then (median) | ... for at least (before the end) | settled |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r, by_law in summary["cells"].items():
         for law, c in by_law.items():
@@ -187,7 +187,9 @@ def _md_range(summary) -> str:
                 f"| {r} m | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
                 f"{_fmt(c['cep_m'])} m | {100 * c['acquired_rate']:.0f} % | "
                 f"{_fmt(c['acq_range_median_m'], 1)} m | {_fmt(c['zem_acq_median_m'], 2)} m | "
-                f"{_fmt(c['zem_settle_median_s'], 2)} s | {_fmt(c['zem_lead_min_s'], 2)} s | "
+                f"{_fmt(c['zem_settle_median_s'], 2)} s | "
+                f"{_fmt(c.get('zem_settle_range_median_m'), 1)} m | "
+                f"{_fmt(c['zem_lead_min_s'], 2)} s | "
                 f"{100 * c['zem_settled_rate']:.0f} % |"
             )
     lines.append(

@@ -34,6 +34,11 @@ class GuidanceInput:
     # elevation (rad) of the image's (top, bottom) edges above the body x axis of a level
     # body: mount pitch +- half the vertical FOV; nan switches the FOV-aware terms off
     fov_edges_rad: tuple[float, float] = (math.nan, math.nan)
+    # the DKF's range along the LOS (m) and the target's velocity (ENU, m/s) with the trace of
+    # its covariance (m^2/s^2); nan / None when unknown (the midcourse term is then off)
+    range_m: float = math.nan
+    target_vel_enu_m_s: np.ndarray | None = None
+    target_vel_var_m2_s2: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,6 +187,37 @@ def smooth_los_change(prev_rad: float, dq_rad: float, dt_s: float, tau_s: float)
     return prev_rad + (dt_s / (tau_s + dt_s)) * (dq_rad - prev_rad)
 
 
+def midcourse_weight(range_m: float, gains: Gains) -> float:
+    """Weight in [0, 1] of the midcourse ZEM-nulling term: 0 within ``r_mid`` metres, rising
+    linearly to 1 at twice ``r_mid`` (0 when ``tau_zem`` = 0 or the range is unknown)."""
+    if gains.tau_zem <= 0.0 or not math.isfinite(range_m):
+        return 0.0
+    return min(max(range_m / gains.r_mid - 1.0, 0.0), 1.0)
+
+
+def zem_nulling_accel(inp: GuidanceInput, gains: Gains) -> np.ndarray:
+    """Midcourse acceleration a = -v_perp / tau_zem (m/s^2, not in the paper), v_perp the
+    vehicle's velocity relative to the target normal to the LOS.
+
+    With t_go = R / V_c the zero-effort miss normal to the LOS is ZEM = -v_perp t_go, so this
+    is a = ZEM / (tau_zem t_go): the miss decays as exp(-t / tau_zem) whatever the range, where
+    PN (a = K V_c q') lets it decay only as (t_go / t_go0)^K. It uses absolute directions
+    (LOS, velocity), not the LOS rate, so the attitude estimate's error enters as an angle
+    (R x 0.2 deg of ZEM), not differentiated. The target's velocity is the DKF's, shrunk toward
+    zero by its own uncertainty (|v_t|^2 / (|v_t|^2 + tr P_v)): far away it is barely
+    observable, and an unobservable estimate must not steer."""
+    v = inp.velocity_enu_m_s
+    vt = inp.target_vel_enu_m_s
+    if vt is not None:
+        vt2 = float(vt @ vt)
+        var = inp.target_vel_var_m2_s2
+        shrink = vt2 / (vt2 + var) if math.isfinite(var) and vt2 + var > 0.0 else 0.0
+        v = v - shrink * vt
+    n = inp.los_enu
+    v_perp = v - float(v @ n) * n
+    return v_perp * (-1.0 / gains.tau_zem)
+
+
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
     v = inp.velocity_enu_m_s
@@ -190,14 +226,20 @@ def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
         a_d = fov_guard(_hover_start(inp, gains).accel_desired_enu_m_s2, inp, gains)
         return GuidanceOutput(a_d, math.nan, math.nan, True)
     sigma_y, sigma_z = direction_angles(v / speed)
-    sigma_yd = sigma_y + gains.K_y * inp.d_los_elev_rad
-    sigma_zd = sigma_z + gains.K_z * inp.d_los_azim_rad
+    # far away PN's LOS-rate term is mostly noise (v/R small): it fades out as the midcourse
+    # ZEM-nulling term fades in (README "Range")
+    w_mid = midcourse_weight(inp.range_m, gains)
+    pn = 1.0 - w_mid
+    sigma_yd = sigma_y + pn * gains.K_y * inp.d_los_elev_rad
+    sigma_zd = sigma_z + pn * gains.K_z * inp.d_los_azim_rad
     n_d = direction_from_angles(sigma_yd, sigma_zd)
     w = pursuit_weight(inp, gains)
     if w > 0.0:  # near the image's top or bottom edge: turn toward the LOS (pursuit)
         n_d = n_d + (w * gains.k_pur * inp.dt_s) * (inp.los_enu - v / speed)
         n_d = n_d / math.sqrt(float(n_d @ n_d))
     v_d = ramped_speed(speed, gains, inp.dt_s) * n_d
+    if w_mid > 0.0:  # far away: null the ZEM (midcourse), PN's endgame takes over within r_mid
+        v_d = v_d + (w_mid * inp.dt_s) * zem_nulling_accel(inp, gains)
     a_d = fov_guard(accel_toward_velocity(v_d, v, gains, inp.dt_s), inp, gains)
     return GuidanceOutput(a_d, sigma_y, sigma_z, False)
 
