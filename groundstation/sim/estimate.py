@@ -288,12 +288,17 @@ class StateEstimateModel:
         self._advance(time_s)
         return np.asarray(rates_flu_rad_s, dtype=float) + self.gyro_bias.value
 
+    def stamp_error_s(self) -> float:
+        """The next frame's capture-stamp error (s): the sortie's camera-IMU offset plus this
+        frame's jitter (one draw a frame)."""
+        return self.camera_offset_s + self.spec.camera_stamp_jitter_s * float(
+            self._camera_rng.standard_normal()
+        )
+
     def stamp(self, detection: Detection) -> Detection:
         """The detection as the loop receives it: its capture time off by the sortie's
         camera-IMU offset and the frame's stamp jitter."""
-        err = self.camera_offset_s + self.spec.camera_stamp_jitter_s * float(
-            self._camera_rng.standard_normal()
-        )
+        err = self.stamp_error_s()
         return replace(detection, capture_time_s=detection.capture_time_s + err)
 
     def summary(self) -> dict[str, float]:

@@ -25,7 +25,6 @@ import numpy as np
 
 from ..camera_model import CameraModel
 from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams, VehicleState
-from ..estimation.dkf import DkfConfig
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.param_meta import FILE_NAMES, component_files
@@ -154,7 +153,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.params.gains,
             law=rt.law,
             control_rate_hz=self.config.control_rate_hz,
-            dkf_config=DkfConfig(lost_timeout_s=rt.TGT_LOST_S),
+            dkf_config=rt.dkf_config(),
         )
         self._event("info", f"camera {width}x{height}, law {rt.law}: loop ready")
 
