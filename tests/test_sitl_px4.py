@@ -76,6 +76,8 @@ def test_bad_sitl_options_are_refused_with_a_clear_error(capsys):
         (["--home", "95,0,0"], "not a latitude/longitude"),
         (["--home", "52,4"], "--home 52,4"),
         (["--offboard-loss", "100"], "expected 0 to 60 s"),
+        (["--set", "estimate.lag_s=-1"], "estimate.lag_s"),
+        (["--set", "camera.no_such_key=1"], "no_such_key"),
     ):
         assert main(["sitl", "--camera-port", "0", "--duration", "0.1", *argv]) == 2
         assert needle in capsys.readouterr().err
