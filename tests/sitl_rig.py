@@ -186,11 +186,17 @@ class Rig:
     def abort(self) -> int:
         return self.command(CMD_ABORT)
 
-    def param_set(self, name: str, value: float, timeout_s: float = 3.0) -> float:
+    def param_set(self, name: str, value: float, timeout_s: float = 6.0) -> float:
+        """The value the vehicle answers; PARAM_SET is sent again each second without one,
+        as ground stations do (setting a value twice is harmless)."""
         self.params_seen.pop(name, None)
-        self.ground.send(self.ground.mav.param_set_encode(1, 191, name.encode(), value, 9))
         end = time.monotonic() + timeout_s
+        resend = 0.0
         while time.monotonic() < end:
+            if time.monotonic() >= resend:
+                resend = time.monotonic() + 1.0
+                msg = self.ground.mav.param_set_encode(1, 191, name.encode(), value, 9)
+                self.ground.send(msg)
             self.pump(0.02)
             if name in self.params_seen:
                 return self.params_seen[name]
