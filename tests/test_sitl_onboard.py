@@ -121,6 +121,8 @@ def test_state_at_carries_the_attitude_to_the_tick_with_the_latest_gyro():
     assert yaw(state_at(f, 0.990)) == 0.0  # a tick before the sample: nothing to carry
     assert yaw(state_at(f, 1.5)) == pytest.approx(-2.0 * MAX_PROPAGATION_S, abs=1e-12)
     assert state_at(f, 1.004).time_s == 1.004
+    f.gyro_flu_rad_s = np.array([0.0, 0.0, 1e6])  # not a gyro reading: not propagated
+    assert np.array_equal(state_at(f, 1.004).attitude_wxyz, q0)
 
 
 def test_the_attitude_paired_with_the_image_estimate_is_the_tick_s():

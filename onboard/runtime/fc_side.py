@@ -35,6 +35,7 @@ from .px4_params import PX4_PARAMS_READ, check
 
 MAX_RATE_RAD_S = 20.0
 MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
+MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
 STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 200.0,
     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
@@ -66,13 +67,14 @@ def state_at(fc: FcState, now_s: float) -> VehicleState:
     """The vehicle state for a control tick at ``now_s`` (position and velocity required):
     the last attitude PX4 sent, propagated from its sample time to the tick with the latest
     gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
-    ``MAX_PROPAGATION_S``. The loop pairs it with an image estimate predicted to the tick, so
+    ``MAX_PROPAGATION_S`` (and not at all with rates beyond a gyro's full scale). The loop pairs it with an image estimate predicted to the tick, so
     an attitude left a stream period old shows as a line-of-sight error of rate x age."""
     q = fc.q_wxyz
     if fc.q_time_s is not None:
         dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
         rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
-        q = propagate_attitude(q, rates, dt)
+        if float(np.linalg.norm(rates)) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
+            q = propagate_attitude(q, rates, dt)
     return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)
 
 
