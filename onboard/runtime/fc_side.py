@@ -67,8 +67,9 @@ def state_at(fc: FcState, now_s: float) -> VehicleState:
     """The vehicle state for a control tick at ``now_s`` (position and velocity required):
     the last attitude PX4 sent, propagated from its sample time to the tick with the latest
     gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
-    ``MAX_PROPAGATION_S`` (and not at all with rates beyond a gyro's full scale). The loop pairs it with an image estimate predicted to the tick, so
-    an attitude left a stream period old shows as a line-of-sight error of rate x age."""
+    ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale. The loop
+    pairs it with an image estimate predicted to the tick, so an attitude left a stream
+    period old would show as a line-of-sight error of rate x age."""
     q = fc.q_wxyz
     if fc.q_time_s is not None:
         dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
