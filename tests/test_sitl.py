@@ -5,6 +5,7 @@ faults the onboard runtime must survive. Real time: each test flies for a few se
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import socket
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 
 from groundstation.recording.reader import inspect_log, iter_messages
+from groundstation.scenario import load_scenario
 from onboard.link.px4 import mavlink
 
 from .sitl_rig import Rig, free_port
@@ -139,8 +141,14 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     assert len(logs) == 1
     info = inspect_log(logs[0])
     assert info.status == "ok" and info.law == "png"
-    # the ground's closest approach (50 Hz ticks, target moved on by its velocity) agrees
-    assert abs(info.miss_m - result["miss_m"]) < 0.1, (info.miss_m, result)
+    # the ground's closest approach (50 Hz ticks, target moved on by its velocity) agrees, to
+    # within what PX4's estimate is off: the ground sees the SITL's reported position, which
+    # carries the estimate model's error (sigma 0.05 m per axis; 3 sigma across the pass)
+    sigma = load_scenario("cv-top-to-bottom").estimate.pos_noise_m
+    assert abs(info.miss_m - result["miss_m"]) < 0.1 + 3 * math.sqrt(2) * sigma, (
+        info.miss_m,
+        result,
+    )
     topics = {}
     for topic, _, _ in iter_messages(logs[0]):
         topics[topic] = topics.get(topic, 0) + 1
