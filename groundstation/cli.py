@@ -254,6 +254,13 @@ def _build_parser() -> argparse.ArgumentParser:
         help="TCP port of the camera stream on 127.0.0.1 (0: any free port)",
     )
     st.add_argument("--seed", type=_SEED, default=0)
+    st.add_argument(
+        "--set",
+        action="append",
+        metavar="SECTION.KEY=VALUE",
+        help="change one scenario value, as for sorties: --set estimate.enabled=false (ideal "
+        "sensors), --set camera.false_probability=0.05 (detector faults)",
+    )
     st.add_argument("--duration", type=_seconds(0, False), help="stop after this many seconds")
     st.add_argument(
         "--on-ground",
@@ -498,7 +505,7 @@ def _cmd_sitl(args: argparse.Namespace) -> int:
     from .sitl.camera_server import CameraServer
     from .sitl.vehicle import SitlOptions, SitlVehicle
 
-    scenario = load_scenario(args.scenario)
+    scenario = with_overrides(load_scenario(args.scenario), parse_overrides(args.set))
     try:
         home = Home()
         if args.home:

@@ -55,6 +55,41 @@ def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:
     )
 
 
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a b of quaternions (w, x, y, z)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation vector (rad)."""
+    x, y, z = rotvec_rad
+    ang = math.sqrt(x * x + y * y + z * z)
+    if ang < 1e-12:
+        return np.array([1.0, 0.5 * rotvec_rad[0], 0.5 * rotvec_rad[1], 0.5 * rotvec_rad[2]])
+    s = math.sin(0.5 * ang) / ang
+    return np.array([math.cos(0.5 * ang), s * x, s * y, s * z])
+
+
+def propagate_attitude(q_wxyz: np.ndarray, rates_flu_rad_s: np.ndarray, dt_s: float) -> np.ndarray:
+    """The attitude ``dt_s`` later at constant body rates: q exp(omega dt) (body-frame
+    rotation; exact for constant rates, renormalised). ``dt_s`` may be negative (back in
+    time); ``dt_s = 0`` returns ``q_wxyz`` unchanged."""
+    if dt_s == 0.0:
+        return np.asarray(q_wxyz, dtype=float)
+    w = np.asarray(rates_flu_rad_s, dtype=float) * dt_s
+    q = quat_mul(np.asarray(q_wxyz, dtype=float), quat_exp(w))
+    return q / math.sqrt(float(q @ q))
+
+
 def rotmat_to_quat(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method)."""
     tr = R[0, 0] + R[1, 1] + R[2, 2]

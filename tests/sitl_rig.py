@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from onboard.enums import RuntimeState
 from onboard.link import telemetry as tm
 from onboard.link.px4 import CMD_ABORT, CMD_START, MavLink, mavlink, message_text
 
@@ -33,6 +34,9 @@ def free_ports(*kinds) -> list[int]:
     if len(set(ports)) < len(ports):  # a UDP and a TCP port may share a number: pick again
         return free_ports(*kinds)
     return ports
+
+
+STARTUP_TIMEOUT_S = 120.0
 
 
 class Rig:
@@ -79,6 +83,54 @@ class Rig:
         self.acks: list[tuple[int, int]] = []
         self.params_seen: dict[str, float] = {}
         self._last_hb = -1e9
+        self._up = False
+
+    # -------------------------------------------------------------- conditions
+    def wait_up(self, timeout_s: float = STARTUP_TIMEOUT_S) -> None:
+        """Both processes started and listening: the SITL printed its camera and MAVLink
+        addresses and the onboard runtime said it is up, in their own logs (which no link can
+        lose). Starting two Python processes is what a loaded machine slows most, and is not
+        what the tests test: the waits after this one count from here."""
+        end = time.monotonic() + timeout_s
+        while not self._up:
+            self._up = (
+                "sitl: camera " in self.sitl_out.read_text()
+                and "onboard up:" in self.onboard_out.read_text()
+            )
+            if self._up:
+                return
+            if time.monotonic() >= end:
+                raise AssertionError(f"processes not up within {timeout_s} s\n{self.logs()}")
+            if self.ground is not None:
+                self.pump(0.05)
+            else:
+                time.sleep(0.05)
+            self.check_alive()
+
+    def wait_state(self, state: RuntimeState, timeout_s: float = 15.0) -> dict:
+        """The first telemetry sample in ``state``, counted from both processes being up. The
+        runtime streams its state at 50 Hz, so this does not miss what a one-shot STATUSTEXT
+        can: with the onboard runtime listening on the ground port, what it says before the
+        ground's first heartbeat reaches it (its peer's address unknown) goes nowhere."""
+        self.wait_up()
+        code = tm.STATE_CODES.index(state.value)
+        end = time.monotonic() + timeout_s
+        n = 0
+        while time.monotonic() < end:
+            for t in self.telemetry[n:]:
+                if t["state"] == code:
+                    return t
+            n = len(self.telemetry)
+            self.pump(0.05)
+            self.check_alive()
+        raise AssertionError(
+            f"no telemetry in state {state.value!r} within {timeout_s} s; got {self.texts}\n"
+            f"{self.logs()}"
+        )
+
+    def wait_ready(self, timeout_s: float = 15.0) -> dict:
+        """The target in view and the runtime ready to start (the ground hears it)."""
+        return self.wait_state(RuntimeState.READY, timeout_s)
 
     # -------------------------------------------------------------- the ground
     def pump(self, seconds: float = 0.0) -> None:
@@ -103,7 +155,9 @@ class Rig:
             time.sleep(0.005)
 
     def wait_text(self, needle: str, timeout_s: float = 15.0, after: int = 0) -> float:
-        """Receipt time of the first STATUSTEXT containing ``needle`` (from index ``after``)."""
+        """Receipt time of the first STATUSTEXT containing ``needle`` (from index ``after``),
+        counted from both processes being up."""
+        self.wait_up()
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
             for t, text in self.texts[after:]:
@@ -132,11 +186,17 @@ class Rig:
     def abort(self) -> int:
         return self.command(CMD_ABORT)
 
-    def param_set(self, name: str, value: float, timeout_s: float = 3.0) -> float:
+    def param_set(self, name: str, value: float, timeout_s: float = 6.0) -> float:
+        """The value the vehicle answers; PARAM_SET is sent again each second without one,
+        as ground stations do (setting a value twice is harmless)."""
         self.params_seen.pop(name, None)
-        self.ground.send(self.ground.mav.param_set_encode(1, 191, name.encode(), value, 9))
         end = time.monotonic() + timeout_s
+        resend = 0.0
         while time.monotonic() < end:
+            if time.monotonic() >= resend:
+                resend = time.monotonic() + 1.0
+                msg = self.ground.mav.param_set_encode(1, 191, name.encode(), value, 9)
+                self.ground.send(msg)
             self.pump(0.02)
             if name in self.params_seen:
                 return self.params_seen[name]

@@ -5,6 +5,7 @@ faults the onboard runtime must survive. Real time: each test flies for a few se
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import socket
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 
 from groundstation.recording.reader import inspect_log, iter_messages
+from groundstation.scenario import load_scenario
 from onboard.link.px4 import mavlink
 
 from .sitl_rig import Rig, free_port
@@ -101,6 +103,7 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     rig = rig_factory(ground=False, onboard_args=("--signing-key", str(key)))
     gs = GroundStationProcess(tmp_path, f"udpin:127.0.0.1:{rig.gcs_port}", key)
     try:
+        rig.wait_up()  # the 30 s below count from all three processes being up
         st = gs.wait(
             lambda s: (
                 s["live"]["onboard_state"] == "ready"
@@ -138,8 +141,14 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     assert len(logs) == 1
     info = inspect_log(logs[0])
     assert info.status == "ok" and info.law == "png"
-    # the ground's closest approach (50 Hz ticks, target moved on by its velocity) agrees
-    assert abs(info.miss_m - result["miss_m"]) < 0.1, (info.miss_m, result)
+    # the ground's closest approach (50 Hz ticks, target moved on by its velocity) agrees, to
+    # within what PX4's estimate is off: the ground sees the SITL's reported position, which
+    # carries the estimate model's error (sigma 0.05 m per axis; 3 sigma across the pass)
+    sigma = load_scenario("cv-top-to-bottom").estimate.pos_noise_m
+    assert abs(info.miss_m - result["miss_m"]) < 0.1 + 3 * math.sqrt(2) * sigma, (
+        info.miss_m,
+        result,
+    )
     topics = {}
     for topic, _, _ in iter_messages(logs[0]):
         topics[topic] = topics.get(topic, 0) + 1
@@ -152,7 +161,7 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
 # ---------------------------------------------------------------------- faults
 def test_sitl_killed_mid_sortie_stops_every_command(rig_factory):
     rig = rig_factory(sitl_listens=True)
-    rig.wait_text("target in view")
+    rig.wait_ready()
     assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
     rig.wait_text("offboard: intercepting")
     rig.pump(0.5)
@@ -189,7 +198,7 @@ def test_sitl_killed_mid_sortie_stops_every_command(rig_factory):
 
 def test_detections_stopped_brake_and_hold_within_the_timeout(rig_factory):
     rig = rig_factory(sitl_args=("--camera-blackout-after", "1.0"))
-    rig.wait_text("target in view")
+    rig.wait_ready()
     assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
     lost_at = rig.wait_text("target lost: braking", timeout_s=10.0)
     rig.pump(0.2)
@@ -233,7 +242,7 @@ def test_garbage_on_every_port_and_an_out_of_range_param(rig_factory, sitl_liste
     (NaN modes and setpoints, out-of-range thrust, unknown commands) during the pass: the
     flight controller's port is the SITL's or the onboard's depending on the topology."""
     rig = rig_factory(sitl_listens=sitl_listens, onboard_gcs_listens=True)
-    rig.wait_text("target in view")
+    rig.wait_ready()
     assert rig.param_set("PRG_V_MAX", 99.0) == 12.0  # refused: the unchanged value comes back
     assert rig.param_set("PRG_K_A", float("nan")) == 2.0
     assert rig.param_set("PRG_V_MAX", 10.0) == 10.0
@@ -286,7 +295,7 @@ def test_abort_brakes_and_px4_rules_for_offboard(rig_factory):
     from onboard.link.px4 import MavLink
 
     rig = rig_factory(sitl_listens=True)
-    rig.wait_text("target in view")
+    rig.wait_ready()
     intruder = MavLink(f"udpout:127.0.0.1:{rig.fc_port}", 255, 190)
     intruder.send(
         intruder.mav.command_long_encode(

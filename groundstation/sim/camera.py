@@ -26,6 +26,14 @@ from ..scenario import CAMERA_MODES, CameraSpec
 from .render import FrameRenderer
 
 
+def apparent_radius_px(model: CameraModel, p_cam: np.ndarray, diameter_m: float) -> float:
+    """Image radius (px) of a sphere of ``diameter_m`` at ``p_cam`` (camera frame, m): the
+    tangent cone's half-angle through the pinhole."""
+    radius = diameter_m / 2.0
+    dist2 = float(p_cam @ p_cam)
+    return model.f_px * radius / math.sqrt(max(dist2 - radius * radius, 1e-12))
+
+
 class DetectorFaults:
     """Seeded detector faults, one :meth:`frame` call per captured frame.
 
@@ -143,9 +151,7 @@ class SimCamera:
         uv = m.project(p_cam)
         if uv is None:
             return None
-        radius = diameter_m / 2.0
-        dist2 = float(p_cam @ p_cam)
-        r_px = m.f_px * radius / math.sqrt(max(dist2 - radius * radius, 1e-12))
+        r_px = apparent_radius_px(m, p_cam, diameter_m)
         u, v = uv
         # visible when at least part of the disc is in the frame
         if not (-r_px < u < m.width_px + r_px and -r_px < v < m.height_px + r_px):

@@ -91,6 +91,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from onboard.datatypes import Detection, VehicleState
+from onboard.geometry import quat_exp, quat_mul
 
 from ..scenario import EstimateSpec
 
@@ -151,29 +152,6 @@ class RandomWalk:
     def step(self, dt_s: float) -> np.ndarray:
         self.value = self.value + self.walk * math.sqrt(dt_s) * self._normals.next()
         return self.value
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
-
-
-def _quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation vector (rad)."""
-    x, y, z = rotvec_rad
-    ang = math.sqrt(x * x + y * y + z * z)
-    if ang < 1e-12:
-        return np.array([1.0, 0.5 * rotvec_rad[0], 0.5 * rotvec_rad[1], 0.5 * rotvec_rad[2]])
-    s = math.sin(0.5 * ang) / ang
-    return np.array([math.cos(0.5 * ang), s * x, s * y, s * z])
 
 
 @dataclass(frozen=True, slots=True)
@@ -279,7 +257,7 @@ class StateEstimateModel:
             velocity_enu_m_s=old.v + self.velocity_error.value,
             # a unit quaternion times a unit quaternion: no renormalising, so that zero
             # errors hand the loop the truth bit for bit
-            attitude_wxyz=_quat_mul(old_att.q, _quat_exp(self.attitude_error.value)),
+            attitude_wxyz=quat_mul(old_att.q, quat_exp(self.attitude_error.value)),
             body_rates_flu_rad_s=old_att.w + self.gyro_bias.value,
         )
 
@@ -288,12 +266,17 @@ class StateEstimateModel:
         self._advance(time_s)
         return np.asarray(rates_flu_rad_s, dtype=float) + self.gyro_bias.value
 
+    def stamp_error_s(self) -> float:
+        """The next frame's capture-stamp error (s): the sortie's camera-IMU offset plus this
+        frame's jitter (one draw a frame)."""
+        return self.camera_offset_s + self.spec.camera_stamp_jitter_s * float(
+            self._camera_rng.standard_normal()
+        )
+
     def stamp(self, detection: Detection) -> Detection:
         """The detection as the loop receives it: its capture time off by the sortie's
         camera-IMU offset and the frame's stamp jitter."""
-        err = self.camera_offset_s + self.spec.camera_stamp_jitter_s * float(
-            self._camera_rng.standard_normal()
-        )
+        err = self.stamp_error_s()
         return replace(detection, capture_time_s=detection.capture_time_s + err)
 
     def summary(self) -> dict[str, float]:

@@ -67,12 +67,20 @@ class FrameRenderer:
         target_pos_enu_m: np.ndarray,
         target_diameter_m: float,
         brightness: float = 1.0,
+        clutter_px: tuple[float, float, float] | None = None,
+        target_visible: bool = True,
     ) -> np.ndarray:
+        """The frame; ``clutter_px`` (u, v, diameter) adds a false red blob, and
+        ``target_visible=False`` leaves the balloon out (too small for the detector)."""
         frame = self._sky.copy()
         poly = self._ground_polygon(R_WC)
         if poly is not None:
             cv2.fillPoly(frame, [poly], GROUND_BGR, cv2.LINE_AA, _SHIFT)
-        self._draw_balloon(frame, R_WC.T @ (target_pos_enu_m - camera_pos_enu_m), target_diameter_m)
+        if target_visible:
+            p_cam = R_WC.T @ (target_pos_enu_m - camera_pos_enu_m)
+            self._draw_balloon(frame, p_cam, target_diameter_m)
+        if clutter_px is not None:
+            draw_balloon(frame, clutter_px[0], clutter_px[1], 0.5 * clutter_px[2])
         if brightness != 1.0:
             frame = cv2.convertScaleAbs(frame, alpha=brightness)
         k = int(self._rng.integers(0, len(self._noise_up)))

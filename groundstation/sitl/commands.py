@@ -84,6 +84,7 @@ class SitlCommands:
         self.setpoints += 1
         self.setpoint = (frd_to_flu(rates), float(msg.thrust))
         self.last_setpoint_s = now
+        self._queue_setpoint(now)
 
     def _ack(self, msg, result: int) -> None:
         """COMMAND_ACK addressed to whoever sent the command (PX4 fills the target too)."""

@@ -64,8 +64,9 @@ class SitlTelemetry:
         due = self._next_send
         if now >= due["ATTITUDE_QUATERNION"]:
             due["ATTITUDE_QUATERNION"] = now + 1.0 / self.rates_hz["ATTITUDE_QUATERNION"]
-            q = quat_enu_flu_to_ned_frd(veh.q)
-            w = flu_to_frd(veh.w)
+            est = self.estimated_state()
+            q = quat_enu_flu_to_ned_frd(est.attitude_wxyz)
+            w = flu_to_frd(est.body_rates_flu_rad_s)
             link.send(
                 mav.attitude_quaternion_encode(
                     boot_ms, *(float(c) for c in q), float(w[0]), float(w[1]), float(w[2])
@@ -74,7 +75,10 @@ class SitlTelemetry:
         if now >= due["HIGHRES_IMU"]:
             due["HIGHRES_IMU"] = now + 1.0 / self.rates_hz["HIGHRES_IMU"]
             noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
-            g = flu_to_frd(np.array(veh.read_gyro()) + noise)
+            rates = np.array(veh.read_gyro()) + noise
+            if self.estimate is not None:  # plus the gyro bias
+                rates = self.estimate.gyro(self.time_s, rates)
+            g = flu_to_frd(rates)
             R = quat_to_rotmat(veh.q)
             f_flu = R.T @ (np.array(veh.accel) + np.array([0.0, 0.0, 9.81]))
             f = flu_to_frd(f_flu)
@@ -99,7 +103,8 @@ class SitlTelemetry:
             )
         if now >= due["LOCAL_POSITION_NED"]:
             due["LOCAL_POSITION_NED"] = now + 1.0 / self.rates_hz["LOCAL_POSITION_NED"]
-            p, v = enu_to_ned(veh.p), enu_to_ned(veh.v)
+            est = self.estimated_state()
+            p, v = enu_to_ned(est.position_enu_m), enu_to_ned(est.velocity_enu_m_s)
             link.send(mav.local_position_ned_encode(boot_ms, *map(float, p), *map(float, v)))
         for name, send in self._extra_senders.items():
             if now >= due[name]:
@@ -115,7 +120,8 @@ class SitlTelemetry:
             )
         while self._frames and self._frames[0][0] <= now:
             _send_t, _, cap_t, frame = heapq.heappop(self._frames)
-            self.camera.publish(frame, cap_t, now - cap_t)
+            # the capture stamp carries the camera-IMU offset: the age is never negative
+            self.camera.publish(frame, cap_t, max(now - cap_t, 0.0))
 
     def _senders(self) -> dict:
         return {
@@ -131,9 +137,9 @@ class SitlTelemetry:
         }
 
     def _send_global(self, boot_ms: int) -> None:
-        veh = self.vehicle
-        lat, lon, alt = self.opt.home.to_global(veh.p)
-        v = enu_to_ned(veh.v)
+        est = self.estimated_state()
+        lat, lon, alt = self.opt.home.to_global(est.position_enu_m)
+        v = enu_to_ned(est.velocity_enu_m_s)
         hdg = (90.0 - math.degrees(self._yaw())) % 360.0
         self.link.send(
             self.link.mav.global_position_int_encode(
@@ -141,7 +147,7 @@ class SitlTelemetry:
                 round(lat * 1e7),
                 round(lon * 1e7),
                 round(alt * 1000.0),
-                round(veh.p[2] * 1000.0),
+                round(est.position_enu_m[2] * 1000.0),
                 *(max(-32767, min(32767, round(100.0 * c))) for c in v),
                 round(100.0 * hdg) % 36000,
             )

@@ -22,6 +22,17 @@ behaves as PX4 does towards an offboard computer:
 - the camera's rendered frames go to the onboard computer over :class:`CameraServer`,
   each sent once the scenario's camera delay has passed.
 
+What the onboard computer is told carries the errors of a real PX4, from the simulator's own
+models (one implementation each, the same scenario keys and ``--set`` switches): the
+state-estimate model of :mod:`..sim.estimate` (``[estimate]``: position, velocity and attitude
+errors and lag, gyro bias in ``HIGHRES_IMU`` and the reported rates, the camera-IMU stamp
+offset in each frame's capture time, the thrust scale and command latency applied to the
+offboard setpoints) and the detector faults of :mod:`..sim.camera` (``[camera]``: bursty frame
+drops, false red blobs drawn into the frame, a balloon narrower than ``min_blob_px`` left out).
+The model's lags are what a loop tick sees; the SITL's streams already make each sample up to
+one period old by the time the runtime ticks, so half a period (their mean age) is taken off
+the modelled lag (:func:`sitl_estimate_spec`). PX4's own hold and AUTO modes fly on the truth.
+
 The target starts moving, and the sortie clock starts, when the vehicle first enters
 offboard; the closest approach is then tracked in continuous time, and the result printed as
 one ``SITL_RESULT {json}`` line when the vehicle passes the target.
@@ -40,18 +51,22 @@ import select
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.control.attitude import attitude_command
+from onboard.datatypes import VehicleState
 from onboard.enums import Outcome
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat, wrap_pi
 from onboard.link.px4 import MODE_HOLD, MODE_OFFBOARD, MavLink, mavlink, px4_mode_name
 
-from ..scenario import Scenario
+from ..scenario import EstimateSpec, Scenario
+from ..sim.camera import DetectorFaults, apparent_radius_px
+from ..sim.estimate import StateEstimateModel
 from ..sim.render import FrameRenderer
 from ..sim.simulation import PASS_RADIUS_M, closest_in_step
 from ..sim.targets import Target
@@ -77,6 +92,17 @@ class SitlOptions:
     on_ground: bool = False  # start disarmed and landed below the scenario's start position
 
 
+def sitl_estimate_spec(spec: EstimateSpec, rates_hz: dict[str, float]) -> EstimateSpec:
+    """The estimate model's lags less the mean age (half a period) the SITL's own
+    ``LOCAL_POSITION_NED`` and ``ATTITUDE_QUATERNION`` streams add at the runtime's tick,
+    so that the loop sees the modelled lag on average, as in the simulator."""
+    return replace(
+        spec,
+        lag_s=max(spec.lag_s - 0.5 / rates_hz["LOCAL_POSITION_NED"], 0.0),
+        att_lag_s=max(spec.att_lag_s - 0.5 / rates_hz["ATTITUDE_QUATERNION"], 0.0),
+    )
+
+
 class SitlVehicle(SitlCommands, SitlTelemetry):
     def __init__(
         self,
@@ -94,6 +120,18 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         ss = np.random.SeedSequence(self.opt.seed)
         cam_rng, wind_rng, gyro_rng, render_rng = (np.random.default_rng(s) for s in ss.spawn(4))
         self._cam_rng, self._gyro_rng = cam_rng, gyro_rng
+        # the estimate model's streams are the next child, as in the simulator
+        est_seed = ss.spawn(1)[0]
+        self.estimate = (
+            StateEstimateModel(sitl_estimate_spec(scenario.estimate, RATES_HZ), est_seed)
+            if scenario.estimate.enabled
+            else None
+        )
+        self._est_now: VehicleState | None = None  # the estimate at its time (one a step)
+        # the detector faults' own stream, spawned from the camera's as the simulator does
+        self.faults = DetectorFaults(scenario.camera, cam_rng.spawn(1)[0])
+        self._commands: deque = deque()  # (due time, body rates, thrust) to the actuators
+        self._actuator: tuple[np.ndarray, float] | None = None  # what the actuators fly
         c = scenario.camera
         self.camera_model = CameraModel(
             c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
@@ -156,6 +194,27 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
     def _yaw(self) -> float:
         R = quat_to_rotmat(self.vehicle.q)
         return math.atan2(R[1, 0], R[0, 0])
+
+    def estimated_state(self) -> VehicleState:
+        """What PX4's estimator says now: the truth through the estimate model (the truth
+        itself with ``estimate.enabled = false``); computed once per physics step."""
+        t = self.time_s
+        est = self._est_now
+        if est is not None and est.time_s == t:
+            return est
+        truth = self.vehicle.state(t)
+        self._est_now = truth if self.estimate is None else self.estimate.vehicle_state(truth)
+        return self._est_now
+
+    def _queue_setpoint(self, now: float) -> None:
+        """An accepted setpoint reaches the actuators after the command latency, with the
+        thrust off by the sortie's thrust scale (the estimate model's actuation errors)."""
+        rates, thrust = self.setpoint
+        est = self.estimate
+        if est is None:
+            self._commands.append((now, rates, thrust))
+        else:
+            self._commands.append((now + est.command_delay_s, rates, thrust * est.thrust_scale))
 
     def _say(self, severity: int, text: str) -> None:
         self.link.statustext(severity, text)
@@ -264,11 +323,14 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         veh = self.vehicle
         if k % self._cam_div == 0:
             self._capture(t)
+        cmds = self._commands
+        while cmds and cmds[0][0] <= t + 1e-9:  # setpoints reach the actuators
+            self._actuator = cmds.popleft()[1:]
         if self.custom_mode == MODE_OFFBOARD:
             if t - self.last_setpoint_s > self.params["COM_OF_LOSS_T"]:
                 self._enter_hold("offboard loss: no setpoints")
-            elif self.setpoint is not None:
-                veh.command(*self.setpoint)
+            elif self._actuator is not None:
+                veh.command(*self._actuator)
         if self.custom_mode != MODE_OFFBOARD and k % self._hold_div == 0:
             self._nav(self._hold_div * self.dt_s)
             self._hold_command()
@@ -336,14 +398,26 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         dropped = rng.random() < spec.dropout_probability
         delay = spec.delay_s + spec.delay_jitter_s * float(rng.standard_normal())
         delay = min(max(delay, 0.5 * spec.delay_s), 2.0 * spec.delay_s + 1e-9)
-        if dropped or self.camera.clients == 0:
+        burst_drop, clutter = self.faults.frame()
+        # the capture stamp's error (camera-IMU offset): one draw a frame, as in the simulator
+        stamp_err = 0.0 if self.estimate is None else self.estimate.stamp_error_s()
+        if dropped or burst_drop or self.camera.clients == 0:
             return
-        R_WC = quat_to_rotmat(self.vehicle.q) @ self.camera_model.R_BC
+        m, diameter = self.camera_model, self.scenario.target.diameter_m
+        R_WC = quat_to_rotmat(self.vehicle.q) @ m.R_BC
+        cam_p, tgt_p = np.array(self.vehicle.p), np.array(self.target.p)
+        visible = spec.min_blob_px <= 0.0 or self.faults.big_enough(
+            2.0 * apparent_radius_px(m, R_WC.T @ (tgt_p - cam_p), diameter)
+        )
+        false_blob = None
+        if clutter is not None:
+            self.faults.false_detections += 1
+            false_blob = (clutter[0] * m.width_px, clutter[1] * m.height_px, spec.false_blob_px)
         frame = self.renderer.render(
-            R_WC, np.array(self.vehicle.p), np.array(self.target.p), self.scenario.target.diameter_m
+            R_WC, cam_p, tgt_p, diameter, clutter_px=false_blob, target_visible=visible
         )
         self._n += 1
-        heapq.heappush(self._frames, (t + delay, self._n, t, frame))
+        heapq.heappush(self._frames, (t + delay, self._n, t + stamp_err, frame))
 
     # ------------------------------------------------------------------ run
     def stop(self) -> None:

@@ -3,7 +3,8 @@ runtime settings below (applied only while not flying), values REAL32. A value o
 range is refused and the old one stays.
 
 On MAVLink each parameter has a PX4-style id derived from its Python name
-(:func:`mavlink_param_id`: ``k_a`` -> ``PRG_K_A``, ``CAM_HFOV_DEG`` -> ``PRG_CAM_HFOV``):
+(:func:`mavlink_param_id`: ``k_a`` -> ``PRG_K_A``, ``CAM_HFOV_DEG`` -> ``PRG_CAM_HFOV``,
+``TGT_DIAM_M`` -> ``PRG_TGT_DIAM``):
 upper case, the component's prefix, at most 16 characters, so every ground station (MAVProxy
 upper-cases what it is typed) can show and set them. Inside the code the Python names stay.
 
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..enums import GuidanceLaw, describe_codes
+from ..estimation.dkf import DkfConfig
 from ..gains import GAIN_SPECS, GainError, Gains, check_ranges, ranged
 from .telemetry import LAW_CODES
 
@@ -43,6 +45,9 @@ class RuntimeParams:
     CAM_LAT_S: float = ranged(0.0, "s", 0.0, 0.5, "OpenCV cameras: exposure-to-grab latency")
     HOVER_THR: float = ranged(1.0 / 3.0, "-", 0.05, 0.95, "normalised thrust that hovers")
     TGT_LOST_S: float = ranged(0.5, "s", 0.1, 5.0, "no detection this long: brake and hold")
+    TGT_DIAM_M: float = ranged(
+        0.3, "m", 0.02, 3.0, "target (balloon) diameter: the DKF's range from apparent size"
+    )
     DONE_SIZE: float = ranged(
         0.2,
         "-",
@@ -61,14 +66,18 @@ class RuntimeParams:
     def law(self) -> str:
         return LAW_CODES[int(self.LAW)]
 
+    def dkf_config(self) -> DkfConfig:
+        """The DKF settings these parameters carry (target lost timeout, target diameter)."""
+        return DkfConfig(lost_timeout_s=self.TGT_LOST_S, target_diameter_m=self.TGT_DIAM_M)
+
 
 PARAM_PREFIX = "PRG_"  # the component's parameter group, as PX4's MPC_, COM_, EKF2_
 
 
 def mavlink_param_id(name: str) -> str:
     """The MAVLink id of a parameter: prefix + upper-cased Python name, a trailing unit suffix
-    (``_DEG``, ``_S``) dropped as in PX4's names (the unit is in the metadata)."""
-    return PARAM_PREFIX + re.sub(r"_(DEG|S)$", "", name.upper())
+    (``_DEG``, ``_S``, ``_M``) dropped as in PX4's names (the unit is in the metadata)."""
+    return PARAM_PREFIX + re.sub(r"_(DEG|S|M)$", "", name.upper())
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..datatypes import GyroSample
+from ..datatypes import GyroSample, VehicleState
+from ..geometry import propagate_attitude
 from ..link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     ONBOARD_COMPONENT_ID,
@@ -33,6 +34,8 @@ from ..link.timesync import on_timesync
 from .px4_params import PX4_PARAMS_READ, check
 
 MAX_RATE_RAD_S = 20.0
+MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
+MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
 STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 200.0,
     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
@@ -51,11 +54,29 @@ class FcState:
     pos_enu_m: np.ndarray | None = None
     vel_enu_m_s: np.ndarray | None = None
     q_wxyz: np.ndarray | None = None
+    q_time_s: float | None = None  # when the attitude was sampled (PX4's stamp, our clock)
     rates_flu_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_flu_rad_s: np.ndarray | None = None  # the latest HIGHRES_IMU gyro sample
 
     @property
     def offboard(self) -> bool:
         return ((self.custom_mode >> 16) & 0xFF) == PX4_MAIN_OFFBOARD
+
+
+def state_at(fc: FcState, now_s: float) -> VehicleState:
+    """The vehicle state for a control tick at ``now_s`` (position and velocity required):
+    the last attitude PX4 sent, propagated from its sample time to the tick with the latest
+    gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
+    ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale. The loop
+    pairs it with an image estimate predicted to the tick, so an attitude left a stream
+    period old would show as a line-of-sight error of rate x age."""
+    q = fc.q_wxyz
+    if fc.q_time_s is not None:
+        dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
+        rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
+        if float(np.linalg.norm(rates)) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
+            q = propagate_attitude(q, rates, dt)
+    return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)
 
 
 class FlightControllerSide:
@@ -84,6 +105,7 @@ class FlightControllerSide:
             if all_finite(q + rates) and abs(math.fsum(c * c for c in q) - 1.0) < 0.1:
                 f.q_wxyz = quat_ned_frd_to_enu_flu(q)
                 f.rates_flu_rad_s = frd_to_flu(rates)
+                f.q_time_s = self._fc_time(msg.time_boot_ms * 1e-3, now, self._arrival_s(msg, now))
                 self._forward(msg, now)
         elif kind == "LOCAL_POSITION_NED":
             p, v = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
@@ -92,10 +114,11 @@ class FlightControllerSide:
                 self._forward(msg, now)
         elif kind == "HIGHRES_IMU":
             g = (msg.xgyro, msg.ygyro, msg.zgyro)
-            if all_finite(g) and self.loop is not None:
-                self.loop.on_gyro(
-                    GyroSample(self._fc_time(msg.time_usec * 1e-6, now), frd_to_flu(g))
-                )
+            if all_finite(g):
+                f.gyro_flu_rad_s = frd_to_flu(g)
+                if self.loop is not None:
+                    t = self._fc_time(msg.time_usec * 1e-6, now)
+                    self.loop.on_gyro(GyroSample(t, f.gyro_flu_rad_s))
         elif kind == "TIMESYNC":
             on_timesync(self.fc, self.timesync, msg, self._arrival_s(msg, now))
         elif kind == "PARAM_VALUE" and param_id_str(msg.param_id) in PX4_PARAMS_READ:
@@ -121,10 +144,13 @@ class FlightControllerSide:
         rx = getattr(msg, "rx_monotonic_s", None)
         return now if rx is None else self.clock.now() - (time.monotonic() - rx)
 
-    def _fc_time(self, t_fc_s: float, now: float) -> float:
-        """A flight-controller sample time in our clock (TIMESYNC), else its arrival."""
+    def _fc_time(self, t_fc_s: float, now: float, arrival: float | None = None) -> float:
+        """A flight-controller sample time in our clock (TIMESYNC), else its arrival
+        (``arrival``, or ``now``)."""
         t = self.timesync.to_companion(t_fc_s)
-        return now if t is None or not now - 0.5 <= t <= now + 0.002 else min(t, now)
+        if t is None or not now - 0.5 <= t <= now + 0.002:
+            return now if arrival is None else arrival
+        return min(t, now)
 
     # ------------------------------------------------------------------ outputs
     def _send_command(self, rates_flu: np.ndarray, thrust: float, now: float) -> bool:

@@ -8,7 +8,6 @@ A mixin of :class:`~onboard.runtime.runner.OnboardRuntime`, run on its control t
 
 from __future__ import annotations
 
-from ..estimation.dkf import DkfConfig
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.params import PARAM_ID_INDEX, PARAM_INDEX, PARAM_NAMES, PARAM_SPECS
@@ -107,7 +106,7 @@ class GroundSide:
             self._event("info", f"param {param_id} = {self.params.get(name):g}")
             if self.loop is not None:
                 self.loop.set_gains(self.params.gains)
-                self.loop.dkf.config = DkfConfig(lost_timeout_s=self.params.runtime.TGT_LOST_S)
+                self.loop.dkf.config = self.params.runtime.dkf_config()
             rt = self.params.runtime
             self.sm.done_size_frac, self.sm.hold_speed_m_s = rt.DONE_SIZE, rt.HOLD_SPEED
             if name.startswith("CAM_") or name in ("HOVER_THR", "LAW"):

@@ -24,8 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera_model import CameraModel
-from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams, VehicleState
-from ..estimation.dkf import DkfConfig
+from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.param_meta import FILE_NAMES, component_files
@@ -46,7 +45,7 @@ from ..link.timesync import TimesyncEstimator, send_request
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
-from .fc_side import FcState, FlightControllerSide
+from .fc_side import FcState, FlightControllerSide, state_at
 from .ground_side import TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
@@ -171,7 +170,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.params.gains,
             law=rt.law,
             control_rate_hz=self.config.control_rate_hz,
-            dkf_config=DkfConfig(lost_timeout_s=rt.TGT_LOST_S),
+            dkf_config=rt.dkf_config(),
         )
         self._event("info", f"camera {width}x{height}, law {rt.law}: loop ready")
         if self.foxglove is not None:
@@ -267,8 +266,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         f = self.fcs
         tel = None
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
-            state = VehicleState(now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, f.rates_flu_rad_s)
-            tel = loop.tick(state, brake=self.sm.state is State.BRAKING)
+            tel = loop.tick(state_at(f, now), brake=self.sm.state is State.BRAKING)
         if self.video is not None:
             self.video_overlay = overlay_of(
                 self._last_det, tel and tel.e_est_px, loop and loop.camera, now
