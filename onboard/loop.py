@@ -162,6 +162,7 @@ class InterceptionLoop:
         if est is not None:
             pred = line_of_sight(est.e_px[0] / f, est.e_px[1] / f, R_WC)
             sigma = max(est.e_std_px) / f
+        sharp = self.gains.coast_std  # px: a vaguer prediction confirms nothing alone
         out: list[Detection] = []
         for det in dets:
             try:
@@ -172,7 +173,8 @@ class InterceptionLoop:
             if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(t_c)):
                 continue
             los = line_of_sight(ex / f, ey / f, self._R_WC_at(t_c, R_WC))
-            out.extend(self.screen.offer(det, Candidate(t_c, los), pred, sigma, self.gains))
+            cand = Candidate(t_c, los)
+            out.extend(self.screen.offer(det, cand, pred, sigma, self.gains, sharp / f))
         return out
 
     def _next_mode(self, t: float, est) -> LoopMode:

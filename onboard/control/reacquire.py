@@ -16,7 +16,8 @@ toward a cue), flies that course at ``v_search`` with the camera along it.
 Detections while the track is not live go through :class:`DetectionScreen` before the DKF
 (which would start a new track on any detection once its own is stale): one within
 ``conf_deg`` plus 3 sigma of the prediction is fused at once; any other only after
-``n_confirm`` consecutive detections agree with each other within ``conf_deg``. A false blob
+``n_confirm`` consecutive detections agree with each other within ``conf_deg`` (also when the
+prediction is vaguer than ``coast_std``: its gate would cover most of the image). A false blob
 (clutter anywhere in the frame) therefore neither hijacks the track nor starts one.
 
 Pure: every function is handed the times and states; no clock, no I/O.
@@ -71,12 +72,16 @@ class DetectionScreen:
         pred_los_enu: np.ndarray | None,
         pred_sigma_rad: float,
         gains: Gains,
+        sharp_sigma_rad: float = math.inf,
     ) -> list[Any]:
         """``item`` (a detection) with its LOS at capture; the prediction's LOS now and its
-        1 sigma (rad), None without a track."""
+        1 sigma (rad), None without a track. A prediction vaguer than ``sharp_sigma_rad``
+        confirms nothing by itself (its gate would cover the image)."""
         gate = math.radians(gains.conf_deg)
-        near = pred_los_enu is not None and (
-            angle_between_rad(cand.los_enu, pred_los_enu) <= gate + 3.0 * pred_sigma_rad
+        near = (
+            pred_los_enu is not None
+            and pred_sigma_rad <= sharp_sigma_rad
+            and angle_between_rad(cand.los_enu, pred_los_enu) <= gate + 3.0 * pred_sigma_rad
         )
         if near:
             self.clear()
