@@ -104,7 +104,7 @@ class Gains:
         0.5, "s", 0.0, 10.0, "no detection since the start this long: search (hold until then)"
     )
     t_search: float = _gain(
-        40.0, "s", 0.0, 300.0, "search this long, then the failsafe (brake and hold)"
+        60.0, "s", 0.0, 300.0, "search this long, then the failsafe (brake and hold)"
     )
     w_search: float = _gain(0.6, "rad/s", 0.0, 3.0, "search at hover: yaw-scan rate")
     v_search: float = _gain(
