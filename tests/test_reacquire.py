@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from groundstation.campaigns.definitions import _build_range
+from groundstation.recording.reader import iter_messages
+from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario, parse_overrides, with_overrides
 from groundstation.sim.simulation import Simulation
 from onboard.control.reacquire import Candidate, DetectionScreen, angle_between_rad
@@ -201,3 +203,21 @@ def test_the_screen_confirms_a_consistent_run_and_drops_scattered_ones():
     assert screen.offer("d", Candidate(0.1, los(-58.0)), pred, 0.0, g) == ["b", "c", "d"]
     assert screen.rejected == 1  # "a"
     assert angle_between_rad(los(0.0), los(1e-7)) == pytest.approx(math.radians(1e-7))
+
+
+def test_the_recording_tells_the_loss_and_the_reacquisition(tmp_path):
+    rec = SortieRecorder(tmp_path)
+    sim = Simulation(load_scenario("static-ahead-20m"), "png", seed=0, observers=[rec])
+    _with_gap(sim, 1.0, 3.4)
+    assert sim.run().outcome == "HIT"
+    assert rec.closed and rec.error is None
+    events = [m["message"] for _, _, m in iter_messages(rec.path, ["/events"])]
+    story = [e for e in events if e.startswith(("target", "no detection", "re-acquiring"))]
+    assert story == [
+        "target acquired",
+        "no detection: coasting on the prediction",
+        "re-acquiring: yawing toward the predicted target, slowing",
+        "target reacquired",
+    ]
+    modes = {m["mode"] for _, _, m in iter_messages(rec.path, ["/control"])}
+    assert {"tracking", "coast", "reacquire"} <= modes
