@@ -45,7 +45,7 @@ from .datatypes import (
     VehicleParams,
     VehicleState,
 )
-from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult
+from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
 from .geometry import quat_to_rotmat
 
@@ -177,7 +177,7 @@ class InterceptionLoop:
             out.extend(self.screen.offer(det, cand, pred, sigma, self.gains, sharp / f))
         return out
 
-    def _next_mode(self, t: float, est) -> LoopMode:
+    def _next_mode(self, t: float, est: ImageEstimate | None) -> LoopMode:
         """The loop's mode at this tick from the track's state and the phase timers (see
         onboard/control/reacquire.py); updates the timers."""
         g = self.gains
@@ -187,6 +187,7 @@ class InterceptionLoop:
             self._coast_over = False
             self._search_start_s = None
             self._search_cue = None
+            self.screen.clear()  # a later loss starts its confirmations afresh
             return LoopMode.TRACKING
         if est is not None:
             self._search_dir = -1.0 if self.camera.upright(*est.e_px)[0] > 0.0 else 1.0
