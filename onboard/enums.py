@@ -21,8 +21,13 @@ class LoopMode(enum.Enum):
 
     WAITING = "waiting"  # no target estimate yet: hold position
     TRACKING = "tracking"  # guidance law active
-    LOST = "lost"  # estimate lost: brake and hold
+    LOST = "lost"  # estimate lost and the search over: brake and hold (the failsafe)
     BRAKE = "brake"  # told to brake and hold (operator abort), estimate still running
+    # appended (the MAVLink code is the index): track loss and re-acquisition, see
+    # onboard/control/reacquire.py
+    COAST = "coast"  # no fresh detection: guidance law on the DKF's prediction
+    REACQUIRE = "reacquire"  # prediction too old: yaw toward it, slow down, wait for a detection
+    SEARCH = "search"  # no usable prediction: yaw scan at hover, or fly the cue, time-bounded
 
 
 class RuntimeState(enum.Enum):

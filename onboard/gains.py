@@ -91,6 +91,37 @@ class Gains:
     r_mid: float = _gain(
         40.0, "m", 5.0, 1000.0, "PNG midcourse: acts beyond this range, fully beyond twice it"
     )
+    # track loss, re-acquisition and search (onboard/control/reacquire.py; README "Track loss")
+    t_coast: float = _gain(
+        1.0,
+        "s",
+        0.0,
+        5.0,
+        "track stale (PRG_TGT_LOST): fly the law on the DKF prediction this long",
+    )
+    coast_std: float = _gain(
+        40.0, "px", 1.0, 500.0, "coast only while the predicted image point's 1 sigma is below"
+    )
+    t_reacq: float = _gain(
+        3.0, "s", 0.0, 20.0, "after the coast: yaw to the predicted LOS and slow down this long"
+    )
+    v_reacq: float = _gain(1.0, "m/s", 0.0, 10.0, "re-acquisition: speed along the predicted LOS")
+    n_confirm: float = _gain(
+        3.0, "-", 1.0, 20.0, "consecutive consistent detections that confirm one off the prediction"
+    )
+    conf_deg: float = _gain(
+        3.0, "deg", 0.1, 30.0, "consistency gate between detections (+3 sigma of the prediction)"
+    )
+    t_wait: float = _gain(
+        0.5, "s", 0.0, 10.0, "no detection since the start this long: search (hold until then)"
+    )
+    t_search: float = _gain(
+        60.0, "s", 0.0, 300.0, "search this long, then the failsafe (brake and hold)"
+    )
+    w_search: float = _gain(0.6, "rad/s", 0.0, 3.0, "search at hover: yaw-scan rate")
+    v_search: float = _gain(
+        8.0, "m/s", 0.0, 20.0, "search when moving at its start: speed along that course (the cue)"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

@@ -6,6 +6,7 @@ no clock, socket or camera, only the time stamps it is handed.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -27,6 +28,14 @@ from .control.guidance import (
     saturate_norm,
     smooth_los_change,
 )
+from .control.reacquire import (
+    Candidate,
+    DetectionScreen,
+    horizontal_unit,
+    reacquire_accel,
+    search_accel,
+    search_yaw_rate,
+)
 from .datatypes import (
     GRAVITY_M_S2,
     ControlTelemetry,
@@ -37,11 +46,12 @@ from .datatypes import (
     VehicleParams,
     VehicleState,
 )
-from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult
+from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
 from .geometry import quat_to_rotmat, rodrigues
 
 _NAN2 = (math.nan, math.nan)
+_ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 
 
 def predict_attitude(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:
@@ -89,6 +99,17 @@ class InterceptionLoop:
         self.last_fusion: list[FusionResult] = []
         self.guard_trips = 0
         self.acquired = False
+        # track loss and search (onboard/control/reacquire.py)
+        self.screen = DetectionScreen()
+        self._R_hist: deque[tuple[float, np.ndarray]] = deque()
+        self._first_tick_s: float | None = None
+        self._live_s = -math.inf  # last tick with a live (not stale) track
+        self._coast_over = False  # the prediction's uncertainty ended this coast
+        self._search_start_s: float | None = None
+        self._search_cue: np.ndarray | None = None
+        self._search_dir = 1.0
+        self.mode = LoopMode.WAITING
+        self._last_velocity = np.zeros(3)
         self.disturbance = DisturbanceObserver(
             DisturbanceObserverConfig(
                 self.gains.k_dob,
@@ -126,6 +147,85 @@ class InterceptionLoop:
     def on_detection(self, detection: Detection) -> None:
         self._detections.append(detection)
 
+    # ------------------------------------------------------------------ track loss
+    def _screening(self, t: float) -> bool:
+        """Do detections go through the screen before the DKF? Not while its track is live
+        (its own gate protects it), nor while waiting for the first one after the start (the
+        operator started with the target in view: the first detection starts the track)."""
+        if not self.acquired:
+            return self._search_start_s is not None
+        return self.dkf.lost(t)
+
+    def _R_WC_at(self, time_s: float, R_now: np.ndarray) -> np.ndarray:
+        """The camera attitude at the last tick at or before ``time_s`` (the oldest held if
+        none; the current one if the history is empty)."""
+        best = None
+        for t_k, R in self._R_hist:
+            if t_k > time_s + 1e-9:
+                break
+            best = R
+        if best is None:
+            return self._R_hist[0][1] if self._R_hist else R_now
+        return best
+
+    def _screened(self, dets: list[Detection], R_WC: np.ndarray) -> list[Detection]:
+        """The detections (capture order) the screen lets through to the DKF now."""
+        est = self.dkf.estimate()
+        f = self.camera.f_px
+        pred, sigma = None, 0.0
+        if est is not None:
+            pred = line_of_sight(est.e_px[0] / f, est.e_px[1] / f, R_WC)
+            sigma = max(est.e_std_px) / f
+        sharp = self.gains.coast_std  # px: a vaguer prediction confirms nothing alone
+        out: list[Detection] = []
+        for det in dets:
+            try:
+                ex, ey = self.camera.error_px(*(float(c) for c in det.center_px))
+                t_c = float(det.capture_time_s)
+            except (TypeError, ValueError):
+                continue
+            if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(t_c)):
+                continue
+            los = line_of_sight(ex / f, ey / f, self._R_WC_at(t_c, R_WC))
+            cand = Candidate(t_c, los)
+            out.extend(self.screen.offer(det, cand, pred, sigma, self.gains, sharp / f))
+        return out
+
+    def _next_mode(self, t: float, est: ImageEstimate | None) -> LoopMode:
+        """The loop's mode at this tick from the track's state and the phase timers (see
+        onboard/control/reacquire.py); updates the timers."""
+        g = self.gains
+        if est is not None and not est.lost:
+            self.acquired = True
+            self._live_s = t
+            self._coast_over = False
+            self._search_start_s = None
+            self._search_cue = None
+            self.screen.clear()  # a later loss starts its confirmations afresh
+            return LoopMode.TRACKING
+        if est is not None:
+            self._search_dir = -1.0 if self.camera.upright(*est.e_px)[0] > 0.0 else 1.0
+        if not self.acquired and self._search_start_s is None:
+            if t - self._first_tick_s < g.t_wait:
+                return LoopMode.WAITING
+        elif self.acquired and self._search_start_s is None:
+            stale_s = t - self._live_s
+            if est is not None:
+                if not self._coast_over and stale_s < g.t_coast:
+                    if max(est.e_std_px) <= g.coast_std:
+                        return LoopMode.COAST
+                    self._coast_over = True
+                if stale_s < g.t_coast + g.t_reacq:
+                    return LoopMode.REACQUIRE
+        if self._search_start_s is None:
+            self._search_start_s = t
+            v = self._last_velocity
+            moving = math.sqrt(float(v @ v)) >= g.v_min if not self.acquired else False
+            self._search_cue = horizontal_unit(v) if moving else None
+        if t - self._search_start_s < g.t_search:
+            return LoopMode.SEARCH
+        return LoopMode.LOST
+
     # ------------------------------------------------------------------ the tick
     def tick(self, state: VehicleState, brake: bool = False) -> ControlTelemetry:
         """One control tick at ``state.time_s``; with ``brake`` the estimate keeps running but
@@ -157,27 +257,51 @@ class InterceptionLoop:
             if self.disturbance.enabled:
                 a = a + self.disturbance.estimate_m_s2
             v = v_est + gains.t_vel_lag * a
+        self._last_velocity = v
+        if self._first_tick_s is None:
+            self._first_tick_s = t
         self.dkf.predict(t, gyro, v, R_WC)
+        hist = self._R_hist
+        hist.append((t, R_WC))
+        while len(hist) > 2 and hist[1][0] <= t - _ATTITUDE_HISTORY_S:
+            hist.popleft()
         self.last_fusion = []
         if self._detections:
-            for det in sorted(self._detections, key=lambda d: d.capture_time_s):
-                self.last_fusion.append(self.dkf.fuse(det))
+            dets = sorted(self._detections, key=lambda d: d.capture_time_s)
             self._detections.clear()
+            if self._screening(t):
+                dets = self._screened(dets, R_WC)
+            for det in dets:
+                self.last_fusion.append(self.dkf.fuse(det))
 
         d_hat = self.disturbance.update(t, v_est, R_WB[:, 2])
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0
-        if brake or est is None or est.lost:
-            mode = LoopMode.BRAKE if brake else LoopMode.LOST if self.acquired else LoopMode.WAITING
+        mode = self._next_mode(t, est)
+        self.mode = mode
+        if brake:
+            mode = LoopMode.BRAKE
+        if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
+        if mode is LoopMode.REACQUIRE:
+            e_est, e_rate = est.e_px, est.e_rate_px_s
+            f = self.camera.f_px
+            n_t = line_of_sight(e_est[0] / f, e_est[1] / f, R_WC)
+            q_y, q_z = direction_angles(n_t)
+            a_d = reacquire_accel(n_t, v, gains)
+            e_lat_px = self.camera.upright(*e_est)[0]
+            e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
+            yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
+        elif mode is LoopMode.SEARCH:
+            a_d = search_accel(self._search_cue, v, gains)
+            yaw_rate = search_yaw_rate(self._search_cue, R_WC[:, 2], self._search_dir, gains)
+        elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
             if est is not None and not est.lost:
                 e_est, e_rate = est.e_px, est.e_rate_px_s
-        else:
-            mode = LoopMode.TRACKING
-            self.acquired = True
+        else:  # tracking, or coasting on the prediction: the guidance law
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
             n_t = line_of_sight(e_est[0] / f, e_est[1] / f, R_WC)

@@ -60,7 +60,7 @@ def test_the_api_serves_the_option_lists(tmp_path):
         gs.close()
     assert meta == {
         "laws": ["png", "pg", "ibvs"],
-        "loop_modes": ["waiting", "tracking", "lost", "brake"],
+        "loop_modes": ["waiting", "tracking", "lost", "brake", "coast", "reacquire", "search"],
         "runtime_states": list(tm.STATE_CODES),
         "outcomes": ["HIT", "MISS", "TIMEOUT", "TARGET_LOST", "CRASHED", "DIVERGED"],
         "camera_modes": list(CAMERA_MODES),

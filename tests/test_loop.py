@@ -59,8 +59,9 @@ def test_gain_change_applies_at_next_tick():
     assert y2 < 1.8 * y1 < 0  # roughly doubled toward clockwise
 
 
-def test_lost_target_brakes_and_holds():
-    loop = _loop()
+def test_lost_target_brakes_and_holds_without_coast_or_search():
+    # t_coast = t_reacq = t_search = 0: the failsafe as soon as the track goes stale
+    loop = _loop(gains=Gains(t_coast=0.0, t_reacq=0.0, t_search=0.0))
     loop.tick(_state(0.0))
     loop.on_detection(Detection(0.0, (320.0, 240.0), (310, 230, 20, 20), 314.0))
     loop.tick(_state(0.01))
@@ -85,3 +86,91 @@ def test_unknown_law_refused():
 
     with pytest.raises(ValueError, match="unknown guidance law 'zzz'"):
         _loop(law="zzz")
+
+
+def _stale_track_modes(gains):
+    """A hovering loop handed a 0.3 m balloon 20 m ahead, 10 px right of centre, at 30 Hz
+    until 0.38 s; the mode and command at every tick after that until 7 s."""
+    loop = _loop(gains=gains)
+    hover = (0.0, 0.0, 0.0)
+    loop.tick(_state(0.0, hover))
+    for k in range(1, 40):
+        t = k / 100
+        if k % 3 == 0:  # 2.4 px radius: 20 m
+            loop.on_detection(Detection(t - 0.01, (330.0, 240.0), (327.6, 237.6, 4.8, 4.8), 18.1))
+        mode = loop.tick(_state(t, hover)).mode
+    assert mode is LoopMode.TRACKING
+    return [(k / 100, loop.tick(_state(k / 100, hover))) for k in range(40, 700)]
+
+
+def test_stale_track_coasts_reacquires_searches_then_fails_safe():
+    ticks = _stale_track_modes(Gains(t_search=2.0))
+    first = {}
+    for t, tel in ticks:
+        first.setdefault(tel.mode, (t, tel))
+    # the DKF goes stale 0.5 s after the last detection (0.38 s): coast on its prediction for
+    # t_coast = 1 s (its 1 sigma grows ~20 px/s here, under coast_std = 40 px), then
+    # re-acquire for t_reacq = 3 s, search for t_search = 2 s, then brake and hold
+    assert_allclose(first[LoopMode.COAST][0], 0.89, atol=0.011)
+    assert_allclose(first[LoopMode.REACQUIRE][0], 1.89, atol=0.011)
+    assert_allclose(first[LoopMode.SEARCH][0], 4.89, atol=0.011)
+    assert_allclose(first[LoopMode.LOST][0], 6.89, atol=0.011)
+    # coasting: the guidance law on the prediction (hover start along the LOS at k_a) and
+    # the FOV-holding yaw toward it (right of centre: clockwise)
+    tel = first[LoopMode.COAST][1]
+    assert_allclose(np.linalg.norm(tel.accel_desired_enu_m_s2), 2.0, atol=1e-6)
+    assert tel.yaw_rate_cmd_rad_s < 0.0
+    # re-acquiring: toward the predicted LOS at v_reacq = 1 m/s (k_brake (v_d - v)), yawing
+    tel = first[LoopMode.REACQUIRE][1]
+    assert_allclose(np.linalg.norm(tel.accel_desired_enu_m_s2), 1.0, atol=1e-6)
+    assert tel.accel_desired_enu_m_s2[1] > 0.99  # north, the camera's heading
+    assert tel.yaw_rate_cmd_rad_s < 0.0
+    # searching at hover: a yaw scan at w_search, clockwise (the side it was last seen)
+    tel = first[LoopMode.SEARCH][1]
+    assert tel.yaw_rate_cmd_rad_s == -0.6
+    assert_allclose(tel.accel_desired_enu_m_s2, 0.0, atol=1e-12)
+    tel = first[LoopMode.LOST][1]
+    assert tel.yaw_rate_cmd_rad_s == 0.0
+
+
+def test_coast_ends_early_when_the_prediction_is_uncertain():
+    ticks = _stale_track_modes(Gains(coast_std=20.0))
+    coast = [t for t, tel in ticks if tel.mode is LoopMode.COAST]
+    # 1 sigma passes 20 px about 0.8 s after the last detection, not 1.5 s
+    assert coast and 0.1 < coast[-1] - coast[0] < 0.6
+
+
+def test_search_before_the_first_detection_flies_the_launch_course():
+    loop = _loop()
+    modes = [loop.tick(_state(k / 100)).mode for k in range(0, 60)]
+    assert modes[0] is LoopMode.WAITING and modes[49] is LoopMode.WAITING
+    assert modes[50] is LoopMode.SEARCH  # t_wait = 0.5 s
+    tel = loop.tick(_state(0.6, (0.0, 1.0, 0.0)))
+    # the cue is the course flown when the search began (north): v_search = 8 m/s along it
+    assert_allclose(tel.accel_desired_enu_m_s2, [0.0, 5.0, 0.0], atol=1e-9)  # k_brake 7, a_max
+    assert abs(tel.yaw_rate_cmd_rad_s) < 1e-9  # the camera already looks north
+
+
+def test_a_far_detection_needs_confirmation_after_a_loss():
+    gains = Gains(t_search=2.0)
+    loop = _loop(gains=gains)
+    hover = (0.0, 0.0, 0.0)
+    loop.tick(_state(0.0, hover))
+    for k in range(1, 40):
+        if k % 3 == 0:
+            loop.on_detection(
+                Detection(k / 100 - 0.01, (330.0, 240.0), (327.6, 237.6, 4.8, 4.8), 18.1)
+            )
+        loop.tick(_state(k / 100, hover))
+    for k in range(40, 120):
+        tel = loop.tick(_state(k / 100, hover))
+    assert tel.mode is LoopMode.COAST
+    # one false blob far from the prediction (200 px left): held, not fused
+    loop.on_detection(Detection(1.18, (130.0, 200.0), (127.5, 197.5, 5, 5), 19.6))
+    assert loop.tick(_state(1.2, hover)).mode is LoopMode.COAST
+    assert loop.last_fusion == [] and not loop.dkf.estimate().e_px[0] < 0
+    # the target where the prediction says: fused at once, tracking again
+    loop.on_detection(Detection(1.2, (331.0, 240.0), (328.6, 237.6, 4.8, 4.8), 18.1))
+    tel = loop.tick(_state(1.21, hover))
+    assert tel.mode is LoopMode.TRACKING
+    assert_allclose(tel.e_est_px[0], 11.0, atol=1.0)

@@ -158,6 +158,17 @@ def test_a_target_lost_after_filling_the_view_is_a_finished_pass():
     assert sm.state is State.BRAKING and sm.reason == "pass done"
 
 
+def test_a_stale_track_keeps_the_loop_flying_unless_the_pass_is_done():
+    # coast, re-acquisition and search fly the loop's command; only its failsafe brakes
+    sm = OffboardStateMachine(done_size_frac=0.2)
+    _to_intercept(sm)
+    d = sm.step(_inputs(1.0, offboard=True, tracking=False, target_stale=True))
+    assert sm.state is State.INTERCEPT and d.output is Output.LOOP
+    sm.step(_inputs(1.1, offboard=True, target_size_frac=0.35))
+    d = sm.step(_inputs(1.2, offboard=True, tracking=False, target_stale=True))
+    assert sm.state is State.BRAKING and sm.reason == "pass done" and d.output is Output.BRAKE
+
+
 def test_abort_brakes_and_link_loss_stops_all_commands():
     sm = OffboardStateMachine()
     _to_intercept(sm)

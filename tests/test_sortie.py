@@ -8,6 +8,8 @@ import pytest
 
 from groundstation.scenario import load_scenario, shipped_scenarios
 from groundstation.sim.simulation import Outcome, Simulation, run_sortie
+from onboard.datatypes import LoopMode
+from onboard.gains import Gains
 
 STATIC_SETUPS = [p.stem for p in shipped_scenarios() if load_scenario(p).target.motion == "static"]
 STATIC_MISS_TOLERANCE_M = 0.10  # issue 2: centimetre-level static interception
@@ -65,8 +67,10 @@ def test_unseen_target_is_lost():
     from groundstation.scenario import with_changes
 
     behind = with_changes(s, target=type(s.target)("static", (0.0, -20.0, 10.0)))
-    r = run_sortie(behind, "png")
+    # the search flies the launch course (north, away from it) for t_search, then gives up
+    r = run_sortie(behind, "png", gains=Gains(t_search=5.0))
     assert r.outcome == "TARGET_LOST" and r.detections_fused == 0
+    assert r.sim_time_s == pytest.approx(0.5 + 5.0, abs=0.011)  # t_wait + t_search
 
 
 def _cli_json(*args):
@@ -140,7 +144,7 @@ def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
     sortie is a hit. Out of contact the same loss ends the sortie as TARGET_LOST."""
     sim = Simulation(load_scenario("static-ahead-20m"), law="png", seed=0)
     sim.loop.acquired = True
-    sim.loop.dkf.lost = lambda t: True
+    sim.loop.mode = LoopMode.LOST  # the loop's failsafe: its search is over
     sim.miss_m = 0.02  # closest approach so far: inside the hit radius
     assert not sim._check_loop_outcome(1.0) and sim.outcome is None
     sim.miss_m = 0.5

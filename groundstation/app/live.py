@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from onboard.enums import RuntimeState
+from onboard.enums import LoopMode, RuntimeState
 from onboard.frames import Frame, SortieStart
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
@@ -42,6 +42,21 @@ from .live_recording import LiveRecording
 from .scene import SceneState
 from .session import SessionError
 from .snapshot import frame_snapshot
+
+_WAITING = tm.LOOP_MODE_CODES.index(LoopMode.WAITING.value)
+_SEARCH = tm.LOOP_MODE_CODES.index(LoopMode.SEARCH.value)
+
+
+def _acquired(t: dict[str, Any]) -> bool:
+    """Has the loop had a target estimate? Not while waiting, nor while searching with no
+    detection ever (the time since one is then infinite or not available)."""
+    mode = t.get("loop_mode")
+    if mode is None or int(mode) == _WAITING:
+        return False
+    since = t.get("dkf_since_det_s")
+    never = since is None or not math.isfinite(float(since))
+    return not (int(mode) == _SEARCH and never)
+
 
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
@@ -345,7 +360,7 @@ class LiveSession(LinkState):
                 "dkf": None
                 if not t
                 else {
-                    "acquired": t.get("loop_mode") is not None and int(t["loop_mode"]) != 0,
+                    "acquired": _acquired(t),
                     "lost": bool(t.get("dkf_lost")),
                     "time_since_detection_s": t.get("dkf_since_det_s"),
                 },

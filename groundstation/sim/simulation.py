@@ -18,7 +18,7 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample
-from onboard.enums import Outcome
+from onboard.enums import LoopMode, Outcome
 from onboard.estimation.dkf import DkfConfig
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
@@ -33,7 +33,6 @@ from .vehicle import Multicopter
 from .wind import Wind
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
-ACQUIRE_TIMEOUT_S = 1.0  # no detection fused by then: TARGET_LOST
 DIVERGED_SPEED_M_S = 60.0
 
 
@@ -304,12 +303,11 @@ class Simulation:
     def _check_loop_outcome(self, t: float) -> bool:
         """Outcomes that can only change at a control tick: target lost, never acquired,
         out of time."""
-        loop = self.loop
-        never_seen = t >= ACQUIRE_TIMEOUT_S + self.scenario.camera.delay_s
         # a balloon bursts on contact: losing it from the image with the vehicle already on
         # it ends a hit (the pass completes in the physics), not a lost target
         contact = self.miss_m <= self.hit_radius_m
-        lost = (loop.acquired and loop.dkf.lost(t)) or (not loop.acquired and never_seen)
+        # the loop coasts, re-acquires and searches; it gives up in its failsafe (lost)
+        lost = self.loop.mode is LoopMode.LOST
         if lost and not contact:
             self.outcome = Outcome.TARGET_LOST
         elif t >= self.scenario.duration_s - 1e-9:

@@ -40,6 +40,12 @@ from ..frames import Frame, SortieStart
 from . import encode as enc
 from .schemas import CHANNELS
 
+# the loop's track-loss ladder (onboard/control/reacquire.py), one event as each begins
+_LADDER = {
+    LoopMode.COAST: "no detection: coasting on the prediction",
+    LoopMode.REACQUIRE: "re-acquiring: yawing toward the predicted target, slowing",
+    LoopMode.SEARCH: "searching for the target",
+}
 LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
 
 
@@ -77,6 +83,8 @@ class ChannelBuilder:
         self._last_gains = None
         self._was_tracking = False
         self._was_lost = False
+        self._last_mode: LoopMode | None = None
+        self._ever_tracked = False
         self._guard_trips = 0
         self._sink = None
         self._joined = None  # the sink's "a client just subscribed" test (Foxglove live)
@@ -226,12 +234,15 @@ class ChannelBuilder:
                 )
         tracking = tel.mode is LoopMode.TRACKING
         if tracking and not self._was_tracking:
-            self.event(
-                t_s, "info", "target acquired" if not self._was_lost else "target reacquired"
-            )
+            again = self._ever_tracked
+            self.event(t_s, "info", "target reacquired" if again else "target acquired")
+            self._ever_tracked = True
         if tel.mode is LoopMode.LOST and not self._was_lost:
             self.event(t_s, "warning", "target lost: braking and holding")
+        if tel.mode in _LADDER and tel.mode is not self._last_mode:
+            self.event(t_s, "warning" if tel.mode is LoopMode.SEARCH else "info", _LADDER[tel.mode])
         self._was_tracking, self._was_lost = tracking, tel.mode is LoopMode.LOST
+        self._last_mode = tel.mode
         if frame.guard_trips != self._guard_trips:
             self._guard_trips = frame.guard_trips
             self.event(t_s, "error", "output guard: non-finite command replaced by hover")

@@ -44,7 +44,9 @@ class RuntimeParams:
     CAM_ROLL_DEG: float = ranged(0.0, "deg", -180.0, 180.0, "camera mount roll")
     CAM_LAT_S: float = ranged(0.0, "s", 0.0, 0.5, "OpenCV cameras: exposure-to-grab latency")
     HOVER_THR: float = ranged(1.0 / 3.0, "-", 0.05, 0.95, "normalised thrust that hovers")
-    TGT_LOST_S: float = ranged(0.5, "s", 0.1, 5.0, "no detection this long: brake and hold")
+    TGT_LOST_S: float = ranged(
+        0.5, "s", 0.1, 5.0, "no detection this long: the track is stale (coast, re-acquire, search)"
+    )
     TGT_DIAM_M: float = ranged(
         0.3, "m", 0.02, 3.0, "target (balloon) diameter: the DKF's range from apparent size"
     )

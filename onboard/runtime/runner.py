@@ -53,6 +53,9 @@ from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
 from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 
+# the loop flies without a live track (coast, re-acquisition, search: see onboard/loop.py)
+_STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
+
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
 
 
@@ -281,6 +284,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 offboard=f.offboard,
                 tracking=tracking,
                 target_lost=tel is not None and tel.mode is LoopMode.LOST,
+                target_stale=tel is not None and tel.mode in _STALE_MODES,
                 target_size_frac=self.target_size_frac,
                 speed_m_s=0.0 if f.vel_enu_m_s is None else float(np.linalg.norm(f.vel_enu_m_s)),
             )

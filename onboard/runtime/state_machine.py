@@ -3,6 +3,8 @@ answers what to command and what to ask PX4 for).
 
     link_down -> waiting_target <-> ready --start--> starting --PX4 in offboard--> intercept
     intercept --abort | target lost | pass done--> braking --slow--> finished (PX4 hold)
+    (target lost: the loop's coast, re-acquisition and search are over; pass done: the
+    target filled ``done_size_frac`` of the view, then the track went stale)
     any state with the flight controller's link gone --> link_lost (nothing is commanded)
 
 Offboard is requested only on the operator's start command (or ``auto_start`` in SITL), and
@@ -39,9 +41,10 @@ class Inputs:
     armed: bool
     offboard: bool  # PX4 reports offboard mode
     tracking: bool  # the loop has a live target estimate
-    target_lost: bool  # the loop's estimate was acquired and is now lost
+    target_lost: bool  # the loop gave the target up (its search is over): the failsafe
     target_size_frac: float  # last detection's width / image width
     speed_m_s: float
+    target_stale: bool = False  # the loop coasts, re-acquires or searches (no live track)
 
 
 @dataclass
@@ -182,8 +185,8 @@ class OffboardStateMachine:
                     d.output = Output.NONE
                 return d
             self._offboard_gone_s = None
-            if i.target_lost:
-                done = self.max_size_frac >= self.done_size_frac
+            done = self.max_size_frac >= self.done_size_frac
+            if i.target_lost or (i.target_stale and done):
                 self.reason = "pass done" if done else "target lost"
                 self._go(
                     State.BRAKING,

@@ -1,0 +1,143 @@
+"""Track loss, re-acquisition and search (not in the paper; README "Track loss, re-acquisition
+and search").
+
+After the DKF's track goes stale (no accepted detection for ``PRG_TGT_LOST``) the loop walks
+down a ladder, each rung bounded in time, and climbs back to tracking as soon as a detection
+is accepted:
+
+    tracking -> coast (the law on the DKF prediction, ``t_coast`` s while its 1 sigma is under
+    ``coast_std`` px) -> reacquire (yaw toward the predicted LOS, fly toward it at ``v_reacq``,
+    ``t_reacq`` s) -> search (``t_search`` s) -> lost (brake and hold: the failsafe)
+
+and before the first detection: waiting (hold, ``t_wait`` s) -> search -> lost. The search
+yaw-scans at hover at ``w_search``, or, when the vehicle was moving as it began (launched
+toward a cue), flies that course at ``v_search`` with the camera along it.
+
+Detections while the track is not live go through :class:`DetectionScreen` before the DKF
+(which would start a new track on any detection once its own is stale): one within
+``conf_deg`` plus 3 sigma of the prediction is fused at once; any other only after
+``n_confirm`` consecutive detections agree with each other within ``conf_deg`` (also when the
+prediction is vaguer than ``coast_std``: its gate would cover most of the image). A false blob
+(clutter anywhere in the frame) therefore neither hijacks the track nor starts one.
+
+Pure: every function is handed the times and states; no clock, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..gains import Gains
+from ..geometry import wrap_pi
+from .guidance import saturate_norm
+
+
+def angle_between_rad(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between two unit vectors, accurate near 0 (atan2 of |a x b| and a . b)."""
+    ax, ay, az = float(a[0]), float(a[1]), float(a[2])
+    bx, by, bz = float(b[0]), float(b[1]), float(b[2])
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
+
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    """A screened detection: its capture time (s) and its LOS at capture (unit, ENU)."""
+
+    time_s: float
+    los_enu: np.ndarray
+
+
+class DetectionScreen:
+    """Which detections may reach a stale (or absent) track. :meth:`offer` one detection at
+    a time, in capture order, with its LOS; it answers the detections to fuse now, in capture
+    order (empty while unconfirmed)."""
+
+    def __init__(self) -> None:
+        self._run: list[tuple[Any, Candidate]] = []  # consecutive mutually consistent ones
+        self.rejected = 0  # offered and dropped (outvoted by a later run)
+
+    def clear(self) -> None:
+        self.rejected += len(self._run)
+        self._run = []
+
+    def offer(
+        self,
+        item: Any,
+        cand: Candidate,
+        pred_los_enu: np.ndarray | None,
+        pred_sigma_rad: float,
+        gains: Gains,
+        sharp_sigma_rad: float = math.inf,
+    ) -> list[Any]:
+        """``item`` (a detection) with its LOS at capture; the prediction's LOS now and its
+        1 sigma (rad), None without a track. A prediction vaguer than ``sharp_sigma_rad``
+        confirms nothing by itself (its gate would cover the image)."""
+        gate = math.radians(gains.conf_deg)
+        near = (
+            pred_los_enu is not None
+            and pred_sigma_rad <= sharp_sigma_rad
+            and angle_between_rad(cand.los_enu, pred_los_enu) <= gate + 3.0 * pred_sigma_rad
+        )
+        if near:
+            self.clear()
+            return [item]  # where the track said it would be
+        if self._run and angle_between_rad(cand.los_enu, self._run[-1][1].los_enu) > gate:
+            self.clear()  # inconsistent with the run so far: start a new one
+        self._run.append((item, cand))
+        if len(self._run) >= round(gains.n_confirm):
+            out = [i for i, _ in self._run]
+            self._run = []
+            return out
+        return []
+
+
+def reacquire_accel(
+    pred_los_enu: np.ndarray, velocity_enu_m_s: np.ndarray, gains: Gains
+) -> np.ndarray:
+    """Re-acquisition: the velocity loop a_d = k_brake (v_reacq n_los - v), saturated to
+    a_max, turning the flight toward the predicted LOS at a slow speed (m/s^2, ENU)."""
+    v_d = gains.v_reacq * pred_los_enu
+    return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
+
+
+def horizontal_unit(vec: np.ndarray) -> np.ndarray | None:
+    """The horizontal direction of ``vec`` (unit, ENU), or None when it is nearly vertical."""
+    x, y = float(vec[0]), float(vec[1])
+    n = math.hypot(x, y)
+    if n < 1e-6:
+        return None
+    return np.array([x / n, y / n, 0.0])
+
+
+def search_accel(
+    cue_enu: np.ndarray | None, velocity_enu_m_s: np.ndarray, gains: Gains
+) -> np.ndarray:
+    """Search: without a cue, brake to a hover (a_d = -k_brake v); with a horizontal cue,
+    hold that course at ``v_search`` and the altitude (a_d = k_brake (v_search cue - v)),
+    saturated to a_max (m/s^2, ENU)."""
+    v_d = np.zeros(3) if cue_enu is None else gains.v_search * cue_enu
+    return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
+
+
+def search_yaw_rate(
+    cue_enu: np.ndarray | None, camera_axis_enu: np.ndarray, direction: float, gains: Gains
+) -> float:
+    """Search yaw rate about body +z (rad/s): without a cue, scan at ``w_search`` in
+    ``direction`` (+1 counter-clockwise seen from above, -1 clockwise); with one, turn the
+    camera's heading onto it (k_R times the heading error, capped at ``w_search``)."""
+    if cue_enu is None:
+        return math.copysign(gains.w_search, direction)
+    axis = horizontal_unit(camera_axis_enu)
+    if axis is None:
+        return 0.0
+    # headings as angles from +x (east) counter-clockwise: the rate about +z turns them
+    err = wrap_pi(
+        math.atan2(float(cue_enu[1]), float(cue_enu[0]))
+        - math.atan2(float(axis[1]), float(axis[0]))
+    )
+    return min(max(gains.k_R * err, -gains.w_search), gains.w_search)

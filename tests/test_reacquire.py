@@ -1,0 +1,223 @@
+"""Track loss, re-acquisition and search in closed loop (issue #13; onboard/control/reacquire.py):
+seeded sorties with forced detection dropouts and false detections."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.campaigns.definitions import _build_range
+from groundstation.recording.reader import iter_messages
+from groundstation.recording.writer import SortieRecorder
+from groundstation.scenario import load_scenario, parse_overrides, with_overrides
+from groundstation.sim.simulation import Simulation
+from onboard.control.reacquire import Candidate, DetectionScreen, angle_between_rad
+from onboard.datatypes import Detection, LoopMode
+from onboard.gains import Gains
+
+
+def _with_gap(sim: Simulation, start_s: float, end_s: float, clutter=None) -> None:
+    """No detection captured in [start_s, end_s) reaches the loop; ``clutter(det)`` may put
+    a false one in its place."""
+    deliver = sim.camera.deliver
+
+    def gapped(t_s: float) -> list[Detection]:
+        out = []
+        for det in deliver(t_s):
+            if start_s <= det.capture_time_s < end_s:
+                if clutter is not None:
+                    out.append(clutter(det))
+            else:
+                out.append(det)
+        return out
+
+    sim.camera.deliver = gapped
+
+
+def _fly(sim: Simulation) -> list:
+    """Run to the outcome; every tick's (time, mode, e_est, true image point)."""
+    ticks = []
+    while not sim.done:
+        sim.step_control_period()
+        tel = sim.last_telemetry
+        if tel is not None and ticks and ticks[-1][0] == tel.time_s:
+            continue
+        if tel is not None:
+            ticks.append((tel.time_s, tel.mode, tel.e_est_px, sim.camera.last_truth_px))
+    return ticks
+
+
+def _modes(ticks) -> list[LoopMode]:
+    out = []
+    for _, m, _, _ in ticks:
+        if not out or out[-1] is not m:
+            out.append(m)
+    return out
+
+
+@pytest.mark.parametrize(
+    "gap_s, ladder",
+    [
+        # 1.2 s without detections mid-flight: 0.5 s stale timeout, then the law on the DKF
+        # prediction until the detections return
+        ((1.0, 2.2), [LoopMode.TRACKING, LoopMode.COAST, LoopMode.TRACKING]),
+        # 2.4 s: the 1 s coast ends, re-acquisition (slow down, yaw to the prediction) until
+        # the first detection near the prediction
+        ((1.0, 3.4), [LoopMode.TRACKING, LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.TRACKING]),
+    ],
+)
+def test_a_forced_dropout_is_coasted_through_and_the_target_reacquired(gap_s, ladder):
+    sc = load_scenario("static-ahead-20m")
+    sim = Simulation(sc, "png", seed=0, keep_records=False)
+    _with_gap(sim, *gap_s)
+    ticks = _fly(sim)
+    res = sim.result()
+    assert _modes(ticks)[1:] == ladder  # after the wait for the first detection
+    assert res.outcome == "HIT" and res.miss_m < 0.1, res
+    # back on track: the first tracking tick after the gap is within 10 px of the truth
+    back = next(k for k in ticks if k[0] > gap_s[1] and k[1] is LoopMode.TRACKING)
+    err = math.hypot(back[2][0] - (back[3][0] - 320.0), back[2][1] - (back[3][1] - 240.0))
+    assert err < 10.0, back
+
+
+def test_false_detections_far_from_the_prediction_do_not_hijack_the_track():
+    # during a 2.4 s dropout every frame shows a false blob somewhere else in the image (at
+    # least 150 px from the target): none is fused, the track comes back on the target
+    rng = np.random.default_rng(5)
+    fused_in_gap = []
+
+    def clutter(det: Detection) -> Detection:
+        u0, v0 = det.center_px
+        while True:
+            u, v = rng.uniform(0, 640), rng.uniform(0, 480)
+            if math.hypot(u - u0, v - v0) > 150.0:
+                return dataclasses.replace(det, center_px=(u, v), bbox_px=(u - 2, v - 2, 4, 4))
+
+    sc = load_scenario("static-ahead-20m")
+    sim = Simulation(sc, "png", seed=0, keep_records=False)
+    _with_gap(sim, 1.0, 3.4, clutter)
+    ticks = []
+    while not sim.done:
+        sim.step_control_period()
+        tel = sim.last_telemetry
+        if tel is not None and (not ticks or ticks[-1][0] != tel.time_s):
+            ticks.append((tel.time_s, tel.mode, tel.e_est_px, sim.camera.last_truth_px))
+            if tel.time_s > 1.5 and tel.mode is not LoopMode.TRACKING:  # stale in the gap
+                fused_in_gap += [r.value for r in sim.loop.last_fusion]
+    res = sim.result()
+    assert fused_in_gap == []
+    assert sim.loop.screen.rejected >= 40  # about 2 s of false blobs at 30 Hz, all held back
+    assert _modes(ticks)[1:] == [
+        LoopMode.TRACKING,
+        LoopMode.COAST,
+        LoopMode.REACQUIRE,
+        LoopMode.TRACKING,
+    ]
+    assert res.outcome == "HIT" and res.miss_m < 0.1, res
+
+
+def test_a_false_blob_at_the_start_is_dropped_for_the_target():
+    # the first detection is a false blob 200 px off the target: the DKF starts on it (the
+    # operator's start accepts the first detection), gates the real target out, goes stale
+    # after 0.5 s, and the screen confirms the real target three frames later: a hit
+    sc = load_scenario("static-ahead-20m")
+    sim = Simulation(sc, "png", seed=0, keep_records=False)
+    first = []
+
+    def clutter(det: Detection) -> Detection:
+        if first:
+            return det
+        first.append(det)
+        u, v = det.center_px[0] - 200.0, det.center_px[1]
+        return dataclasses.replace(det, center_px=(u, v), bbox_px=(u - 2, v - 2, 4, 4))
+
+    _with_gap(sim, 0.02, 0.05, clutter)  # the 2nd frame: the 1st is stamped before the DKF starts
+    ticks = _fly(sim)
+    res = sim.result()
+    assert _modes(ticks)[:3] == [LoopMode.WAITING, LoopMode.TRACKING, LoopMode.COAST]
+    assert res.outcome == "HIT" and res.miss_m < 0.1, res
+
+
+def test_search_flies_the_launch_course_into_detection_range():
+    # the range campaign's 50 m target with a 3 px minimum blob (seen from 32 m): the loop
+    # waits 0.5 s, searches along its launch course at v_search, acquires and hits
+    (job,) = [j for j in _build_range(1, ("png",), "projected", 0) if j.labels[0][1] == 50]
+    sc = with_overrides(job.scenario, parse_overrides(["camera.min_blob_px=3"]))
+    sim = Simulation(sc, "png", seed=job.seed, keep_records=False)
+    ticks = _fly(sim)
+    res = sim.result()
+    assert _modes(ticks)[:3] == [LoopMode.WAITING, LoopMode.SEARCH, LoopMode.TRACKING]
+    acquired = next(k for k in ticks if k[1] is LoopMode.TRACKING)
+    assert 3.0 < acquired[0] < 7.0  # ~18 m at up to 8 m/s after the wait
+    assert res.outcome == "HIT" and res.miss_m < 0.15, res
+
+
+def test_a_search_that_finds_nothing_ends_in_the_failsafe():
+    # 35 m ahead, flying in at 2 m/s: with a 3 px minimum blob (32 m) the search along the
+    # launch course finds it; with 40 px (2.4 m) nothing is seen for t_search: lost
+    sc = load_scenario("static-far-35m")
+    found = Simulation(with_overrides(sc, parse_overrides(["camera.min_blob_px=3"])), "png", seed=0)
+    ticks = _fly(found)
+    assert _modes(ticks) == [LoopMode.WAITING, LoopMode.SEARCH, LoopMode.TRACKING]
+    assert found.result().outcome == "HIT"
+    blind = with_overrides(sc, parse_overrides(["camera.min_blob_px=40"]))
+    sim = Simulation(blind, "png", seed=0, gains=Gains(t_search=2.0), keep_records=False)
+    ticks = _fly(sim)
+    assert _modes(ticks) == [LoopMode.WAITING, LoopMode.SEARCH, LoopMode.LOST]
+    assert sim.result().outcome == "TARGET_LOST"
+    assert ticks[-1][0] == pytest.approx(0.5 + 2.0, abs=0.011)
+
+
+def test_a_yaw_scan_at_hover_finds_a_target_behind():
+    # hovering with the balloon 15 m behind: nothing in view, the scan turns the camera
+    # round at w_search = 0.6 rad/s (pi / 0.6 = 5.2 s), the screen confirms it, a hit
+    sc = load_scenario("static-ahead-20m")
+    p = sc.interceptor.position_m
+    target = dataclasses.replace(sc.target, position_m=(p[0] + 1.0, p[1] - 15.0, p[2]))
+    hover = dataclasses.replace(sc.interceptor, velocity_m_s=(0.0, 0.0, 0.0))
+    sc = dataclasses.replace(sc, interceptor=hover, target=target, duration_s=20.0)
+    sim = Simulation(sc, "png", seed=0, keep_records=False)
+    ticks = _fly(sim)
+    assert _modes(ticks) == [LoopMode.WAITING, LoopMode.SEARCH, LoopMode.TRACKING]
+    acquired = next(k for k in ticks if k[1] is LoopMode.TRACKING)
+    assert 2.0 < acquired[0] < 6.0
+    assert sim.result().outcome == "HIT"
+
+
+def test_the_screen_confirms_a_consistent_run_and_drops_scattered_ones():
+    g = Gains(n_confirm=3, conf_deg=3.0)
+    screen = DetectionScreen()
+
+    def los(az_deg):
+        a = math.radians(az_deg)
+        return np.array([math.sin(a), math.cos(a), 0.0])
+
+    pred = los(0.0)
+    assert screen.offer("near", Candidate(0.0, los(2.0)), pred, 0.0, g) == ["near"]
+    # 3 sigma of the prediction widens the gate: 10 deg off with sigma 3 deg is near
+    assert screen.offer("wide", Candidate(0.0, los(10.0)), pred, math.radians(3.0), g) == ["wide"]
+    assert screen.offer("a", Candidate(0.0, los(40.0)), pred, 0.0, g) == []
+    assert screen.offer("b", Candidate(0.03, los(-60.0)), pred, 0.0, g) == []  # restarts
+    assert screen.offer("c", Candidate(0.07, los(-59.0)), pred, 0.0, g) == []
+    assert screen.offer("d", Candidate(0.1, los(-58.0)), pred, 0.0, g) == ["b", "c", "d"]
+    assert screen.rejected == 1  # "a"
+    assert angle_between_rad(los(0.0), los(1e-7)) == pytest.approx(math.radians(1e-7))
+
+
+def test_the_recording_tells_the_loss_and_the_reacquisition(tmp_path):
+    rec = SortieRecorder(tmp_path)
+    sim = Simulation(load_scenario("static-ahead-20m"), "png", seed=0, observers=[rec])
+    _with_gap(sim, 1.0, 3.4)
+    assert sim.run().outcome == "HIT"
+    assert rec.closed and rec.error is None
+    events = [m["message"] for _, _, m in iter_messages(rec.path, ["/events"])]
+    story = [e for e in events if e.startswith(("target", "no detection", "re-acquiring"))]
+    assert story == [
+        "target acquired",
+        "no detection: coasting on the prediction",
+        "re-acquiring: yawing toward the predicted target, slowing",
+        "target reacquired",
+    ]
+    modes = {m["mode"] for _, _, m in iter_messages(rec.path, ["/control"])}
+    assert {"tracking", "coast", "reacquire"} <= modes
