@@ -90,6 +90,19 @@ def propagate_attitude(q_wxyz: np.ndarray, rates_flu_rad_s: np.ndarray, dt_s: fl
     return q / math.sqrt(float(q @ q))
 
 
+def propagate_rotation(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:
+    """The attitude ``lag_s`` seconds after ``R_WB`` at the body rates ``rates_flu_rad_s``
+    (held): R_WB exp([w lag]x), :func:`propagate_attitude` on a rotation matrix; non-finite
+    rates leave it unchanged. The attitude estimate arrives late (EKF2's output predictor
+    plus the link, about 10 ms) while the image estimate is predicted to the tick: at the
+    endgame's body rates of a few rad/s that lag is a LOS error of tens of mrad."""
+    w = np.asarray(rates_flu_rad_s, dtype=float)
+    n = math.sqrt(float(w @ w))
+    if not (n > 0.0 and math.isfinite(n)):
+        return R_WB
+    return R_WB @ rodrigues(w / n, n * lag_s)
+
+
 def rotmat_to_quat(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method)."""
     tr = R[0, 0] + R[1, 1] + R[2, 2]

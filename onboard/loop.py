@@ -48,22 +48,10 @@ from .datatypes import (
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
-from .geometry import quat_to_rotmat, rodrigues
+from .geometry import propagate_rotation, quat_to_rotmat
 
 _NAN2 = (math.nan, math.nan)
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
-
-
-def predict_attitude(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:
-    """The attitude ``lag_s`` seconds after ``R_WB`` at the body rates ``rates_flu_rad_s``
-    (held): R_WB exp([w lag]x). The attitude estimate arrives late (EKF2's output predictor
-    plus the link, about 10 ms) while the image estimate is predicted to the tick: at the
-    endgame's body rates of a few rad/s that lag is a LOS error of tens of mrad."""
-    w = np.asarray(rates_flu_rad_s, dtype=float)
-    n = math.sqrt(float(w @ w))
-    if not (n > 0.0 and math.isfinite(n)):
-        return R_WB
-    return R_WB @ rodrigues(w / n, n * lag_s)
 
 
 class InterceptionLoop:
@@ -245,7 +233,7 @@ class InterceptionLoop:
         self._gyro_n = 0
         R_WB = quat_to_rotmat(state.attitude_wxyz)
         if gains.t_att_lag > 0.0:
-            R_WB = predict_attitude(R_WB, gyro, gains.t_att_lag)
+            R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
         v_est = state.velocity_enu_m_s
         v = v_est

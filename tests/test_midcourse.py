@@ -122,15 +122,14 @@ def test_midcourse_nulls_the_zem_exponentially_where_pn_takes_most_of_the_flight
 
 
 def test_attitude_latency_prediction():
-    from onboard.geometry import rot_z
-    from onboard.loop import predict_attitude
+    from onboard.geometry import propagate_rotation, rot_z
 
     R = rot_z(0.3)
     # 2 rad/s of yaw for 10 ms: 20 mrad more yaw; no rate or no lag: unchanged
-    assert_allclose(predict_attitude(R, np.array([0.0, 0.0, 2.0]), 0.01), rot_z(0.32), atol=1e-12)
-    assert_allclose(predict_attitude(R, np.zeros(3), 0.01), R)
-    assert_allclose(predict_attitude(R, np.array([1.0, -2.0, 0.5]), 0.0), R, atol=1e-15)
-    assert_allclose(predict_attitude(R, np.array([np.nan, 0.0, 0.0]), 0.01), R)
+    assert_allclose(propagate_rotation(R, np.array([0.0, 0.0, 2.0]), 0.01), rot_z(0.32), atol=1e-12)
+    assert_allclose(propagate_rotation(R, np.zeros(3), 0.01), R)
+    assert_allclose(propagate_rotation(R, np.array([1.0, -2.0, 0.5]), 0.0), R, atol=1e-15)
+    assert_allclose(propagate_rotation(R, np.array([np.nan, 0.0, 0.0]), 0.01), R)
     assert Gains().t_att_lag == 0.0  # off by default (README "Envelope maps")
 
 
