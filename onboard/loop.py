@@ -74,6 +74,7 @@ class InterceptionLoop:
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
         self.last_fusion: list[FusionResult] = []
+        self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
         self.acquired = False
         self.disturbance = DisturbanceObserver(
@@ -112,6 +113,18 @@ class InterceptionLoop:
     def on_detection(self, detection: Detection) -> None:
         self._detections.append(detection)
 
+    def fuse_detections(self) -> list[FusionResult]:
+        """Fuse the detections handed in so far into the DKF now, against its last prediction,
+        instead of in the next tick (the runtime calls this on the camera thread as a detection
+        arrives, so the tick only predicts). Their results appear in the next tick's
+        ``last_fusion``. Call it from one thread at a time with :meth:`tick`."""
+        out = [
+            self.dkf.fuse(det) for det in sorted(self._detections, key=lambda d: d.capture_time_s)
+        ]
+        self._detections.clear()
+        self._fused_early.extend(out)
+        return out
+
     # ------------------------------------------------------------------ the tick
     def tick(self, state: VehicleState, brake: bool = False) -> ControlTelemetry:
         """One control tick at ``state.time_s``; with ``brake`` the estimate keeps running but
@@ -133,7 +146,7 @@ class InterceptionLoop:
         R_WC = R_WB @ self.camera.R_BC
         v = state.velocity_enu_m_s
         self.dkf.predict(t, gyro, v, R_WC)
-        self.last_fusion = []
+        self.last_fusion, self._fused_early = self._fused_early, []
         if self._detections:
             for det in sorted(self._detections, key=lambda d: d.capture_time_s):
                 self.last_fusion.append(self.dkf.fuse(det))
