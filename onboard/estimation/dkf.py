@@ -71,33 +71,26 @@ _N = 6  # state size
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
 _F_LOWER = (
-    0.0,
-    0.0,
-    0.0,
-    1.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    1.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-    1.0,
-)
+    (0.0,) * 3 + (1.0, 0.0, 0.0) + (0.0,) * 4 + (1.0, 0.0) + (0.0,) * 5 + (1.0,)
+)  # F rows 3-5
 
 
 def _floats3(v) -> tuple[float, float, float]:
     """Three floats from a 3-vector (ndarray or sequence)."""
+    if isinstance(v, np.ndarray) and v.shape == (3,) and v.dtype == np.float64:
+        return tuple(v.tolist())
     out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
     if len(out) != 3:
         raise ValueError(f"expected 3 numbers, got {len(out)}")
     return (float(out[0]), float(out[1]), float(out[2]))
+
+
+def _transposed9(m) -> tuple:
+    """The transpose of a 3x3 matrix (ndarray or nested sequence) as 9 floats, row-major."""
+    if isinstance(m, np.ndarray) and m.shape == (3, 3) and m.dtype == np.float64:
+        return tuple(m.T.ravel().tolist())
+    a0, a1, a2 = (_floats3(row) for row in _rows3(m))
+    return (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
 
 
 def _rows3(m) -> list:
@@ -301,11 +294,7 @@ class DelayedKalmanFilter:
             c[6] * g0 + c[7] * g1 + c[8] * g2,
         )
         v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else _floats3(velocity_enu_m_s)
-        if R_WC is None:
-            R_CW = self._R_CW_default
-        else:
-            a0, a1, a2 = (_floats3(row) for row in _rows3(R_WC))
-            R_CW = (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
+        R_CW = self._R_CW_default if R_WC is None else _transposed9(R_WC)
         # a non-finite input is not used: hold the previous one (the filter never sees NaN)
         if not math.isfinite(sum(w)):
             w = prev.w if prev is not None else (0.0, 0.0, 0.0)
