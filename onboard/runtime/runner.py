@@ -337,12 +337,13 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         try:
             while not self._stop.is_set():
                 start = sched.wait()
+                cpu0 = time.thread_time()
                 self.timing.tick_started(start, sched.last_woken)
                 with self._loop_lock:  # the camera thread fuses into the same loop
                     self.tick()
                 now = time.perf_counter()
                 work = now - start
-                overran = self.timing.tick_done(work)
+                overran = self.timing.tick_done(work, time.thread_time() - cpu0)
                 if overran and now - self._last_overrun_report > 5.0:
                     self._last_overrun_report = now
                     self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
