@@ -43,9 +43,10 @@ it): P_k = F_k P_{k-1} F_k^T + Q_k from the last entry that holds one, with the 
 Q, which equals carrying dP forward as Phi_k dP Phi_k^T; a tick without a fusion does no 6x6
 arithmetic. Entries that already hold a P (a caller reads the covariance every tick, as the
 simulator's recorded frames do) get dP carried as P_k += Phi_k dP Phi_k^T, a prefix product
-of the buffered F in log2(n) batched products. A detection captured before one already fused (out of order) is fused by a full
-replay in capture order (every step re-propagated with the buffered inputs). Every replayed
-state is written back. The delay comes from timestamps only.
+of the buffered F in log2(n) batched products. A detection captured before one already
+fused (out of order) is fused by a full replay in capture order (every step re-propagated
+with the buffered inputs). Every replayed state is written back. The delay comes from
+timestamps only.
 
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
 (Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every
