@@ -5,13 +5,11 @@ from __future__ import annotations
 
 import gc
 import sys
-import threading
 import time
 
 import pytest
 
 from onboard.runtime.scheduler import PeriodicScheduler
-from onboard.runtime.timing import LoopTiming
 
 
 def test_ticks_start_no_earlier_than_their_deadlines_on_a_fixed_grid():
@@ -60,34 +58,3 @@ def test_collection_is_held_during_the_loop_and_handed_back():
 def test_bad_period_is_refused():
     with pytest.raises(ValueError):
         PeriodicScheduler(0.0)
-
-
-def test_a_wake_starts_the_tick_early_and_re_anchors_the_grid():
-    """A detection fused on the camera thread wakes the control thread: the tick starts well
-    before its deadline, and the next deadline is a full period after the woken tick."""
-    period = 0.05
-    sched = PeriodicScheduler(period)
-    sched.start()
-    try:
-        first = sched.wait()
-        assert not sched.last_woken
-        threading.Timer(0.01, sched.wake).start()
-        woken = sched.wait()
-        assert sched.last_woken and sched.woken == 1
-        nxt = sched.wait()
-        assert not sched.last_woken
-    finally:
-        sched.stop()
-    assert woken < first + period - 0.02  # at the wake (10 ms in), not at the 50 ms deadline
-    assert nxt >= woken + period - 1e-4
-
-
-def test_woken_ticks_count_in_the_rate_but_not_in_the_jitter():
-    timing = LoopTiming(0.005, keep=100)
-    for k in range(11):
-        timing.tick_started(0.005 * k)
-    timing.tick_started(0.0515, woken=True)  # 1.5 ms after the last grid tick
-    timing.tick_started(0.0565)
-    fig = timing.figures()
-    assert fig["woken_ticks"] == 1 and fig["ticks"] == 13
-    assert fig["jitter_max_ms"] < 1e-6 and timing.jitter_p99_ms() < 1e-6

@@ -137,7 +137,6 @@ def run_sitl_bench(
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
-        "ticks_woken_by_detections": stats.get("woken_ticks"),
         "camera_delay_s": delay_s,
         "capture_to_command_median_ms": stats.get("latency_total_median_ms"),
         "beyond_camera_median_ms": stats.get("latency_beyond_camera_median_ms"),
@@ -171,10 +170,7 @@ def run_sitl_bench(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
     )
-    print(
-        f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target 200 (of which "
-        f"{figures['ticks_woken_by_detections']} ticks started early by a fused detection)"
-    )
+    print(f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target 200")
     print(
         f"  period jitter p99 {f(figures['jitter_p99_ms'])} ms (max {f(figures['jitter_max_ms'])})"
         + verdict(figures["jitter_p99_ms"], TARGETS_MS["jitter_p99"])

@@ -235,7 +235,7 @@ class CameraThread(threading.Thread):
                 self.clock.now(),
                 (w, h),
             )
-            self.events.append(ev)  # queued first: a tick woken by on_detection finds it
+            self.events.append(ev)  # queued first: the tick after on_detection finds it
             if self.on_detection is not None:
                 try:
                     self.on_detection(ev)

@@ -178,7 +178,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def _fuse_on_arrival(self, ev) -> None:
         """On the camera thread, as a detection arrives (run() only): fuse it into the DKF
-        now and wake the control thread, whose next tick then only predicts and commands."""
+        now, so the next tick only predicts and commands. (The tick is not started early: the
+        guidance's eq. 17 divides by the tick's dt, so an off-grid tick would command a
+        multiple of the acceleration.)"""
         loop = self.loop
         if not self._fusing or loop is None or ev.detection is None:
             return
@@ -187,7 +189,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         with self._loop_lock:
             loop.on_detection(ev.detection)
             loop.fuse_detections()
-        self.scheduler.wake()
 
     # ------------------------------------------------------------------ timing figures
     @property
@@ -206,7 +207,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "frames": self.camera.frames,
             "commands_sent": self.commands_sent,
             "scheduler_stalls": self.scheduler.stalls,
-            "ticks_woken_by_detections": self.scheduler.woken,
             "gc_runs_in_slack": self.scheduler.gc_runs,
             "realtime_priority": self.config.realtime_priority,
             "bad_frames_fc": self.fc.bad_frames,
@@ -338,7 +338,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             while not self._stop.is_set():
                 start = sched.wait()
                 cpu0 = time.thread_time()
-                self.timing.tick_started(start, sched.last_woken)
+                self.timing.tick_started(start)
                 with self._loop_lock:  # the camera thread fuses into the same loop
                     self.tick()
                 now = time.perf_counter()

@@ -3,11 +3,7 @@ start, so a late tick does not push the later ones back), reached by sleeping un
 spin before the deadline and spinning the rest (the kernel's sleep overshoots by tens of
 microseconds, more under load). Garbage collection never interrupts a tick: the heap built at
 start-up is frozen out of the collector, automatic collection is off while the loop runs and
-the young generations are collected in the slack after a tick. Another thread can call
-:meth:`PeriodicScheduler.wake` (the camera thread, when it has fused a detection): the wait
-ends at once, the tick runs now and the grid re-anchors there, so a command follows a
-detection without waiting for the next deadline and no period is longer than nominal.
-Optionally the control thread
+the young generations are collected in the slack after a tick. Optionally the control thread
 (and the camera thread it starts afterwards) runs under SCHED_FIFO, as a flight stack's
 threads do, so other programs on the companion computer cannot delay a tick.
 """
@@ -17,7 +13,6 @@ from __future__ import annotations
 import gc
 import os
 import sys
-import threading
 import time
 
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
@@ -41,9 +36,6 @@ class PeriodicScheduler:
         self.realtime_priority = realtime_priority
         self.stalls = 0  # times the loop fell a whole period behind and re-anchored
         self.gc_runs = 0
-        self.woken = 0  # ticks started early by wake()
-        self.last_woken = False  # the tick wait() just returned for was woken
-        self._wake = threading.Event()
         self._next_s = 0.0
         self._next_young_s = self._next_older_s = 0.0
         self._switch_interval = sys.getswitchinterval()
@@ -69,37 +61,21 @@ class PeriodicScheduler:
         self._next_older_s = now + GC_OLDER_EVERY_S
         return note
 
-    def wake(self) -> None:
-        """Start the next tick now instead of at its deadline (thread-safe)."""
-        self._wake.set()
-
     def wait(self) -> float:
-        """Return at the next deadline (sleeping, then spinning), or at once when woken; when a
-        stall left the loop more than a period behind, start afresh from now rather than run
-        a burst of ticks. A woken tick re-anchors the grid: the next deadline is a period
-        after it."""
+        """Return at the next deadline (sleeping, then spinning); when a stall left the loop
+        more than a period behind, start afresh from now rather than run a burst of ticks."""
         deadline = self._next_s
         now = time.perf_counter()
-        wake = self._wake
-        woken = False
         if now > deadline + self.period_s:
             self.stalls += 1
             deadline = now
         else:
             if deadline - now > self.spin_s:
-                woken = wake.wait(deadline - now - self.spin_s)
-            while not woken and time.perf_counter() < deadline:
-                woken = wake.is_set()
-        wake.clear()
-        start = time.perf_counter()
-        if woken and start < deadline:
-            self.woken += 1
-            deadline = start
-        else:
-            woken = False
-        self.last_woken = woken
+                time.sleep(deadline - now - self.spin_s)
+            while time.perf_counter() < deadline:
+                pass
         self._next_s = deadline + self.period_s
-        return start
+        return time.perf_counter()
 
     def after_tick(self) -> None:
         """Collect garbage if due and there is slack before the next deadline."""

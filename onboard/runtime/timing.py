@@ -1,9 +1,7 @@
 """The control thread's timing figures: achieved rate and jitter over the last second (sent
 in the telemetry), and over the run (ten minutes at most) the period, the work per tick, the
 overruns and the capture-to-command latency (``onboard run --stats``, ``groundstation bench
---sitl``). A tick started early on purpose (woken by a fused detection) ends a period shorter
-than nominal by design: it counts in the rate and is counted, but not in the jitter, which is
-the grid's timing error. Pure bookkeeping: the runner hands it the times."""
+--sitl``). Pure bookkeeping: the runner hands it the times."""
 
 from __future__ import annotations
 
@@ -25,11 +23,8 @@ class LoopTiming:
     def __init__(self, period_s: float, keep: int) -> None:
         self.period_s = period_s
         self.overruns = 0
-        # (tick start, period, woken), last 1 s
-        self._recent: deque[tuple[float, float, bool]] = deque()
+        self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
         self.periods_all: deque[float] = deque(maxlen=keep)
-        self.periods_grid: deque[float] = deque(maxlen=keep)  # ending at a tick not woken
-        self.woken_ticks = 0
         self.tick_work_s: deque[float] = deque(maxlen=keep)
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the control thread's CPU time
         self.latency_total_s: deque[float] = deque(maxlen=keep)
@@ -37,15 +32,11 @@ class LoopTiming:
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
         self._last_start: float | None = None
 
-    def tick_started(self, start_s: float, woken: bool = False) -> None:
-        """A tick started at ``start_s``; ``woken``: early on purpose (not on the grid)."""
-        self.woken_ticks += woken
+    def tick_started(self, start_s: float) -> None:
         if self._last_start is not None:
             per = start_s - self._last_start
             self.periods_all.append(per)
-            if not woken:
-                self.periods_grid.append(per)
-            self._recent.append((start_s, per, woken))
+            self._recent.append((start_s, per))
             while self._recent and self._recent[0][0] < start_s - 1.0:
                 self._recent.popleft()
         self._last_start = start_s
@@ -83,14 +74,12 @@ class LoopTiming:
     def jitter_p99_ms(self) -> float:
         if not self._recent:
             return 0.0
-        dev = sorted(abs(per - self.period_s) for _, per, woken in self._recent if not woken)
-        if not dev:
-            return 0.0
+        dev = sorted(abs(per - self.period_s) for _, per in self._recent)
         return 1000.0 * dev[min(len(dev) - 1, int(0.99 * len(dev)))]
 
     def figures(self) -> dict:
         per = self.periods_all
-        jit = [abs(p - self.period_s) for p in self.periods_grid]
+        jit = [abs(p - self.period_s) for p in per]
         return {
             "ticks": len(per) + 1 if per else 0,
             "rate_hz": (len(per) / sum(per)) if per else None,
@@ -102,7 +91,6 @@ class LoopTiming:
             "tick_cpu_median_ms": _ms(_pct(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": _ms(_pct(self.tick_cpu_s, 0.99)),
             "overruns": self.overruns,
-            "woken_ticks": self.woken_ticks,
             "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
             "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
             "latency_beyond_camera_p99_ms": _ms(_pct(self.latency_beyond_camera_s, 0.99)),
