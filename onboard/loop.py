@@ -85,6 +85,7 @@ class InterceptionLoop:
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
         self.last_fusion: list[FusionResult] = []
+        self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
         self.acquired = False
         # track loss and search (onboard/control/reacquire.py)
@@ -163,7 +164,8 @@ class InterceptionLoop:
         pred, sigma = None, 0.0
         if est is not None:
             pred = line_of_sight(est.e_px[0] / f, est.e_px[1] / f, R_WC)
-            sigma = max(est.e_std_px) / f
+            std = self.dkf.image_std_px()
+            sigma = 0.0 if std is None else max(std) / f
         sharp = self.gains.coast_std  # px: a vaguer prediction confirms nothing alone
         out: list[Detection] = []
         for det in dets:
@@ -200,7 +202,8 @@ class InterceptionLoop:
             stale_s = t - self._live_s
             if est is not None:
                 if not self._coast_over and stale_s < g.t_coast:
-                    if max(est.e_std_px) <= g.coast_std:
+                    std = self.dkf.image_std_px()
+                    if std is not None and max(std) <= g.coast_std:
                         return LoopMode.COAST
                     self._coast_over = True
                 if stale_s < g.t_coast + g.t_reacq:
@@ -213,6 +216,20 @@ class InterceptionLoop:
         if t - self._search_start_s < g.t_search:
             return LoopMode.SEARCH
         return LoopMode.LOST
+
+    def fuse_detections(self) -> list[FusionResult]:
+        """Fuse the detections handed in so far into the DKF now, against its last prediction,
+        instead of in the next tick (the runtime calls this on the camera thread as a detection
+        arrives, so the tick only predicts). While the track is stale they pass the screen
+        first, against the last tick's camera attitude. Their results appear in the next tick's
+        ``last_fusion``. Call it from one thread at a time with :meth:`tick`."""
+        dets = sorted(self._detections, key=lambda d: d.capture_time_s)
+        self._detections.clear()
+        if dets and self._R_hist and self._screening(self._prev_time_s):
+            dets = self._screened(dets, self._R_hist[-1][1])
+        out = [self.dkf.fuse(det) for det in dets]
+        self._fused_early.extend(out)
+        return out
 
     # ------------------------------------------------------------------ the tick
     def tick(self, state: VehicleState, brake: bool = False) -> ControlTelemetry:
@@ -253,7 +270,7 @@ class InterceptionLoop:
         hist.append((t, R_WC))
         while len(hist) > 2 and hist[1][0] <= t - _ATTITUDE_HISTORY_S:
             hist.popleft()
-        self.last_fusion = []
+        self.last_fusion, self._fused_early = self._fused_early, []
         if self._detections:
             dets = sorted(self._detections, key=lambda d: d.capture_time_s)
             self._detections.clear()
@@ -307,7 +324,9 @@ class InterceptionLoop:
                 self._dq_filt = (dq_y, dq_z)
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
-            if gains.tau_zem > 0.0:
+            mean_range = self.dkf.range_m() if gains.tau_zem > 0.0 else None
+            # within r_mid the midcourse weight is 0 whatever the covariance: skip computing it
+            if mean_range is not None and mean_range > gains.r_mid:
                 dv = self.dkf.depth_velocity()
                 if dv is not None:
                     # the range the DKF is confident of: its inverse depth one sigma high

@@ -31,22 +31,28 @@ noise that covers a wrong diameter. The apparent size makes depth observable at 
 vehicle's own acceleration along and across the line of sight makes it observable over time.
 Without size the depth starts from ``init_range_m`` with a wide prior.
 
-Delay: every prediction is buffered as (time, inputs, x, P, F). A detection captured at t_c is
-fused at t_c: the filter takes the buffered state just before t_c, propagates to t_c with the
-buffered inputs, updates (Joseph form in closed form, equal to filterpy's ``update``),
-propagates to the next buffered time, and carries the correction forward to now through the
-buffered transition matrices:
-x_k += Phi_k dx, P_k += Phi_k dP Phi_k^T with Phi_k = F_k ... F_{j+2}. That is the replay of
-the linearised filter at a few small matrix products per fusion instead of a full predict per
-buffered step. A detection captured before one already fused (out of order) is fused by a full
-replay in capture order (every step re-propagated with the buffered inputs). Every replayed
-state is written back. The delay comes from timestamps only.
+Delay: every prediction is buffered as (time, inputs, x, F, Q) and, lazily, P. A detection
+captured at t_c is fused at t_c: the filter takes the buffered state just before t_c,
+propagates to t_c with the buffered inputs, updates (Joseph form in closed form, equal to
+filterpy's ``update``), propagates to the next buffered time, and carries the correction of
+the state forward to now through the buffered transition matrices: x_k += Phi_k dx with
+Phi_k = F_k ... F_{j+2}, one 3x6 product in floats per buffered step (F's last three rows are
+the identity). That is the replay of the linearised filter. The covariance is propagated only
+when it is needed (the next fusion, the oldest entry leaving the buffer, a caller asking for
+it): P_k = F_k P_{k-1} F_k^T + Q_k from the last entry that holds one, with the buffered F and
+Q, which equals carrying dP forward as Phi_k dP Phi_k^T; a tick without a fusion does no 6x6
+arithmetic. Entries that already hold a P (a caller reads the covariance every tick, as the
+simulator's recorded frames do) get dP carried as P_k += Phi_k dP Phi_k^T, a prefix product
+of the buffered F in log2(n) batched products. A detection captured before one already
+fused (out of order) is fused by a full replay in capture order (every step re-propagated
+with the buffered inputs). Every replayed state is written back. The delay comes from
+timestamps only.
 
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
-(Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every update
-and every replay,
-rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves the view
-by more than ~76 degrees or turns non-finite.
+(Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every
+update, rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves
+the view by more than ~76 degrees or turns non-finite (the state at every step, the
+covariance when it is propagated).
 """
 
 from __future__ import annotations
@@ -67,14 +73,27 @@ _TIME_EPS_S = 1e-9
 _N = 6  # state size
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
+_F_LOWER = (
+    (0.0,) * 3 + (1.0, 0.0, 0.0) + (0.0,) * 4 + (1.0, 0.0) + (0.0,) * 5 + (1.0,)
+)  # F rows 3-5
 
 
 def _floats3(v) -> tuple[float, float, float]:
     """Three floats from a 3-vector (ndarray or sequence)."""
+    if isinstance(v, np.ndarray) and v.shape == (3,) and v.dtype == np.float64:
+        return tuple(v.tolist())
     out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
     if len(out) != 3:
         raise ValueError(f"expected 3 numbers, got {len(out)}")
     return (float(out[0]), float(out[1]), float(out[2]))
+
+
+def _transposed9(m) -> tuple:
+    """The transpose of a 3x3 matrix (ndarray or nested sequence) as 9 floats, row-major."""
+    if isinstance(m, np.ndarray) and m.shape == (3, 3) and m.dtype == np.float64:
+        return tuple(m.T.ravel().tolist())
+    a0, a1, a2 = (_floats3(row) for row in _rows3(m))
+    return (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
 
 
 def _rows3(m) -> list:
@@ -126,25 +145,27 @@ class ImageEstimate:
     time_s: float
     e_px: tuple[float, float]  # image error e = (u - c_u, v - c_v)
     e_rate_px_s: tuple[float, float]  # total rate: rotational + translational flow
-    e_std_px: tuple[float, float]
     time_since_detection_s: float
     lost: bool
 
 
 class _Entry:
-    """One buffered prediction: inputs held over (previous entry, t], the state at t and the
-    transition F from the previous entry's state."""
+    """One buffered prediction: inputs held over (previous entry, t], the state at t, the
+    transition F from the previous entry's state (its first three rows, 18 floats row-major;
+    the rest is the identity), the process noise Q's diagonal over the step, and P at t once
+    it has been propagated (None until then)."""
 
-    __slots__ = ("F", "P", "R_CW", "t", "v_c", "w", "x")
+    __slots__ = ("F", "P", "Q", "R_CW", "t", "v_c", "w", "x")
 
-    def __init__(self, t: float, w: tuple, v_c: tuple, R_CW: tuple, x, P, F) -> None:
+    def __init__(self, t: float, w: tuple, v_c: tuple, R_CW: tuple) -> None:
         self.t = t
         self.w = w  # camera-frame angular rate (rad/s), 3 floats
         self.v_c = v_c  # vehicle velocity ENU (m/s), 3 floats
         self.R_CW = R_CW  # world -> camera rotation, 9 floats row-major
-        self.x = x
-        self.P = P
-        self.F = F
+        self.x = None
+        self.P = None
+        self.F = None
+        self.Q = None
 
 
 class _Meas:
@@ -187,8 +208,9 @@ class DelayedKalmanFilter:
         self._radius_m = 0.5 * c.target_diameter_m
 
     # ----------------------------------------------------------------- propagation
-    def _step(self, x: np.ndarray, P: np.ndarray, e: _Entry, dt: float):
-        """Propagate (x, P) by dt with entry e's inputs: returns (x', P', F)."""
+    def _step_x(self, x: np.ndarray, e: _Entry, dt: float):
+        """Propagate x by dt with entry e's inputs: returns (x', F's first three rows, Q's
+        diagonal)."""
         xn, yn, rho, vE, vN, vU = x.tolist()
         wx, wy, wz = e.w
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = e.R_CW
@@ -205,23 +227,53 @@ class DelayedKalmanFilter:
         x1, y1, rho1 = sx * iz, sy * iz, min(rho * iz, self._rho_max)
         # exact Jacobian of the map: d(s_i/s_z) = (ds_i - (s_i/s_z) ds_z) / s_z
         a, b = dt * iz, dt * rho * iz
-        F = np.array(
-            [
-                [iz - x1 * a * wy, a * (wz + x1 * wx), a * (ux - x1 * uz),
-                 b * (r00 - x1 * r20), b * (r01 - x1 * r21), b * (r02 - x1 * r22)],
-                [-a * (wz + y1 * wy), iz + y1 * a * wx, a * (uy - y1 * uz),
-                 b * (r10 - y1 * r20), b * (r11 - y1 * r21), b * (r12 - y1 * r22)],
-                [-rho1 * a * wy, rho1 * a * wx, iz - rho1 * a * uz,
-                 -rho1 * b * r20, -rho1 * b * r21, -rho1 * b * r22],
-                [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
-                [0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
-                [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
-            ]
+        F = (
+            iz - x1 * a * wy, a * (wz + x1 * wx), a * (ux - x1 * uz),
+            b * (r00 - x1 * r20), b * (r01 - x1 * r21), b * (r02 - x1 * r22),
+            -a * (wz + y1 * wy), iz + y1 * a * wx, a * (uy - y1 * uz),
+            b * (r10 - y1 * r20), b * (r11 - y1 * r21), b * (r12 - y1 * r22),
+            -rho1 * a * wy, rho1 * a * wx, iz - rho1 * a * uz,
+            -rho1 * b * r20, -rho1 * b * r21, -rho1 * b * r22,
         )  # fmt: skip
-        P1 = F @ P @ F.T  # symmetric to rounding; symmetrised at every update and replay
         qi, qv = self._q_img * dt, self._q_v * dt
-        P1.flat[::7] += (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
-        return np.array([x1, y1, rho1, vE, vN, vU]), P1, F
+        Q = (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
+        return np.array([x1, y1, rho1, vE, vN, vU]), F, Q
+
+    @staticmethod
+    def _propagate(P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
+        """F P F^T + Q (symmetric to rounding; symmetrised at every update)."""
+        Fm = np.array(F + _F_LOWER).reshape(6, 6)
+        P1 = Fm @ P @ Fm.T
+        P1.flat[::7] += Q
+        return P1
+
+    def _step(self, x: np.ndarray, P: np.ndarray, e: _Entry, dt: float):
+        """Propagate (x, P) by dt with entry e's inputs: returns (x', P', F, Q)."""
+        x1, F, Q = self._step_x(x, e, dt)
+        return x1, self._propagate(P, F, Q), F, Q
+
+    def _covariance(self, i: int) -> np.ndarray | None:
+        """P at buffered entry i, propagated from the last entry before it that holds one
+        (None without a track; the track is dropped if it turns non-finite)."""
+        buf = self._buf
+        e = buf[i]
+        if e.P is not None or e.x is None:
+            return e.P
+        k = i
+        while k > 0 and buf[k].P is None and buf[k - 1].x is not None:
+            k -= 1
+        P = buf[k].P
+        if P is None:  # no covariance to start from (cannot happen with a track): drop it
+            self._drop_track()
+            return None
+        for n in range(k + 1, i + 1):
+            e = buf[n]
+            P = self._propagate(P, e.F, e.Q)
+            e.P = P
+        if not math.isfinite(float(P.trace())):
+            self._drop_track()
+            return None
+        return P
 
     def predict(
         self,
@@ -245,11 +297,7 @@ class DelayedKalmanFilter:
             c[6] * g0 + c[7] * g1 + c[8] * g2,
         )
         v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else _floats3(velocity_enu_m_s)
-        if R_WC is None:
-            R_CW = self._R_CW_default
-        else:
-            a0, a1, a2 = (_floats3(row) for row in _rows3(R_WC))
-            R_CW = (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
+        R_CW = self._R_CW_default if R_WC is None else _transposed9(R_WC)
         # a non-finite input is not used: hold the previous one (the filter never sees NaN)
         if not math.isfinite(sum(w)):
             w = prev.w if prev is not None else (0.0, 0.0, 0.0)
@@ -257,33 +305,35 @@ class DelayedKalmanFilter:
             v_c = prev.v_c if prev is not None else (0.0, 0.0, 0.0)
         if not math.isfinite(sum(R_CW)):
             R_CW = prev.R_CW if prev is not None else self._R_CW_default
-        entry = _Entry(time_s, w, v_c, R_CW, None, None, None)
+        entry = _Entry(time_s, w, v_c, R_CW)
         if self._initialised:
             last = self._buf[-1]
-            x, P, F = self._step(last.x, last.P, entry, time_s - last.t)
-            if self._valid(x, P):
-                entry.x, entry.P, entry.F = x, P, F
+            x, F, Q = self._step_x(last.x, entry, time_s - last.t)
+            if self._valid(x):
+                entry.x, entry.F, entry.Q = x, F, Q
             else:
                 self._drop_track()
-        self._buf.append(entry)
+        buf = self._buf
+        buf.append(entry)
         horizon = time_s - self.config.buffer_s
-        while len(self._buf) > 2 and self._buf[1].t <= horizon:
-            self._buf.popleft()
+        while len(buf) > 2 and buf[1].t <= horizon:
+            if buf[1].P is None and buf[1].x is not None:
+                self._covariance(1)  # the oldest entry is where P is propagated from
+            buf.popleft()
         # measurements before the oldest buffered state can never be replayed again
         cut = bisect.bisect_left(self._meas, self._buf[0].t, key=lambda m: m.t)
         if cut:
             del self._meas[:cut]
 
     @staticmethod
-    def _valid(x: np.ndarray, P: np.ndarray) -> bool:
-        """Finite, in front of the camera and within ~76 degrees of the axis (a NaN anywhere in
-        P reaches its trace within a step)."""
-        xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
+    def _valid(x: np.ndarray) -> bool:
+        """Finite, in front of the camera and within ~76 degrees of the axis."""
+        xn, yn, rho, vE, vN, vU = x.tolist()
         return (
             abs(xn) < _MAX_ABS_N
             and abs(yn) < _MAX_ABS_N
             and rho > 0.0
-            and math.isfinite(float(x[3]) + float(x[4]) + float(x[5]) + float(P.trace()))
+            and math.isfinite(vE + vN + vU)
         )
 
     # ----------------------------------------------------------------- fusion
@@ -363,7 +413,7 @@ class DelayedKalmanFilter:
 
     def _drop_track(self) -> None:
         for e in self._buf:
-            e.x = e.P = e.F = None
+            e.x = e.P = e.F = e.Q = None
         self._meas = []
         self._initialised = False
 
@@ -398,40 +448,66 @@ class DelayedKalmanFilter:
 
     def _fuse_latest(self, j: int, m: _Meas) -> bool:
         """Fuse m (later than every stored measurement) captured inside buffer interval
-        (j, j+1]: exact at j+1, then the linearised correction carried to now."""
+        (j, j+1]: exact at j+1, then the linearised correction of the state carried to now;
+        the later covariances are propagated when next needed."""
         buf = self._buf
+        P_j = self._covariance(j)
+        if P_j is None:
+            return False
         nxt = buf[j + 1]
-        x, P, _ = self._step(buf[j].x, buf[j].P, nxt, m.t - buf[j].t)
+        x, P, _, _ = self._step(buf[j].x, P_j, nxt, m.t - buf[j].t)
         x, P, ok = self._update(x, P, m)
         if not ok:
             return False
         self._meas.append(m)
         self._last_accepted_s = max(self._last_accepted_s, m.t)
-        x, P, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
+        x, P, _, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
         dx = x - nxt.x
-        dP = P - nxt.P
+        dP = P - nxt.P if nxt.P is not None else None
         nxt.x, nxt.P = x, P
-        n = len(buf) - j - 2
-        if n <= 0:
-            return True
-        entries = [buf[j + 2 + k] for k in range(n)]
-        # Phi_k = F_k ... F_{j+2} for every k at once: a prefix product in log2(n) batched
-        # matrix products (Hillis-Steele scan; the right-hand side is evaluated first)
-        phis = np.array([e.F for e in entries])
+        if dP is not None:
+            self._carry_covariance(j + 2, dP)
+        d0, d1, d2, d3, d4, d5 = dx.tolist()
+        rho_max = self._rho_max
+        for k in range(j + 2, len(buf)):
+            # dx_k = F_k dx_{k-1}: F's last three rows are the identity
+            e = buf[k]
+            F = e.F
+            d0, d1, d2 = (
+                F[0] * d0 + F[1] * d1 + F[2] * d2 + F[3] * d3 + F[4] * d4 + F[5] * d5,
+                F[6] * d0 + F[7] * d1 + F[8] * d2 + F[9] * d3 + F[10] * d4 + F[11] * d5,
+                F[12] * d0 + F[13] * d1 + F[14] * d2 + F[15] * d3 + F[16] * d4 + F[17] * d5,
+            )
+            xk = e.x + np.array([d0, d1, d2, d3, d4, d5])
+            xk[2] = min(max(xk[2], 1e-6), rho_max)
+            e.x = xk
+        if not self._valid(buf[-1].x):
+            self._drop_track()
+        return True
+
+    def _carry_covariance(self, i: int, dP: np.ndarray) -> None:
+        """The covariance correction dP at entry i - 1 carried to the entries from i on that
+        already hold a P (someone asked for it: a caller reading the covariance every tick),
+        P_k += Phi_k dP Phi_k^T with Phi_k = F_k ... F_i; the rest is propagated when needed."""
+        buf = self._buf
+        end = i
+        while end < len(buf) and buf[end].P is not None:
+            end += 1
+        n = end - i
+        if n == 0:
+            return
+        entries = [buf[k] for k in range(i, end)]
+        # Phi_k for every k at once: a prefix product in log2(n) batched matrix products
+        # (Hillis-Steele scan; the right-hand side is evaluated first)
+        phis = np.array([e.F + _F_LOWER for e in entries]).reshape(n, 6, 6)
         d = 1
         while d < n:
             phis[d:] = phis[d:] @ phis[:-d]
             d *= 2
-        xs = np.array([e.x for e in entries]) + phis @ dx
-        np.clip(xs[:, 2], 1e-6, self._rho_max, out=xs[:, 2])
         Ps = np.array([e.P for e in entries]) + phis @ dP @ phis.transpose(0, 2, 1)
         Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
-        for e, xk, Pk in zip(entries, xs, Ps, strict=True):
-            e.x, e.P = xk, Pk
-        last = buf[-1]
-        if not self._valid(last.x, last.P):
-            self._drop_track()
-        return True
+        for e, Pk in zip(entries, Ps, strict=True):
+            e.P = Pk
 
     def _replay(self, j: int, x, P, t: float, new_t_c: float | None) -> bool:
         """From state (x, P) at time t inside buffer interval j, re-run every later buffered
@@ -444,7 +520,7 @@ class DelayedKalmanFilter:
             entry = buf[i]
             while k < len(meas) and meas[k].t <= entry.t + _TIME_EPS_S:
                 m = meas[k]
-                x, P, _ = self._step(x, P, entry, m.t - t)
+                x, P, _, _ = self._step(x, P, entry, m.t - t)
                 t = m.t
                 x, P, ok = self._update(x, P, m)
                 if ok:
@@ -452,10 +528,11 @@ class DelayedKalmanFilter:
                 if m.t == new_t_c:
                     new_accepted = ok
                 k += 1
-            x, P, F = self._step(x, P, entry, entry.t - t)
+            x, P, F, Q = self._step(x, P, entry, entry.t - t)
             t = entry.t
-            entry.x, entry.P, entry.F = x, P, F
-        if not self._valid(buf[-1].x, buf[-1].P):
+            entry.x, entry.P, entry.F, entry.Q = x, P, F, Q
+        last = buf[-1]
+        if not (self._valid(last.x) and math.isfinite(float(last.P.trace()))):
             self._drop_track()
         return new_accepted
 
@@ -529,7 +606,6 @@ class DelayedKalmanFilter:
             time_s=e.t,
             e_px=(float(e.x[0]) * f, float(e.x[1]) * f),
             e_rate_px_s=((rot[0] + tr[0]) * f, (rot[1] + tr[1]) * f),
-            e_std_px=(math.sqrt(e.P[0, 0]) * f, math.sqrt(e.P[1, 1]) * f),
             time_since_detection_s=since,
             lost=since > self.config.lost_timeout_s,
         )
@@ -539,6 +615,8 @@ class DelayedKalmanFilter:
         the camera's rotation does not explain, and the diagonal of its covariance (r's
         variance through the Jacobian of the translational flow)."""
         if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        if self._covariance(len(self._buf) - 1) is None:
             return None
         e = self._buf[-1]
         f = self._f
@@ -554,10 +632,31 @@ class DelayedKalmanFilter:
         cov = np.array([e.P[0, 0], e.P[1, 1], var_r[0], var_r[1]]) * f * f
         return state, cov
 
+    def range_m(self) -> float | None:
+        """Current range along the line of sight (m) from the mean alone (no covariance), or
+        None without a track."""
+        if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        xn, yn, rho = self._buf[-1].x[:3].tolist()
+        return math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
+
+    def image_std_px(self) -> tuple[float, float] | None:
+        """The 1-sigma of the current image point (px, x and y), or None without a track
+        (propagates the covariance if it is still lazy)."""
+        if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        if self._covariance(len(self._buf) - 1) is None:
+            return None
+        P = self._buf[-1].P
+        f = self._f
+        return math.sqrt(max(float(P[0, 0]), 0.0)) * f, math.sqrt(max(float(P[1, 1]), 0.0)) * f
+
     def depth_velocity(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         """Current range along the line of sight (m), the target's velocity (ENU, m/s) and the
         full 6x6 covariance of the internal state, or None without a track."""
         if not self._initialised or not self._buf or self._buf[-1].x is None:
+            return None
+        if self._covariance(len(self._buf) - 1) is None:
             return None
         e = self._buf[-1]
         xn, yn, rho = e.x[:3].tolist()

@@ -173,7 +173,8 @@ class DetectionEvent:
 
 
 class CameraThread(threading.Thread):
-    """Reads frames, runs the detector, queues the results; reconnects after a failure."""
+    """Reads frames, runs the detector, hands each result to ``on_detection`` (if given) and
+    queues it; reconnects after a failure."""
 
     def __init__(
         self,
@@ -182,6 +183,7 @@ class CameraThread(threading.Thread):
         clock: Clock,
         on_error: Callable[[str], None] | None = None,
         retry_s: float = 1.0,
+        on_detection: Callable[[DetectionEvent], None] | None = None,
     ) -> None:
         super().__init__(name="camera", daemon=True)
         self.source_factory = source_factory
@@ -189,6 +191,7 @@ class CameraThread(threading.Thread):
         self.clock = clock
         self.on_error = on_error
         self.retry_s = retry_s
+        self.on_detection = on_detection  # called here, on the camera thread, per event
         self.events: collections.deque[DetectionEvent] = collections.deque(maxlen=64)
         self.frames = 0
         self.detections = 0
@@ -224,16 +227,22 @@ class CameraThread(threading.Thread):
             if det is not None:
                 self.detections += 1
             h, w = frame.image.shape[:2]
-            self.events.append(
-                DetectionEvent(
-                    det,
-                    frame.seq,
-                    frame.capture_time_s,
-                    frame.received_time_s,
-                    self.clock.now(),
-                    (w, h),
-                )
+            ev = DetectionEvent(
+                det,
+                frame.seq,
+                frame.capture_time_s,
+                frame.received_time_s,
+                self.clock.now(),
+                (w, h),
             )
+            self.events.append(ev)  # queued first: the tick after on_detection finds it
+            if self.on_detection is not None:
+                try:
+                    self.on_detection(ev)
+                except Exception as exc:  # the camera thread must keep running
+                    self.errors += 1
+                    if self.on_error is not None:
+                        self.on_error(f"on_detection failed: {type(exc).__name__}: {exc}")
         if source is not None:
             source.close()
 

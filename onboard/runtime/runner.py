@@ -126,7 +126,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             RedBalloonDetector(),
             self.clock,
             on_error=lambda msg: self._event("warning", f"camera: {msg}"),
+            on_detection=self._fuse_on_arrival,
         )
+        self._loop_lock = threading.Lock()  # the loop: ticked here, fused on the camera thread
+        self._fusing = False  # run(): detections are fused on the camera thread
         self._stop = threading.Event()
         self._tick_n = 0
         self._events: deque[tuple[str, str]] = deque()
@@ -201,6 +204,20 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                     status,
                 )
 
+    def _fuse_on_arrival(self, ev) -> None:
+        """On the camera thread, as a detection arrives (run() only): fuse it into the DKF
+        now, so the next tick only predicts and commands. (The tick is not started early: the
+        guidance's eq. 17 divides by the tick's dt, so an off-grid tick would command a
+        multiple of the acceleration.)"""
+        loop = self.loop
+        if not self._fusing or loop is None or ev.detection is None:
+            return
+        if ev.image_size != (loop.camera.width_px, loop.camera.height_px):
+            return  # the tick reports it and ignores the frame
+        with self._loop_lock:
+            loop.on_detection(ev.detection)
+            loop.fuse_detections()
+
     # ------------------------------------------------------------------ timing figures
     @property
     def overruns(self) -> int:
@@ -259,7 +276,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 self._event("error", f"camera size changed to {ev.image_size}: frame ignored")
                 continue
             if ev.detection is not None:
-                loop.on_detection(ev.detection)
+                if not self._fusing:  # else already fused on the camera thread
+                    loop.on_detection(ev.detection)
                 self._last_det = ev.detection
                 bw = ev.detection.bbox_px[2]
                 self.target_size_frac = bw / loop.camera.width_px
@@ -348,6 +366,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._event("warning", note)
         self._fc_rx = LinkReceiver(self.fc)  # parses PX4's stream between ticks
         self._fc_rx.start()
+        self._fusing = True
         self.camera.start()
         if self.video is not None:
             self.video.start()
@@ -359,11 +378,13 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         try:
             while not self._stop.is_set():
                 start = sched.wait()
+                cpu0 = time.thread_time()
                 self.timing.tick_started(start)
-                self.tick()
+                with self._loop_lock:  # the camera thread fuses into the same loop
+                    self.tick()
                 now = time.perf_counter()
                 work = now - start
-                overran = self.timing.tick_done(work)
+                overran = self.timing.tick_done(work, time.thread_time() - cpu0)
                 if overran and now - self._last_overrun_report > 5.0:
                     self._last_overrun_report = now
                     self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")

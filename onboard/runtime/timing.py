@@ -26,6 +26,7 @@ class LoopTiming:
         self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
         self.periods_all: deque[float] = deque(maxlen=keep)
         self.tick_work_s: deque[float] = deque(maxlen=keep)
+        self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the control thread's CPU time
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
@@ -40,9 +41,13 @@ class LoopTiming:
                 self._recent.popleft()
         self._last_start = start_s
 
-    def tick_done(self, work_s: float) -> bool:
-        """Record a tick's work; True when it overran its period."""
+    def tick_done(self, work_s: float, cpu_s: float | None = None) -> bool:
+        """Record a tick's work (wall time, and the control thread's CPU time in it: the
+        difference is waiting for the GIL, a lock or the CPU); True when it overran its
+        period."""
         self.tick_work_s.append(work_s)
+        if cpu_s is not None:
+            self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
             self.overruns += 1
             return True
@@ -83,6 +88,8 @@ class LoopTiming:
             "jitter_max_ms": None if not jit else 1000 * max(jit),
             "tick_work_median_ms": _ms(_pct(self.tick_work_s, 0.5)),
             "tick_work_p99_ms": _ms(_pct(self.tick_work_s, 0.99)),
+            "tick_cpu_median_ms": _ms(_pct(self.tick_cpu_s, 0.5)),
+            "tick_cpu_p99_ms": _ms(_pct(self.tick_cpu_s, 0.99)),
             "overruns": self.overruns,
             "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
             "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
