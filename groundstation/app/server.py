@@ -65,8 +65,10 @@ class TelemetryHub:
         self.queues: dict[asyncio.Queue, bool] = {}  # queue -> wants camera frames
         self.last: str | None = None
         self.sent: dict[int, int] = {}  # messages sent, per connected subscriber
+        self.published = 0  # snapshots handed in by the session
 
     def publish_from_thread(self, snapshot: dict[str, Any]) -> None:
+        self.published += 1
         full = json.dumps(snapshot, separators=(",", ":"))
         lean = full
         if "frame_jpeg_b64" in snapshot:

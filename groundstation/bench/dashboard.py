@@ -66,10 +66,10 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
                 "[performance.now(), window.peregrine.received || 0,"
                 " window.peregrine.applied ?? null, window.peregrine.updates]"
             )
-            sent0, t0 = dict(hub.sent), time.perf_counter()
+            sent0, pub0, t0 = dict(hub.sent), hub.published, time.perf_counter()
             c0 = [pg.evaluate(probe) for pg in pages]
             time.sleep(seconds)
-            sent1, elapsed = dict(hub.sent), time.perf_counter() - t0
+            sent1, pub1, elapsed = dict(hub.sent), hub.published, time.perf_counter() - t0
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
             c1 = [pg.evaluate(probe) for pg in pages]
@@ -97,6 +97,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "viewers": tabs,
         "seconds": seconds,
         "sim_real_time_share": share,
+        "snapshots_published_hz": round((pub1 - pub0) / elapsed, 1),
         "telemetry_delivered_hz": delivered,
         "received_hz": received,
         "applied_hz": applied,
@@ -129,6 +130,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
             text += f"  target >= 30 Hz in each: {'met' if ok else 'NOT MET'}"
         print(text)
 
+    line("published by the session (one for all):", [figures["snapshots_published_hz"]])
     line("delivered by the server to each viewer:", list(delivered))
     line("received by each page:", received)
     line("applied to each page's plots and readouts:", applied, target=True)
