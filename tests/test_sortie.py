@@ -149,3 +149,12 @@ def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
     assert not sim._check_loop_outcome(1.0) and sim.outcome is None
     sim.miss_m = 0.5
     assert sim._check_loop_outcome(1.0) and sim.outcome.value == "TARGET_LOST"
+
+
+def test_recording_a_sortie_does_not_change_what_it_flies():
+    """The DKF's covariance is lazy; the recorded frames read it every tick. Read or not, it
+    is computed by the same steps, so the flight is bit for bit the same (realistic sensors)."""
+    sc = load_scenario("cv-top-to-bottom")
+    recorded = Simulation(sc, seed=3)  # keeps every frame, reading the covariance
+    assert recorded.run() == run_sortie(sc, seed=3)
+    assert recorded.records

@@ -41,12 +41,11 @@ the identity). That is the replay of the linearised filter. The covariance is pr
 when it is needed (the next fusion, the oldest entry leaving the buffer, a caller asking for
 it): P_k = F_k P_{k-1} F_k^T + Q_k from the last entry that holds one, with the buffered F and
 Q, which equals carrying dP forward as Phi_k dP Phi_k^T; a tick without a fusion does no 6x6
-arithmetic. Entries that already hold a P (a caller reads the covariance every tick, as the
-simulator's recorded frames do) get dP carried as P_k += Phi_k dP Phi_k^T, a prefix product
-of the buffered F in log2(n) batched products. A detection captured before one already
-fused (out of order) is fused by a full replay in capture order (every step re-propagated
-with the buffered inputs). Every replayed state is written back. The delay comes from
-timestamps only.
+arithmetic, and every P is computed by the same steps whenever it is asked for, so a caller
+that reads the covariance every tick (the simulator's recorded frames) flies bit for bit as
+one that never does. A detection captured before one already fused (out of order) is fused by a full
+replay in capture order (every step re-propagated with the buffered inputs). Every replayed
+state is written back. The delay comes from timestamps only.
 
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
 (Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every
@@ -462,12 +461,8 @@ class DelayedKalmanFilter:
         self._meas.append(m)
         self._last_accepted_s = max(self._last_accepted_s, m.t)
         x, P, _, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
-        dx = x - nxt.x
-        dP = P - nxt.P if nxt.P is not None else None
+        d0, d1, d2, d3, d4, d5 = (x - nxt.x).tolist()
         nxt.x, nxt.P = x, P
-        if dP is not None:
-            self._carry_covariance(j + 2, dP)
-        d0, d1, d2, d3, d4, d5 = dx.tolist()
         rho_max = self._rho_max
         for k in range(j + 2, len(buf)):
             # dx_k = F_k dx_{k-1}: F's last three rows are the identity
@@ -480,34 +475,10 @@ class DelayedKalmanFilter:
             )
             xk = e.x + np.array([d0, d1, d2, d3, d4, d5])
             xk[2] = min(max(xk[2], 1e-6), rho_max)
-            e.x = xk
+            e.x, e.P = xk, None
         if not self._valid(buf[-1].x):
             self._drop_track()
         return True
-
-    def _carry_covariance(self, i: int, dP: np.ndarray) -> None:
-        """The covariance correction dP at entry i - 1 carried to the entries from i on that
-        already hold a P (someone asked for it: a caller reading the covariance every tick),
-        P_k += Phi_k dP Phi_k^T with Phi_k = F_k ... F_i; the rest is propagated when needed."""
-        buf = self._buf
-        end = i
-        while end < len(buf) and buf[end].P is not None:
-            end += 1
-        n = end - i
-        if n == 0:
-            return
-        entries = [buf[k] for k in range(i, end)]
-        # Phi_k for every k at once: a prefix product in log2(n) batched matrix products
-        # (Hillis-Steele scan; the right-hand side is evaluated first)
-        phis = np.array([e.F + _F_LOWER for e in entries]).reshape(n, 6, 6)
-        d = 1
-        while d < n:
-            phis[d:] = phis[d:] @ phis[:-d]
-            d *= 2
-        Ps = np.array([e.P for e in entries]) + phis @ dP @ phis.transpose(0, 2, 1)
-        Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
-        for e, Pk in zip(entries, Ps, strict=True):
-            e.P = Pk
 
     def _replay(self, j: int, x, P, t: float, new_t_c: float | None) -> bool:
         """From state (x, P) at time t inside buffer interval j, re-run every later buffered
