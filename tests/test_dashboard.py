@@ -109,7 +109,10 @@ def test_gain_edited_between_sorties_is_flown_at_start(station, page):
     )
     assert station.session.sim.loop.gains.K_y == 3.0
     assert station.session.sim.loop.gains.a_max == load_scenario("outdoor-static").gains["a_max"]
-    assert page.text_content("#st-gains").startswith("gains: scenario outdoor-static")
+    page.wait_for_function(  # the header follows with the next snapshot
+        "document.querySelector('#st-gains').textContent"
+        ".startsWith('gains: scenario outdoor-static')"
+    )
     page.wait_for_function(
         "document.querySelector('#gains input[data-gain=\"K_y\"]').value === '3'"
     )
