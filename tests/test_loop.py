@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from numpy.testing import assert_allclose
 
 from onboard.camera_model import CameraModel
@@ -151,27 +152,35 @@ def test_search_before_the_first_detection_flies_the_launch_course():
     assert abs(tel.yaw_rate_cmd_rad_s) < 1e-9  # the camera already looks north
 
 
-def test_a_far_detection_needs_confirmation_after_a_loss():
-    gains = Gains(t_search=2.0)
-    loop = _loop(gains=gains)
+@pytest.mark.parametrize("on_arrival", [False, True], ids=["fused-in-tick", "fused-on-arrival"])
+def test_a_far_detection_needs_confirmation_after_a_loss(on_arrival):
+    """The screen holds on both fusion paths: in the tick (the simulator) and on arrival
+    (``fuse_detections``, the vehicle's camera thread)."""
+    loop = _loop(gains=Gains(t_search=2.0))
     hover = (0.0, 0.0, 0.0)
+
+    def hand(det: Detection) -> None:
+        loop.on_detection(det)
+        if on_arrival:
+            loop.fuse_detections()
+
     loop.tick(_state(0.0, hover))
     for k in range(1, 40):
         if k % 3 == 0:
-            loop.on_detection(
-                Detection(k / 100 - 0.01, (330.0, 240.0), (327.6, 237.6, 4.8, 4.8), 18.1)
-            )
+            hand(Detection(k / 100 - 0.01, (330.0, 240.0), (327.6, 237.6, 4.8, 4.8), 18.1))
         loop.tick(_state(k / 100, hover))
     for k in range(40, 120):
         tel = loop.tick(_state(k / 100, hover))
     assert tel.mode is LoopMode.COAST
     # one false blob far from the prediction (200 px left): held, not fused
-    loop.on_detection(Detection(1.18, (130.0, 200.0), (127.5, 197.5, 5, 5), 19.6))
+    hand(Detection(1.18, (130.0, 200.0), (127.5, 197.5, 5, 5), 19.6))
     assert loop.tick(_state(1.2, hover)).mode is LoopMode.COAST
     assert loop.last_fusion == [] and not loop.dkf.estimate().e_px[0] < 0
-    # the target where the prediction says: fused at once, tracking again
-    loop.on_detection(Detection(1.2, (331.0, 240.0), (328.6, 237.6, 4.8, 4.8), 18.1))
+    # the target where the prediction says: fused at once (a track stale this long restarts
+    # the DKF from it), tracking again
+    hand(Detection(1.2, (331.0, 240.0), (328.6, 237.6, 4.8, 4.8), 18.1))
     tel = loop.tick(_state(1.21, hover))
+    assert [r.value for r in loop.last_fusion] == ["initialised"]
     assert tel.mode is LoopMode.TRACKING
     assert_allclose(tel.e_est_px[0], 11.0, atol=1.0)
 
@@ -205,30 +214,3 @@ def test_detections_fused_between_ticks_fly_the_same_as_fused_in_the_tick():
     print(f"max |difference|: estimate {de:.4f} px, body rate command {dc:.5f} rad/s")
     assert de < 0.1
     assert dc < 0.01
-
-
-def test_detections_fused_on_arrival_are_screened_while_the_track_is_stale():
-    """The runtime's path (``fuse_detections`` on the camera thread) applies the same screen
-    as the tick: a far blob during a coast is held, the target near the prediction is fused."""
-    loop = _loop(gains=Gains(t_search=2.0))
-    hover = (0.0, 0.0, 0.0)
-    loop.tick(_state(0.0, hover))
-    for k in range(1, 40):
-        if k % 3 == 0:
-            loop.on_detection(
-                Detection(k / 100 - 0.01, (330.0, 240.0), (327.6, 237.6, 4.8, 4.8), 18.1)
-            )
-            loop.fuse_detections()
-        loop.tick(_state(k / 100, hover))
-    for k in range(40, 120):
-        tel = loop.tick(_state(k / 100, hover))
-    assert tel.mode is LoopMode.COAST
-    loop.on_detection(Detection(1.18, (130.0, 200.0), (127.5, 197.5, 5, 5), 19.6))
-    assert loop.fuse_detections() == []
-    assert loop.tick(_state(1.2, hover)).mode is LoopMode.COAST
-    loop.on_detection(Detection(1.2, (331.0, 240.0), (328.6, 237.6, 4.8, 4.8), 18.1))
-    # fused (a track stale this long restarts the DKF from it: "initialised")
-    assert [r.value for r in loop.fuse_detections()] == ["initialised"]
-    tel = loop.tick(_state(1.21, hover))
-    assert tel.mode is LoopMode.TRACKING
-    assert_allclose(tel.e_est_px[0], 11.0, atol=1.0)
