@@ -15,6 +15,7 @@ from pathlib import Path
 # filterpy/scipy, OpenCV or viser; each command imports what it needs when it runs.
 from onboard.enums import GuidanceLaw, codes
 from onboard.gains import GainError
+from onboard.link.address import add_host_port_option
 
 from .campaigns.tune_options import add_tune_arguments
 from .scenario import (
@@ -117,19 +118,6 @@ _PORT = _int_at_least(0, 65535, " (0: any free port)")
 _SEED = _int_at_least(0)
 
 
-def _host_port(default_port: int) -> Callable[[str], tuple[str, int]]:
-    """An argparse type: ``HOST:PORT``, ``PORT`` (on 127.0.0.1) or ``HOST``."""
-    from onboard.link.address import parse_host_port
-
-    def parse(text: str) -> tuple[str, int]:
-        try:
-            return parse_host_port(text, default_port)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-
-    return parse
-
-
 _COUNT = _int_at_least(1)
 
 
@@ -213,23 +201,19 @@ def _build_parser() -> argparse.ArgumentParser:
         default="logs",
         help="where sorties are recorded (default logs)",
     )
-    sv.add_argument(
+    add_host_port_option(
+        sv,
         "--foxglove",
-        metavar="[HOST:]PORT",
-        type=_host_port(8765),
-        nargs="?",
-        const=("127.0.0.1", 8765),
-        help="also publish every sortie's channels (the recording's) to Foxglove over its "
+        8765,
+        "also publish every sortie's channels (the recording's) to Foxglove over its "
         "WebSocket protocol on HOST:PORT (alone: 127.0.0.1:8765; a bare PORT is on "
         "127.0.0.1); in Foxglove: Open connection, Foxglove WebSocket, ws://HOST:PORT",
     )
-    sv.add_argument(
+    add_host_port_option(
+        sv,
         "--video",
-        metavar="[HOST:]PORT",
-        type=_host_port(5600),
-        nargs="?",
-        const=("127.0.0.1", 5600),
-        help="live mode: show the vehicle's H.264/RTP video (onboard run --video) in the "
+        5600,
+        "live mode: show the vehicle's H.264/RTP video (onboard run --video) in the "
         "image panel, received on UDP HOST:PORT (alone: 127.0.0.1:5600)",
     )
 

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .gains import GAIN_SPECS, GainError, Gains, load_gains_file
+from .link.address import add_host_port_option
 
 
 def _positive(unit: str, maximum: float = float("inf")):
@@ -25,19 +26,6 @@ def _positive(unit: str, maximum: float = float("inf")):
         if not 0.0 < value <= maximum:  # NaN fails too
             raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
         return value
-
-    return parse
-
-
-def _host_port(default_port: int):
-    """An argparse type: ``HOST:PORT``, ``PORT`` (on 127.0.0.1) or ``HOST``."""
-    from .link.address import parse_host_port
-
-    def parse(text: str) -> tuple[str, int]:
-        try:
-            return parse_host_port(text, default_port)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
 
     return parse
 
@@ -168,22 +156,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="DIR",
         help="record every MAVLink frame in and out to DIR/<UTC>_onboard.tlog",
     )
-    r.add_argument(
+    add_host_port_option(
+        r,
         "--video",
-        metavar="[HOST:]PORT",
-        type=_host_port(5600),
-        nargs="?",
-        const=("127.0.0.1", 5600),
-        help="stream the camera as H.264 over RTP/UDP to HOST:PORT (alone: 127.0.0.1:5600, "
+        5600,
+        "stream the camera as H.264 over RTP/UDP to HOST:PORT (alone: 127.0.0.1:5600, "
         "what QGroundControl's UDP h.264 video and groundstation serve --video receive)",
     )
-    r.add_argument(
+    add_host_port_option(
+        r,
         "--foxglove",
-        metavar="[HOST:]PORT",
-        type=_host_port(8765),
-        nargs="?",
-        const=("127.0.0.1", 8765),
-        help="publish the recording's channels over Foxglove's WebSocket protocol on "
+        8765,
+        "publish the recording's channels over Foxglove's WebSocket protocol on "
         "HOST:PORT (alone: 127.0.0.1:8765, loopback; open it in Foxglove as a Foxglove "
         "WebSocket connection)",
     )

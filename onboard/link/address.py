@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 
 def parse_host_port(
     text: str, default_port: int, default_host: str = "127.0.0.1"
@@ -24,3 +26,25 @@ def parse_host_port(
     if not port.isdigit() or not 1 <= int(port) <= 65535:
         raise ValueError(f"{text!r}: the port must be a number in 1..65535")
     return host, int(port)
+
+
+def add_host_port_option(
+    parser: argparse.ArgumentParser, flag: str, default_port: int, help: str
+) -> None:
+    """An optional ``flag [HOST:]PORT`` (given alone: 127.0.0.1:``default_port``, loopback);
+    a bad value is an argparse error that says what is wrong."""
+
+    def parse(text: str) -> tuple[str, int]:
+        try:
+            return parse_host_port(text, default_port)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parser.add_argument(
+        flag,
+        metavar="[HOST:]PORT",
+        type=parse,
+        nargs="?",
+        const=("127.0.0.1", default_port),
+        help=help,
+    )
