@@ -9,7 +9,6 @@ asks for 10 s: set PEREGRINE_FUZZ_FLOOD_S=10), at the full 10x rate either way."
 import io
 import math
 import os
-import socket
 import threading
 import time
 from collections import Counter
@@ -25,18 +24,14 @@ from onboard.link.px4 import (
     mavlink,
 )
 
+from .sitl_rig import free_port
+
 FLOOD_S = float(os.environ.get("PEREGRINE_FUZZ_FLOOD_S", "2"))
 # The flood and the link under test share this process (and the GIL) on a shared 2-core
 # machine that can stall a process for a second or more, so these are liveness checks with
 # wide margins, not speed targets: the link goes on receiving, acting and sending.
 ALIVE = 0.05
 _TALLY: Counter = Counter()
-
-
-def _udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _finite(msg) -> bool:
@@ -140,7 +135,7 @@ def test_sitl_vehicle_keeps_flying_under_hostile_traffic(fuzz_summary):
     from groundstation.sitl.camera_server import CameraServer
     from groundstation.sitl.vehicle import SitlOptions, SitlVehicle
 
-    port = _udp_port()
+    port = free_port()
     link = MavLink(f"udpin:127.0.0.1:{port}", 1, 1)
     camera = CameraServer("127.0.0.1", 0)
     options = SitlOptions(offboard_loss_s=5.0)  # a stalled test process is not a lost link
@@ -192,7 +187,7 @@ def test_sitl_vehicle_keeps_flying_under_hostile_traffic(fuzz_summary):
 def _runtime(tmp_path):
     from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
-    fc_port, gcs_port = _udp_port(), _udp_port()
+    fc_port, gcs_port = free_port(), free_port()
     fc = MavLink(f"udpin:127.0.0.1:{fc_port}", 1, 1)  # plays PX4
     gcs = MavLink(f"udpin:127.0.0.1:{gcs_port}", 255, 190)  # plays the ground station
     cfg = RuntimeConfig(
@@ -326,7 +321,7 @@ def test_dashboard_live_link_survives_hostile_traffic(fuzz_summary):
     from groundstation.app.live import LiveSession
     from onboard.link import telemetry as tm
 
-    port = _udp_port()
+    port = free_port()
     session = LiveSession(f"udpin:127.0.0.1:{port}")
     onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
     hostile = Hostile(onboard, ("127.0.0.1", port), seed=14)
@@ -370,7 +365,7 @@ def test_dashboard_live_link_survives_hostile_traffic(fuzz_summary):
 
 
 def test_the_adapter_drops_duplicates_and_stale_frames_and_counts_them():
-    port = _udp_port()
+    port = free_port()
     rx = MavLink(f"udpin:127.0.0.1:{port}", 1, 191)
     tx = MavLink(f"udpout:127.0.0.1:{port}", 255, 190)
     try:

@@ -16,11 +16,7 @@ from onboard.link import telemetry as tm
 from onboard.link.params import PARAM_IDS
 from onboard.link.px4 import MavLink, mavlink
 
-
-def _port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from .sitl_rig import free_port
 
 
 def _wait(pred, timeout_s=3.0):
@@ -46,7 +42,7 @@ def _telemetry(onboard: MavLink, t: float, **extra) -> None:
 
 
 def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
-    port = _port()
+    port = free_port()
     session = LiveSession(f"udpin:127.0.0.1:{port}")
     onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
     fc = MavLink(f"udpout:127.0.0.1:{port}", 1, 1)
@@ -86,7 +82,7 @@ def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
 
 
 def test_gain_edits_wait_for_the_vehicles_param_value():
-    port = _port()
+    port = free_port()
     session = LiveSession(f"udpin:127.0.0.1:{port}")
     onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
     try:
@@ -137,7 +133,7 @@ def test_live_routes_in_simulator_mode_are_refused(tmp_path):
 
 def test_live_start_without_onboard_is_a_clear_error(tmp_path):
     gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs",
-                       mavlink_url=f"udpin:127.0.0.1:{_port()}")  # fmt: skip
+                       mavlink_url=f"udpin:127.0.0.1:{free_port()}")  # fmt: skip
     try:
         with TestClient(gs.app, base_url="http://127.0.0.1") as c:
             c.headers["Authorization"] = f"Bearer {gs.token}"
@@ -153,7 +149,7 @@ def test_live_start_without_onboard_is_a_clear_error(tmp_path):
 def test_a_signing_key_mismatch_is_named_when_a_command_goes_unanswered():
     import os
 
-    port = _port()
+    port = free_port()
     session = LiveSession(f"udpin:127.0.0.1:{port}", signing_key=os.urandom(32))
     onboard = MavLink(
         f"udpout:127.0.0.1:{port}", 1, 191, os.urandom(32),

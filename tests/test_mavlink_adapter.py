@@ -29,11 +29,7 @@ from onboard.link.px4 import (
     quat_ned_frd_to_enu_flu,
 )
 
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from .sitl_rig import free_port
 
 
 def _poll_until(link: MavLink, kind: str, timeout_s: float = 2.0):
@@ -107,7 +103,7 @@ def _garbage_frames() -> list[bytes]:
 
 
 def test_garbage_is_counted_dropped_and_the_sender_not_answered():
-    port = _free_udp_port()
+    port = free_port()
     link = MavLink(f"udpin:127.0.0.1:{port}", 1, 191)
     peer = MavLink(f"udpout:127.0.0.1:{port}", 255, 190)
     junk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -138,7 +134,7 @@ def test_garbage_is_counted_dropped_and_the_sender_not_answered():
 
 def test_signed_link_refuses_unsigned_commands_and_accepts_signed_ones():
     key = os.urandom(32)
-    port = _free_udp_port()
+    port = free_port()
     onboard = MavLink(
         f"udpin:127.0.0.1:{port}", 1, 191, key, unsigned_ok=(mavlink.MAVLINK_MSG_ID_HEARTBEAT,)
     )

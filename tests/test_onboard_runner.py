@@ -2,7 +2,6 @@
 parameter protocol, against sockets this test reads."""
 
 import math
-import socket
 import time
 
 import numpy as np
@@ -11,15 +10,11 @@ from onboard.link.params import PARAM_SPECS
 from onboard.link.px4 import MavLink, mavlink
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
-
-def _udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from .sitl_rig import free_port
 
 
 def _runtime(tmp_path, **kw):
-    fc_port, gcs_port = _udp_port(), _udp_port()
+    fc_port, gcs_port = free_port(), free_port()
     fc = MavLink(f"udpin:127.0.0.1:{fc_port}", 1, 1)
     gcs = MavLink(f"udpin:127.0.0.1:{gcs_port}", 255, 190)
     cfg = RuntimeConfig(

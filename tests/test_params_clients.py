@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import struct
 import subprocess
 import sys
@@ -22,6 +21,8 @@ from onboard.gains import GAIN_SPECS, GainError, Gains
 from onboard.link import ftp
 from onboard.link.param_meta import FILE_NAMES, component_files, parameter_metadata
 from onboard.link.params import PARAM_IDS, PARAM_NAMES, PARAM_SPECS, ParamTable
+
+from .sitl_rig import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -121,22 +122,16 @@ def test_parameter_metadata_follows_mavlinks_component_metadata_schema():
 
 
 # ---------------------------------------------------------------------- real clients
-def _port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture
 def onboard(tmp_path):
     """``onboard run`` with no flight controller and no camera, its ground link on a port."""
-    port = _port()
+    port = free_port()
     params = tmp_path / "params.toml"
     params.write_text("k_a = 2.5\n")  # an old file: still loads
     out = (tmp_path / "onboard.log").open("w")
     proc = subprocess.Popen(
         [sys.executable, "-m", "onboard", "run", "--camera", "sitl://127.0.0.1:9",
-         "--mavlink", f"udpout:127.0.0.1:{_port()}", "--gcs", f"udpout:127.0.0.1:{port}",
+         "--mavlink", f"udpout:127.0.0.1:{free_port()}", "--gcs", f"udpout:127.0.0.1:{port}",
          "--params", str(params), "--rate", "50"],
         stdout=out, stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"),
     )  # fmt: skip

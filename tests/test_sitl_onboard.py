@@ -5,7 +5,6 @@ PX4's sample time to the tick."""
 from __future__ import annotations
 
 import math
-import socket
 
 import numpy as np
 import pytest
@@ -25,18 +24,14 @@ from onboard.link.params import PARAM_IDS, ParamTable, mavlink_param_id
 from onboard.runtime.fc_side import MAX_PROPAGATION_S, FcState, state_at
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
-
-def _udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from .sitl_rig import free_port
 
 
 def _runtime(tmp_path) -> OnboardRuntime:
     cfg = RuntimeConfig(
-        fc_url=f"udpout:127.0.0.1:{_udp_port()}",
+        fc_url=f"udpout:127.0.0.1:{free_port()}",
         camera="sitl://127.0.0.1:9",  # never opened: run() is not called
-        gcs_url=f"udpout:127.0.0.1:{_udp_port()}",  # PARAM_VALUE goes out to nobody
+        gcs_url=f"udpout:127.0.0.1:{free_port()}",  # PARAM_VALUE goes out to nobody
         params_path=tmp_path / "params.toml",
     )
     return OnboardRuntime(cfg, log=lambda _s: None)
