@@ -122,6 +122,9 @@ class Gains:
     v_search: float = _gain(
         8.0, "m/s", 0.0, 20.0, "search when moving at its start: speed along that course (the cue)"
     )
+    h_floor: float = _gain(
+        2.0, "m", 0.0, 100.0, "coast/re-acquire/search: never descend below this height above home"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

@@ -31,6 +31,7 @@ from .control.guidance import (
 from .control.reacquire import (
     Candidate,
     DetectionScreen,
+    floor_guard_accel,
     horizontal_unit,
     reacquire_accel,
     search_accel,
@@ -348,6 +349,10 @@ class InterceptionLoop:
             e_lat_px = self.camera.upright(*e_est)[0]
             e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
+
+        if mode is LoopMode.COAST or mode is LoopMode.REACQUIRE or mode is LoopMode.SEARCH:
+            # without a live track: never descend below h_floor above home (z = 0)
+            a_d = floor_guard_accel(a_d, float(state.position_enu_m[2]), float(v[2]), gains)
 
         # disturbance feed-forward: the attitude loop flies a_d - d^ (normal to v in flight;
         # the guidance limit a_max applies to a_d, |d^| is clamped to a_max by the observer)

@@ -221,3 +221,63 @@ def test_the_recording_tells_the_loss_and_the_reacquisition(tmp_path):
     ]
     modes = {m["mode"] for _, _, m in iter_messages(rec.path, ["/control"])}
     assert {"tracking", "coast", "reacquire"} <= modes
+
+
+def _low_target_sortie(h_floor: float) -> tuple[str, float, list[LoopMode], list]:
+    """A balloon on the ground (centre 0.15 m up) 8 m ahead of a vehicle at 5 m: PNG dives
+    at it and the detections stop for good at 1.0 s, so the loop coasts, re-acquires toward
+    the ground and searches. Returns (outcome, lowest true altitude m, modes, per tick
+    (mode, commanded a_d, true altitude, true vertical velocity))."""
+    sc = load_scenario("static-ahead-20m")
+    ic = dataclasses.replace(sc.interceptor, position_m=(0.0, 0.0, 5.0))
+    tg = dataclasses.replace(sc.target, position_m=(0.0, 8.0, 0.15))
+    sc = dataclasses.replace(sc, interceptor=ic, target=tg, duration_s=8.0)
+    sim = Simulation(sc, "png", seed=0, gains=Gains(h_floor=h_floor), keep_records=False)
+    _with_gap(sim, 1.0, math.inf)
+    z_min, modes, ticks = math.inf, [], []
+    while not sim.done:
+        sim.step_control_period()
+        z_min = min(z_min, float(sim.vehicle.p[2]))
+        tel = sim.last_telemetry
+        if tel is not None and (not ticks or ticks[-1][0] != tel.time_s):
+            ticks.append((tel.time_s, tel.mode, tel.accel_desired_enu_m_s2, sim.vehicle.p[2]))
+            if not modes or modes[-1] is not tel.mode:
+                modes.append(tel.mode)
+    return sim.result().outcome, z_min, modes, ticks
+
+
+def test_a_loss_near_the_ground_never_takes_the_vehicle_below_the_floor():
+    # without a floor (h_floor = 0: the guard only stops at the ground) the coast and the
+    # re-acquisition fly the prediction of a target on the ground down to 0.5 m; with the
+    # default 2 m floor the vehicle levels off at it (0.13 m of overshoot from the attitude
+    # and thrust lags) and the search holds there
+    out0, z0, _, _ = _low_target_sortie(0.0)
+    out, z, modes, ticks = _low_target_sortie(2.0)
+    assert z0 < 0.8, (out0, z0)
+    assert modes[1:] == [LoopMode.TRACKING, LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH]
+    assert out != "CRASHED" and z > 2.0 - 0.2, (out, z)
+    # the guard, not luck: the re-acquisition braked the descent hard above the floor (its
+    # own velocity loop asks for at most k_brake |v_reacq n - v|, about 2 m/s^2 here)
+    assert max(k[2][2] for k in ticks if k[1] is LoopMode.REACQUIRE and k[3] < 3.0) > 4.0
+
+
+def test_the_floor_guard_limits_descent_and_keeps_a_safe_command():
+    from onboard.control.reacquire import floor_guard_accel
+
+    g = Gains(h_floor=2.0, a_max=5.0)
+    a = np.array([1.0, 2.0, -3.0])
+    # high above the floor and slow: unchanged (the same object)
+    assert floor_guard_accel(a, 50.0, -1.0, g) is a
+    # 4.5 m above the floor, descending at 6 m/s: faster than sqrt(5 * 4.5) = 4.74 m/s, so
+    # the guard asks for a_z = (-4.74 + 6) / 0.25 = 5.0 capped at a_max, the horizontal gone
+    out = floor_guard_accel(a, 6.5, -6.0, g)
+    assert out[2] == pytest.approx(5.0) and np.linalg.norm(out) <= 5.0 + 1e-12
+    # 1 m above the floor descending at 1 m/s: v_floor = -sqrt(5) = -2.24 m/s: no limit
+    assert floor_guard_accel(a, 3.0, -1.0, g) is a
+    # 0.5 m below the floor, still: climb back (v_floor = +2 m/s -> a_z = 8 capped at 5)
+    out = floor_guard_accel(np.zeros(3), 1.5, 0.0, g)
+    assert out.tolist() == [0.0, 0.0, 5.0]
+    # between: the vertical raised, the horizontal shrunk only as far as |a| <= a_max needs
+    out = floor_guard_accel(np.array([3.0, 0.0, -2.0]), 2.2, -1.5, g)
+    a_z = (-math.sqrt(5.0 * 0.2) + 1.5) / 0.25
+    assert out[2] == pytest.approx(a_z) and out[0] == pytest.approx(3.0)

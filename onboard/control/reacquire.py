@@ -141,3 +141,31 @@ def search_yaw_rate(
         - math.atan2(float(axis[1]), float(axis[0]))
     )
     return min(max(gains.k_R * err, -gains.w_search), gains.w_search)
+
+
+_FLOOR_TAU_S = 0.25  # the floor guard's velocity-loop time constant (about 2 / k_R)
+
+
+def floor_guard_accel(
+    accel_enu_m_s2: np.ndarray, height_m: float, vel_up_m_s: float, gains: Gains
+) -> np.ndarray:
+    """Ground clearance for the commands that fly without a live track (coast,
+    re-acquisition, search): the vertical component of ``accel_enu_m_s2`` (m/s^2, ENU) is
+    raised to at least a_z,min = (v_floor - v_up) / tau so that the descent rate never exceeds
+    v_floor = -sqrt(2 (a_max / 2) h), h = ``height_m`` - ``h_floor`` the height above the
+    floor (m): the vehicle can always stop at the floor with half of a_max; below it v_floor =
+    -h / tau climbs back. a_z,min is capped at a_max and takes priority: the horizontal part
+    shrinks to keep |a| <= a_max. A command that already satisfies it is returned unchanged
+    (the same array)."""
+    h = height_m - gains.h_floor
+    # above: the braking curve sqrt(2 (a_max / 2) h); below: climb back
+    v_floor = -math.sqrt(gains.a_max * h) if h > 0.0 else -h / _FLOOR_TAU_S
+    a_z_min = min((v_floor - vel_up_m_s) / _FLOOR_TAU_S, gains.a_max)
+    if not float(accel_enu_m_s2[2]) < a_z_min:
+        return accel_enu_m_s2
+    ax, ay = float(accel_enu_m_s2[0]), float(accel_enu_m_s2[1])
+    room = math.sqrt(max(gains.a_max * gains.a_max - a_z_min * a_z_min, 0.0))
+    n = math.hypot(ax, ay)
+    if n > room:
+        ax, ay = ax * room / n, ay * room / n
+    return np.array([ax, ay, a_z_min])
