@@ -80,6 +80,7 @@ class InterceptionLoop:
         self._pending_gains: Gains | None = None
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
+        self.dkf.carry_max_s = self.gains.t_carry
         self._gyro_sum = np.zeros(3)
         self._gyro_n = 0
         self._detections: list[Detection] = []
@@ -98,6 +99,7 @@ class InterceptionLoop:
         self._search_start_s: float | None = None
         self._search_cue: np.ndarray | None = None
         self._search_dir = 1.0
+        self._launch_cue: np.ndarray | None = None
         self.mode = LoopMode.WAITING
         self._last_velocity = np.zeros(3)
         self.disturbance = DisturbanceObserver(
@@ -213,7 +215,8 @@ class InterceptionLoop:
             self._search_start_s = t
             v = self._last_velocity
             moving = math.sqrt(float(v @ v)) >= g.v_min if not self.acquired else False
-            self._search_cue = horizontal_unit(v) if moving else None
+            cue = self._launch_cue if self._launch_cue is not None else horizontal_unit(v)
+            self._search_cue = cue if moving else None
         if t - self._search_start_s < g.t_search:
             return LoopMode.SEARCH
         return LoopMode.LOST
@@ -241,6 +244,7 @@ class InterceptionLoop:
             self.gains, self._pending_gains = self._pending_gains, None
             g = self.gains
             self.disturbance.set_bandwidth(g.k_dob, g.a_max, g.k_drag)
+            self.dkf.carry_max_s = g.t_carry
         gains = self.gains
         dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
         if not dt > 0.0:
@@ -266,6 +270,8 @@ class InterceptionLoop:
         self._last_velocity = v
         if self._first_tick_s is None:
             self._first_tick_s = t
+            # the launch cue: where the operator pointed the camera (horizontal heading)
+            self._launch_cue = horizontal_unit(R_WC[:, 2])
         self.dkf.predict(t, gyro, v, R_WC)
         hist = self._R_hist
         hist.append((t, R_WC))
@@ -302,7 +308,9 @@ class InterceptionLoop:
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
         elif mode is LoopMode.SEARCH:
             a_d = search_accel(self._search_cue, v, gains)
-            yaw_rate = search_yaw_rate(self._search_cue, R_WC[:, 2], self._search_dir, gains)
+            yaw_rate = search_yaw_rate(
+                self._search_cue, R_WC[:, 2], self._search_dir, gains, t - self._search_start_s
+            )
         elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
             if est is not None and not est.lost:

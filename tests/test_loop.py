@@ -147,9 +147,17 @@ def test_search_before_the_first_detection_flies_the_launch_course():
     assert modes[0] is LoopMode.WAITING and modes[49] is LoopMode.WAITING
     assert modes[50] is LoopMode.SEARCH  # t_wait = 0.5 s
     tel = loop.tick(_state(0.6, (0.0, 1.0, 0.0)))
-    # the cue is the course flown when the search began (north): v_search = 8 m/s along it
+    # the cue is the launch heading (the camera looked north at the first tick): v_search =
+    # 8 m/s along it
     assert_allclose(tel.accel_desired_enu_m_s2, [0.0, 5.0, 0.0], atol=1e-9)  # k_brake 7, a_max
-    assert abs(tel.yaw_rate_cmd_rad_s) < 1e-9  # the camera already looks north
+    # the camera weaves about it: 0.1 s into the search psi_d = 20 deg sin(2 pi 0.1 / 4) =
+    # 3.13 deg left of north, psi_d' = 0.54 rad/s: 0.54 + k_R 0.0546 capped at w_search
+    assert tel.yaw_rate_cmd_rad_s == 0.6
+    g = Gains(weave_deg=0.0)
+    loop = _loop(gains=g)
+    for k in range(0, 60):
+        loop.tick(_state(k / 100))
+    assert abs(loop.tick(_state(0.6, (0.0, 1.0, 0.0))).yaw_rate_cmd_rad_s) < 1e-9  # no weave
 
 
 @pytest.mark.parametrize("on_arrival", [False, True], ids=["fused-in-tick", "fused-on-arrival"])

@@ -11,7 +11,8 @@ is accepted:
 
 and before the first detection: waiting (hold, ``t_wait`` s) -> search -> lost. The search
 yaw-scans at hover at ``w_search``, or, when the vehicle was moving as it began (launched
-toward a cue), flies that course at ``v_search`` with the camera along it.
+toward a cue), flies the launch heading (the camera's, where the operator pointed it) at
+``v_search``, weaving the camera ``weave_deg`` to each side of it.
 
 Detections while the track is not live go through :class:`DetectionScreen` before the DKF
 (which would start a new track on any detection once its own is stale): one within
@@ -125,22 +126,33 @@ def search_accel(
 
 
 def search_yaw_rate(
-    cue_enu: np.ndarray | None, camera_axis_enu: np.ndarray, direction: float, gains: Gains
+    cue_enu: np.ndarray | None,
+    camera_axis_enu: np.ndarray,
+    direction: float,
+    gains: Gains,
+    search_time_s: float = 0.0,
 ) -> float:
     """Search yaw rate about body +z (rad/s): without a cue, scan at ``w_search`` in
-    ``direction`` (+1 counter-clockwise seen from above, -1 clockwise); with one, turn the
-    camera's heading onto it (k_R times the heading error, capped at ``w_search``)."""
+    ``direction`` (+1 counter-clockwise seen from above, -1 clockwise); with one, weave the
+    camera's heading about it, psi_d = psi_cue + A sin(2 pi t / T) (A = ``weave_deg``, T =
+    ``t_weave``, t = ``search_time_s`` since the search began): the rate psi_d' plus k_R
+    times the heading error, capped at ``w_search``. The weave sweeps the camera's view
+    A to each side of the course, so a target off the course is seen as it passes."""
     if cue_enu is None:
         return math.copysign(gains.w_search, direction)
     axis = horizontal_unit(camera_axis_enu)
     if axis is None:
         return 0.0
+    amp = math.radians(gains.weave_deg)
+    w = 2.0 * math.pi / gains.t_weave
     # headings as angles from +x (east) counter-clockwise: the rate about +z turns them
     err = wrap_pi(
         math.atan2(float(cue_enu[1]), float(cue_enu[0]))
+        + amp * math.sin(w * search_time_s)
         - math.atan2(float(axis[1]), float(axis[0]))
     )
-    return min(max(gains.k_R * err, -gains.w_search), gains.w_search)
+    rate = amp * w * math.cos(w * search_time_s) + gains.k_R * err
+    return min(max(rate, -gains.w_search), gains.w_search)
 
 
 _FLOOR_TAU_S = 0.25  # the floor guard's velocity-loop time constant (about 2 / k_R)

@@ -188,6 +188,11 @@ class DelayedKalmanFilter:
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
+        # a re-started track keeps the old one's depth and target velocity if it was last
+        # confirmed less than this long ago (s; 0: every track starts afresh)
+        self.carry_max_s = 0.0
+        # the last dropped track's (time, v_t, P_vv): the velocity it knew when it was dropped
+        self._memory: tuple[float, np.ndarray, np.ndarray] | None = None
         self.counts: dict[FusionResult, int] = {r: 0 for r in FusionResult}
 
     @property
@@ -411,14 +416,78 @@ class DelayedKalmanFilter:
         return max(bisect.bisect_right(times, t + _TIME_EPS_S) - 1, 0)
 
     def _drop_track(self) -> None:
+        if self._initialised:
+            # remember the target velocity at the last entry holding a covariance (v_t is a
+            # random walk: from there on only its variance grows, by q_v per second)
+            for e in reversed(self._buf):
+                if e.x is not None and e.P is not None:
+                    v, P_vv = e.x[3:].copy(), e.P[3:, 3:].copy()
+                    if math.isfinite(float(v.sum() + P_vv.sum())):
+                        self._memory = (e.t, v, P_vv)
+                    break
         for e in self._buf:
             e.x = e.P = e.F = e.Q = None
         self._meas = []
         self._initialised = False
 
-    def _initialise(self, m: _Meas) -> FusionResult:
-        self._drop_track()
-        self._meas = [m]
+    def _carried(self, m: _Meas) -> tuple[np.ndarray, np.ndarray] | None:
+        """The state and covariance to restart a track from at m (capture time m.t), keeping
+        what the old track still knows (DESIGN.md §4; README "Track loss"), or None when it
+        knows nothing useful. The image point is m's. The target velocity is the old track's,
+        its covariance grown by the random walk over the time without measurements
+        (P_vv + q_v dt I), if no component is vaguer than the first-detection prior. While the
+        old track is still propagated and m falls inside its (grown) image gate, its depth
+        and the depth-velocity covariance are kept too and m's apparent size is fused into
+        them; otherwise the depth restarts from m's size (or the prior) as for a new track."""
+        if m.t - self._last_accepted_s > self.carry_max_s:
+            return None
+        c = self.config
+        s_v2 = c.init_target_speed_m_s**2
+        buf = self._buf
+        j = self._index_at_or_before(m.t)
+        x = P = None
+        if self._initialised and buf[j].x is not None:
+            P = self._covariance(j)
+            x = buf[j].x
+            if P is not None and m.t > buf[j].t + _TIME_EPS_S and j + 1 < len(buf):
+                x, P, _, _ = self._step(x, P, buf[j + 1], m.t - buf[j].t)
+            if P is None or not (self._valid(x) and math.isfinite(float(P.trace()))):
+                x = P = None
+        if P is not None:
+            if float(max(P[3, 3], P[4, 4], P[5, 5])) > s_v2:
+                return None
+            r = self._r_point
+            y0, y1 = float(m.z[0] - x[0]), float(m.z[1] - x[1])
+            s00, s01, s11 = float(P[0, 0]) + r, float(P[0, 1]), float(P[1, 1]) + r
+            det = s00 * s11 - s01 * s01
+            d2 = (s11 * y0 * y0 - 2.0 * s01 * y0 * y1 + s00 * y1 * y1) / det if det > 0 else 1e9
+            if d2 <= self._gate2_point:
+                # m where the old track predicted it: keep depth and velocity with their
+                # covariance, reset the image point (variance 1, ~45 deg: uncorrelated) and
+                # fuse m into it (the point, then its size against the carried depth)
+                x0 = x.copy()
+                P0 = P.copy()
+                P0[:2, :] = 0.0
+                P0[:, :2] = 0.0
+                P0[0, 0] = P0[1, 1] = 1.0
+                x0, P0, ok = self._update(x0, P0, m)
+                return (x0, P0) if ok else None
+            v, P_vv = x[3:].copy(), P[3:, 3:].copy()
+        elif self._memory is not None:
+            t0, v, P_vv = self._memory
+            P_vv = P_vv + np.eye(3) * (self._q_v * max(m.t - t0, 0.0))
+            if float(max(np.diag(P_vv))) > s_v2:
+                return None
+        else:
+            return None
+        x0, P0 = self._fresh(m)
+        x0[3:] = v
+        P0[3:, 3:] = P_vv
+        return x0, P0
+
+    def _fresh(self, m: _Meas) -> tuple[np.ndarray, np.ndarray]:
+        """A new track's state and covariance at m: the image point, the depth from the
+        apparent size (or the prior range), the target velocity 0 +- init_target_speed_m_s."""
         c = self.config
         xn, yn = float(m.z[0]), float(m.z[1])
         n2 = 1.0 + xn * xn + yn * yn
@@ -436,6 +505,13 @@ class DelayedKalmanFilter:
         s_v = c.init_target_speed_m_s
         x0 = np.array([xn, yn, rho, 0.0, 0.0, 0.0])
         P0 = np.diag([s_n**2, s_n**2, s_rho**2, s_v**2, s_v**2, s_v**2])
+        return x0, P0
+
+    def _initialise(self, m: _Meas) -> FusionResult:
+        carried = self._carried(m) if self.carry_max_s > 0.0 else None
+        self._drop_track()
+        self._meas = [m]
+        x0, P0 = self._fresh(m) if carried is None else carried
         j = self._index_at_or_before(m.t)
         if abs(self._buf[j].t - m.t) < _TIME_EPS_S:
             self._buf[j].x, self._buf[j].P = x0, P0
