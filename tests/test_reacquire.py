@@ -281,3 +281,36 @@ def test_the_floor_guard_limits_descent_and_keeps_a_safe_command():
     out = floor_guard_accel(np.array([3.0, 0.0, -2.0]), 2.2, -1.5, g)
     a_z = (-math.sqrt(5.0 * 0.2) + 1.5) / 0.25
     assert out[2] == pytest.approx(a_z) and out[0] == pytest.approx(3.0)
+
+
+def _velocity_after_a_dropout(t_carry: float) -> tuple[str, float, float]:
+    """sm-tailgate (the target 3 m/s away plus a 2 m sway), detections gone from 5.0 to
+    6.2 s: (outcome, miss m, mean |DKF target velocity - truth| m/s over 0.3-0.8 s after the
+    detections return)."""
+    sim = Simulation(
+        load_scenario("sm-tailgate"),
+        "png",
+        seed=0,
+        gains=Gains(t_carry=t_carry),
+        keep_records=False,
+    )
+    _with_gap(sim, 5.0, 6.2)
+    errs = []
+    while not sim.done:
+        sim.step_control_period()
+        dv = sim.loop.dkf.depth_velocity()
+        if 6.5 <= sim.time_s <= 7.0 and dv is not None and sim.loop.mode is LoopMode.TRACKING:
+            errs.append(float(np.linalg.norm(dv[1] - np.asarray(sim.target.v))))
+    res = sim.result()
+    return res.outcome, res.miss_m, float(np.mean(errs))
+
+
+def test_a_reacquired_track_keeps_the_target_velocity():
+    # restarted from zero (t_carry = 0) the DKF's target velocity is 2-3 m/s off for a
+    # second after the re-acquisition (measured 2.9 m/s, n = 5 seeds mean); carried over
+    # with its covariance grown by the 1.2 s without detections it stays within 0.6 m/s
+    # (measured 0.34). The miss does not change (PN flies on the LOS rate here, inside r_mid)
+    out0, miss0, err0 = _velocity_after_a_dropout(0.0)
+    out, miss, err = _velocity_after_a_dropout(5.0)
+    assert err0 > 2.0 and err < 0.6, (err0, err)
+    assert out0 == out == "HIT" and miss < 0.1 and miss0 < 0.1, (miss0, miss)
