@@ -52,6 +52,15 @@ Robustness: non-finite or out-of-view detections are refused, the point innovati
 update, rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves
 the view by more than ~76 degrees or turns non-finite (the state at every step, the
 covariance when it is propagated).
+
+Re-started tracks: a detection after the track went stale (``lost_timeout_s``) starts a new
+track at its image point, but with ``carry_max_s`` > 0 (the loop's gain ``t_carry``) and the
+old track last confirmed less than that long ago, the new one keeps what the old one still
+knows: the target velocity with its covariance grown by the random walk over the time without
+measurements (P_vv + q_v dt I: exactly what the propagation does to it), and, when the old
+track is still propagated and the detection falls inside its grown image gate, the depth and
+the depth-velocity covariance too, the detection's apparent size fused into them. A velocity
+vaguer than the first-detection prior (``init_target_speed_m_s``) is not carried.
 """
 
 from __future__ import annotations
