@@ -123,9 +123,9 @@ class Gains:
         8.0, "m/s", 0.0, 20.0, "search when moving at its start: speed along that course (the cue)"
     )
     weave_deg: float = _gain(
-        20.0, "deg", 0.0, 60.0, "search along a course: yaw-weave amplitude about it (0 = off)"
+        40.0, "deg", 0.0, 60.0, "search along a course: yaw-weave amplitude about it (0 = off)"
     )
-    t_weave: float = _gain(4.0, "s", 0.5, 60.0, "search along a course: yaw-weave period")
+    t_weave: float = _gain(3.0, "s", 0.5, 60.0, "search along a course: yaw-weave period")
     t_carry: float = _gain(
         5.0, "s", 0.0, 30.0, "re-acquired track keeps the old depth/velocity if lost < this (0=off)"
     )

@@ -150,9 +150,10 @@ def test_search_before_the_first_detection_flies_the_launch_course():
     # the cue is the launch heading (the camera looked north at the first tick): v_search =
     # 8 m/s along it
     assert_allclose(tel.accel_desired_enu_m_s2, [0.0, 5.0, 0.0], atol=1e-9)  # k_brake 7, a_max
-    # the camera weaves about it: 0.1 s into the search psi_d = 20 deg sin(2 pi 0.1 / 4) =
-    # 3.13 deg left of north, psi_d' = 0.54 rad/s: 0.54 + k_R 0.0546 capped at w_search
-    assert tel.yaw_rate_cmd_rad_s == 0.6
+    # the camera weaves about it: 0.1 s into the search psi_d = 40 deg sin(2 pi 0.1 / 3) =
+    # 8.3 deg left of north, psi_d' = 1.43 rad/s, plus k_R 0.145 capped at w_search = 0.6
+    w = 2.0 * math.pi / 3.0
+    assert tel.yaw_rate_cmd_rad_s == pytest.approx(math.radians(40.0) * w * math.cos(0.1 * w) + 0.6)
     g = Gains(weave_deg=0.0)
     loop = _loop(gains=g)
     for k in range(0, 60):

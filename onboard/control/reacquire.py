@@ -136,8 +136,9 @@ def search_yaw_rate(
     ``direction`` (+1 counter-clockwise seen from above, -1 clockwise); with one, weave the
     camera's heading about it, psi_d = psi_cue + A sin(2 pi t / T) (A = ``weave_deg``, T =
     ``t_weave``, t = ``search_time_s`` since the search began): the rate psi_d' plus k_R
-    times the heading error, capped at ``w_search``. The weave sweeps the camera's view
-    A to each side of the course, so a target off the course is seen as it passes."""
+    times the heading error, the latter capped at ``w_search``. The weave sweeps the
+    camera's view A to each side of the course, so a target off the course is seen as it
+    passes (and, turned toward it, nearer the image's centre in elevation too)."""
     if cue_enu is None:
         return math.copysign(gains.w_search, direction)
     axis = horizontal_unit(camera_axis_enu)
@@ -151,8 +152,8 @@ def search_yaw_rate(
         + amp * math.sin(w * search_time_s)
         - math.atan2(float(axis[1]), float(axis[0]))
     )
-    rate = amp * w * math.cos(w * search_time_s) + gains.k_R * err
-    return min(max(rate, -gains.w_search), gains.w_search)
+    correction = min(max(gains.k_R * err, -gains.w_search), gains.w_search)
+    return amp * w * math.cos(w * search_time_s) + correction
 
 
 _FLOOR_TAU_S = 0.25  # the floor guard's velocity-loop time constant (about 2 / k_R)
