@@ -338,3 +338,39 @@ def test_a_stamp_a_few_ms_ahead_is_fused_at_the_filters_time():
     before = dkf.estimate()
     assert dkf.fuse(_det(1.05, 330, 240)) == FusionResult.FUTURE  # 60 ms ahead
     assert dkf.estimate() == before
+
+
+@pytest.mark.parametrize("carry_s", [0.0, 5.0])
+def test_a_restarted_track_keeps_the_target_velocity_with_grown_covariance(carry_s):
+    # a target moving at (1.5, 0, 0.5) m/s, no detection from 2.0 to 3.0 s (stale after
+    # 0.5 s): the next detection re-starts the track. Carried (carry_max_s = 5 s), the
+    # velocity is the old track's and its covariance has grown by at least q_v x 1 s per
+    # axis; afresh (0) it restarts from 0 with the 3 m/s prior
+    dkf = DelayedKalmanFilter(CAM)
+    dkf.carry_max_s = carry_s
+    true_v = np.array([1.5, 0.0, 0.5])
+    before = None
+    restarted = None
+    for t, w, v, R_WC, _, det, _, _ in _approach(target_vel=tuple(true_v), delay_s=0.0):
+        dkf.predict(t, w, v, R_WC)
+        if det is None or 2.0 <= t < 3.0:
+            continue
+        if restarted is None and t >= 3.0:
+            assert dkf.lost()
+            assert dkf.fuse(det) is FusionResult.INITIALISED
+            _, v_t, P = dkf.depth_velocity()
+            restarted = (v_t, P)
+            continue
+        dkf.fuse(det)
+        if t < 2.0:
+            _, v_t, P = dkf.depth_velocity()
+            before = (v_t, P)
+    v_t, P = restarted
+    if carry_s == 0.0:
+        assert_allclose(v_t, 0.0, atol=1e-12)
+        assert_allclose(np.diag(P)[3:], 9.0)
+    else:
+        assert np.linalg.norm(before[0] - true_v) < 0.5  # the old track knew it
+        assert_allclose(v_t, before[0], atol=0.05)  # kept, up to the size/depth update
+        assert np.all(np.diag(P)[3:] >= np.diag(before[1])[3:] + 1.0 - 1e-9)
+        assert np.all(np.diag(P)[3:] < 9.0)
