@@ -27,7 +27,7 @@ from onboard.loop import InterceptionLoop
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
-from .estimate import StateEstimateModel
+from .estimate import Normals, StateEstimateModel
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
@@ -102,7 +102,7 @@ class Simulation:
                 raise ValueError(f"{name} rate {rate} Hz must divide {sim.physics_rate_hz} Hz")
         ss = np.random.SeedSequence(self.seed)
         cam_rng, wind_rng, gyro_rng, render_rng = (np.random.default_rng(s) for s in ss.spawn(4))
-        self._gyro_rng = gyro_rng
+        self._gyro_noise = Normals(gyro_rng, 3)  # the gyro's white noise, drawn in blocks
         # the estimate model's streams are the next child: the four above stay as they were
         est_seed = ss.spawn(1)[0]
         self.estimate = (
@@ -261,8 +261,9 @@ class Simulation:
                 det = est.stamp(det)
             loop.on_detection(det)
             self.last_detection = det
-        noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
-        rates = np.array(veh.read_gyro()) + noise
+        sigma = self.scenario.sim.gyro_noise_rad_s
+        (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
+        rates = np.array([r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma])
         if est is None:
             loop.on_gyro(GyroSample(t, rates))
             tel = loop.tick(veh.state(t))
