@@ -123,6 +123,7 @@ class Simulation:
             else TrackTarget(scenario.target, *target_track)
         )
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
+        self._target_moves = self.target.moves
         self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
@@ -246,9 +247,16 @@ class Simulation:
             self.vehicle.command(rates, thrust)
         wind = self.wind  # evaluated where each body is
         veh = self.vehicle
-        veh.step(dt, wind.at(veh.p))
-        self.target.advance(t + dt, dt, wind.at(self.target.p))
-        wind.step(dt)
+        if wind.uniform:  # the same everywhere: no lookups (this runs at every step)
+            w = wind.velocity_m_s
+            veh.step(dt, w)
+            if self._target_moves:
+                self.target.advance(t + dt, dt, w)
+        else:
+            veh.step(dt, wind.at(veh.p))
+            self.target.advance(t + dt, dt, wind.at(self.target.p))
+        if wind.gusty:
+            wind.step(dt)
         self.step_index = k + 1
         self._check_physics_outcome(t)
 

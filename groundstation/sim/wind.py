@@ -84,6 +84,8 @@ class Wind:
         g = spec.gust_m_s
         self._sigma = (g, g, VERTICAL_GUST_RATIO * g)
         self._jet = spec.model == "jet"
+        self.uniform = not self._jet  # the same wind at every point
+        self.gusty = g > 0.0  # step() changes it
         self._ref_profile = jet_profile(spec, reference_m, on_axis=True) if self._jet else 1.0
         if self._jet and not self._ref_profile > 0.0:
             raise ValueError("the fan jet does not reach the reference point")
@@ -123,7 +125,7 @@ class Wind:
         return (f * m[0], f * m[1], f * m[2])
 
     def step(self, dt: float) -> None:
-        if self.spec.gust_m_s <= 0.0:
+        if not self.gusty:
             return
         if dt != self._dt_s:  # the factors, once per step size
             self._dt_s = dt
