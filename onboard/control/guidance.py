@@ -18,7 +18,7 @@ from ..gains import Gains
 from ..geometry import wrap_pi
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class GuidanceInput:
     """What a guidance law sees at one control tick."""
 
@@ -41,7 +41,7 @@ class GuidanceInput:
     target_vel_var_m2_s2: float = math.nan
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class GuidanceOutput:
     accel_desired_enu_m_s2: np.ndarray  # a_d, saturated (eq. 17)
     vel_elev_rad: float  # sigma_y (eq. 7), nan when hovering

@@ -137,7 +137,7 @@ class FusionResult(enum.Enum):
     FUTURE = "future"  # captured after the filter's current time
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class ImageEstimate:
     """The DKF's estimate at ``time_s`` (the time of its last prediction)."""
 
