@@ -170,7 +170,7 @@ class RandomWalk:
         return self.x
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): three are made a tick
 class _Sample:
     """One sample of the truth: time, position, velocity, attitude (w, x, y, z) and body rates
     (sequences of floats)."""

@@ -491,9 +491,10 @@ class DelayedKalmanFilter:
                 F[6] * d0 + F[7] * d1 + F[8] * d2 + F[9] * d3 + F[10] * d4 + F[11] * d5,
                 F[12] * d0 + F[13] * d1 + F[14] * d2 + F[15] * d3 + F[16] * d4 + F[17] * d5,
             )
-            xk = e.x + np.array([d0, d1, d2, d3, d4, d5])
-            xk[2] = min(max(xk[2], 1e-6), rho_max)
-            e.x, e.P = xk, None
+            x0, x1, x2, x3, x4, x5 = e.x.tolist()
+            x2 = min(max(x2 + d2, 1e-6), rho_max)
+            e.x = np.array([x0 + d0, x1 + d1, x2, x3 + d3, x4 + d4, x5 + d5])
+            e.P = None
         if not self._valid(buf[-1].x):
             self._drop_track()
         return True
