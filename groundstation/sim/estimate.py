@@ -142,8 +142,11 @@ class GaussMarkov:
             self._dt_s = dt_s
             self._a = math.exp(-dt_s / self.tau_s)
             self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
-        a, b = self._a, self._b
-        self.x = [a * x + b * n for x, n in zip(self.x, self._normals.next(), strict=True)]
+        a, b, x, n = self._a, self._b, self.x, self._normals.next()
+        if len(x) == 3:  # the estimate's vectors, written out (a comprehension costs twice)
+            self.x = [a * x[0] + b * n[0], a * x[1] + b * n[1], a * x[2] + b * n[2]]
+        else:
+            self.x = [a * xi + b * ni for xi, ni in zip(x, n, strict=True)]
         return self.x
 
 
@@ -165,8 +168,11 @@ class RandomWalk:
         return np.array(self.x)
 
     def step(self, dt_s: float) -> list[float]:
-        s = self.walk * math.sqrt(dt_s)
-        self.x = [x + s * n for x, n in zip(self.x, self._normals.next(), strict=True)]
+        s, x, n = self.walk * math.sqrt(dt_s), self.x, self._normals.next()
+        if len(x) == 3:  # as GaussMarkov.step
+            self.x = [x[0] + s * n[0], x[1] + s * n[1], x[2] + s * n[2]]
+        else:
+            self.x = [xi + s * ni for xi, ni in zip(x, n, strict=True)]
         return self.x
 
 

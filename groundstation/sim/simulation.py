@@ -34,6 +34,7 @@ from .wind import Wind
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
 DIVERGED_SPEED_M_S = 60.0
+_DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
 
 
 @dataclass(frozen=True)
@@ -348,7 +349,7 @@ class Simulation:
         if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
             # closing at the start of the step, opening at its end, near: the pass is over
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > DIVERGED_SPEED_M_S**2:
+        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > _DIVERGED_SPEED2:
             self.outcome = Outcome.DIVERGED
         elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED
