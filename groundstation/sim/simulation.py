@@ -87,7 +87,12 @@ class Simulation:
         keep_records: bool = True,
         observers: Sequence[SortieObserver] = (),
         target_track: tuple[list[float], list[tuple[float, float, float]]] | None = None,
+        records_dkf: bool = True,
     ) -> None:
+        """``records_dkf = False``: frames made only for :attr:`records` (no observers) leave
+        the DKF's image state and covariance diagonal None (the campaigns' traces do not read
+        them; computing them propagates the covariance every tick). What is flown is the
+        same either way."""
         self.scenario = scenario
         self.law = law
         self.seed = int(seed)
@@ -139,6 +144,7 @@ class Simulation:
         self.step_index = 0
         self.outcome: Outcome | None = None
         self.keep_records = keep_records
+        self.records_dkf = records_dkf
         self.records: list[Frame] = []  # every control tick's frame, if keep_records
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
@@ -191,7 +197,7 @@ class Simulation:
         """The sortie now: at a control tick, what that tick computed; between ticks, the
         truth now with the last tick's loop output."""
         veh, loop = self.vehicle, self.loop
-        state = loop.dkf.state_vector()
+        state = loop.dkf.state_vector() if self.records_dkf or self.observers else None
         return Frame(
             time_s=self.time_s,
             vehicle_p_enu_m=tuple(veh.p),
