@@ -16,7 +16,7 @@ from .enums import LoopMode  # declared there, imported from here too
 GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class VehicleState:
     """What the flight controller reports: position, velocity, attitude, body rates."""
 
@@ -27,7 +27,7 @@ class VehicleState:
     body_rates_flu_rad_s: np.ndarray
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class GyroSample:
     time_s: float
     rates_flu_rad_s: np.ndarray
@@ -56,7 +56,7 @@ class VehicleParams:
         return self.mass_kg * GRAVITY_M_S2 / self.max_thrust_n
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class RateThrustCommand:
     """Body rates (FLU, rad/s) and collective thrust normalised to [0, 1] for PX4."""
 
@@ -65,7 +65,7 @@ class RateThrustCommand:
     thrust_normalised: float
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class ControlTelemetry:
     """What one control tick computed; the ground station plots and records this."""
 

@@ -112,6 +112,7 @@ class InterceptionLoop:
             )
         )
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
+        self._los_last = None  # (e_px, R_WC, LOS angles) of the last tick that flew the law
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
         # the image's top/bottom edges above body x (upright: a portrait camera's long side)
         roll = math.radians(camera.mount_roll_deg)
@@ -324,9 +325,17 @@ class InterceptionLoop:
             prev = None if self._prev_time_s is None else self.dkf.e_px_at(self._prev_time_s)
             if prev is not None and self._prev_R_WC is not None:
                 # previous LOS from the replay-corrected buffered estimate: a fused detection
-                # moves both ends of the difference, so Delta q carries no correction jump
-                n_prev = line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
-                dq_y, dq_z = los_change(q_y, q_z, *direction_angles(n_prev))
+                # moves both ends of the difference, so Delta q carries no correction jump.
+                # Unmoved since the last tick (same estimate, same attitude): that tick's angles
+                c = self._los_last
+                if c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:
+                    q_prev = c[2]
+                else:
+                    q_prev = direction_angles(
+                        line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
+                    )
+                dq_y, dq_z = los_change(q_y, q_z, *q_prev)
+            self._los_last = (e_est, R_WC, (q_y, q_z))
             if gains.tau_los > 0.0:
                 dq_y = smooth_los_change(self._dq_filt[0], dq_y, dt, gains.tau_los)
                 dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)

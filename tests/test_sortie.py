@@ -1,5 +1,6 @@
 """Closed-loop sorties in the simulator: the onboard loop flies the paper's setups."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -158,3 +159,24 @@ def test_recording_a_sortie_does_not_change_what_it_flies():
     recorded = Simulation(sc, seed=3)  # keeps every frame, reading the covariance
     assert recorded.run() == run_sortie(sc, seed=3)
     assert recorded.records
+
+
+def test_campaign_frames_without_the_dkf_state_fly_the_same():
+    """records_dkf=False (campaign traces) leaves the frames' DKF state out and nothing else:
+    the same result and, field for field, the same frames."""
+    sc = load_scenario("cv-top-to-bottom")
+    full, light = Simulation(sc, seed=3), Simulation(sc, seed=3, records_dkf=False)
+    assert full.run() == light.run()
+    assert len(full.records) == len(light.records) > 100
+    assert all(f.dkf_state_px is None and f.dkf_cov_diag is None for f in light.records)
+    assert sum(f.dkf_state_px is not None for f in full.records) > 100
+    for a, b in zip(full.records, light.records, strict=True):
+        ta, tb = a.telemetry, b.telemetry
+        assert ta.command.body_rates_flu_rad_s.tolist() == tb.command.body_rates_flu_rad_s.tolist()
+        assert ta.accel_desired_enu_m_s2.tolist() == tb.accel_desired_enu_m_s2.tolist()
+        # the rest of the frame, the arrays in it compared above
+        a = dataclasses.replace(a, dkf_state_px=None, dkf_cov_diag=None, telemetry=None)
+        assert dataclasses.replace(b, telemetry=None) == a
+        assert dataclasses.replace(
+            ta, command=None, accel_desired_enu_m_s2=None
+        ) == dataclasses.replace(tb, command=None, accel_desired_enu_m_s2=None)

@@ -6,6 +6,7 @@ process pool on this machine; another engine (a cluster) only has to implement
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -57,11 +58,17 @@ def saturated_fraction(sim: Simulation) -> float:
         tel = rec.telemetry
         thrust = tel.command.thrust_normalised
         n += (
-            float(np.linalg.norm(tel.accel_desired_enu_m_s2)) >= a_lim
-            or float(np.linalg.norm(tel.command.body_rates_flu_rad_s)) >= w_lim
+            _norm3(tel.accel_desired_enu_m_s2) >= a_lim
+            or _norm3(tel.command.body_rates_flu_rad_s) >= w_lim
             or not 0.001 < thrust < 0.999
         )
     return n / len(sim.records)
+
+
+def _norm3(v) -> float:
+    """|v| of a 3-vector in floats (what np.linalg.norm computes, without its call cost)."""
+    x, y, z = v.tolist() if isinstance(v, np.ndarray) else v
+    return math.sqrt(x * x + y * y + z * z)
 
 
 def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str, Any]:
@@ -74,8 +81,9 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
         tgt.append([round(c, 4) for c in rec.target_p_enu_m])
         vel.append([round(c, 4) for c in rec.vehicle_v_enu_m_s])
         a_n.append(round(rec.normal_accel_m_s2, 4))
-        los = np.subtract(rec.target_p_enu_m, rec.vehicle_p_enu_m)
-        v_n.append(round(normal_component(np.asarray(rec.vehicle_v_enu_m_s), los), 4))
+        tp, vp = rec.target_p_enu_m, rec.vehicle_p_enu_m
+        los = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
+        v_n.append(round(normal_component(rec.vehicle_v_enu_m_s, los), 4))
         est = rec.telemetry.e_est_px
         if est is None:
             e.append(None)
@@ -100,8 +108,14 @@ def _trace(sim: Simulation, initial_px: tuple[float, float] | None) -> dict[str,
 def run_job(job: SortieJob) -> SortieOutcome:
     """Run one sortie (in whatever process) and return its outcome."""
     observers = [] if job.log_dir is None else [SortieRecorder(Path(job.log_dir))]
-    sim = Simulation(
-        job.scenario, job.law, job.seed, job.camera, keep_records=job.trace, observers=observers
+    sim = Simulation(  # the trace reads no DKF state: frames skip it (and its covariance)
+        job.scenario,
+        job.law,
+        job.seed,
+        job.camera,
+        keep_records=job.trace,
+        observers=observers,
+        records_dkf=False,
     )
     initial_px = sim.camera_model.project(
         sim.R_WC().T @ (np.array(sim.target.p) - np.array(sim.vehicle.p))

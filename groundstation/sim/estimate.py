@@ -99,18 +99,19 @@ from ..scenario import EstimateSpec
 STREAMS = ("position", "velocity", "attitude", "gyro_bias", "camera_time", "thrust")
 
 
-class _Normals:
-    """Standard normal vectors of one stream, drawn a block at a time (one call per 256
-    samples instead of one each: the stream's sequence does not depend on the block)."""
+class Normals:
+    """Standard normal vectors of one stream as lists of floats, drawn a block at a time (one
+    call per 256 samples instead of one each: the stream's sequence does not depend on the
+    block)."""
 
     def __init__(self, rng: np.random.Generator, dim: int, block: int = 256) -> None:
         self._rng, self._dim, self._block = rng, dim, block
-        self._buf = np.empty((0, dim))
+        self._buf: list[list[float]] = []
         self._i = 0
 
-    def next(self) -> np.ndarray:
-        if self._i >= self._buf.shape[0]:
-            self._buf = self._rng.standard_normal((self._block, self._dim))
+    def next(self) -> list[float]:
+        if self._i >= len(self._buf):
+            self._buf = self._rng.standard_normal((self._block, self._dim)).tolist()
             self._i = 0
         self._i += 1
         return self._buf[self._i - 1]
@@ -119,48 +120,76 @@ class _Normals:
 class GaussMarkov:
     """First-order Gauss-Markov process per component, x' = -x / tau + w, stationary standard
     deviation ``sigma``; started in its stationary distribution and stepped exactly for any
-    dt (x <- a x + sigma sqrt(1 - a^2) n, a = exp(-dt / tau))."""
+    dt (x <- a x + sigma sqrt(1 - a^2) n, a = exp(-dt / tau)). Kept as floats (:attr:`x`;
+    :attr:`value` is the same as an array): numpy's per-call cost on a 3-vector is several
+    times the arithmetic, which is the same operations in the same order."""
 
     def __init__(self, sigma: float, tau_s: float, dim: int, rng: np.random.Generator) -> None:
         self.sigma = float(sigma)
         self.tau_s = float(tau_s)
-        self._normals = _Normals(rng, dim)
-        self.value = self.sigma * self._normals.next()
+        self._normals = Normals(rng, dim)
+        s = self.sigma
+        self.x = [s * n for n in self._normals.next()]
         self._dt_s = -1.0
         self._a = self._b = 0.0
 
-    def step(self, dt_s: float) -> np.ndarray:
+    @property
+    def value(self) -> np.ndarray:
+        return np.array(self.x)
+
+    def step(self, dt_s: float) -> list[float]:
         if dt_s != self._dt_s:  # the factors, once per step size
             self._dt_s = dt_s
             self._a = math.exp(-dt_s / self.tau_s)
             self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
-        self.value = self._a * self.value + self._b * self._normals.next()
-        return self.value
+        a, b, x, n = self._a, self._b, self.x, self._normals.next()
+        if len(x) == 3:  # the estimate's vectors, written out (a comprehension costs twice)
+            self.x = [a * x[0] + b * n[0], a * x[1] + b * n[1], a * x[2] + b * n[2]]
+        else:
+            self.x = [a * xi + b * ni for xi, ni in zip(x, n, strict=True)]
+        return self.x
 
 
 class RandomWalk:
     """A bias: N(0, ``initial``) per component at the start, then a random walk of
-    ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t))."""
+    ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t)). Floats as
+    :class:`GaussMarkov`."""
 
     def __init__(
         self, initial: float, walk_per_sqrt_s: float, dim: int, rng: np.random.Generator
     ) -> None:
         self.walk = float(walk_per_sqrt_s)
-        self._normals = _Normals(rng, dim)
-        self.value = float(initial) * self._normals.next()
+        self._normals = Normals(rng, dim)
+        s = float(initial)
+        self.x = [s * n for n in self._normals.next()]
 
-    def step(self, dt_s: float) -> np.ndarray:
-        self.value = self.value + self.walk * math.sqrt(dt_s) * self._normals.next()
-        return self.value
+    @property
+    def value(self) -> np.ndarray:
+        return np.array(self.x)
+
+    def step(self, dt_s: float) -> list[float]:
+        s, x, n = self.walk * math.sqrt(dt_s), self.x, self._normals.next()
+        if len(x) == 3:  # as GaussMarkov.step
+            self.x = [x[0] + s * n[0], x[1] + s * n[1], x[2] + s * n[2]]
+        else:
+            self.x = [xi + s * ni for xi, ni in zip(x, n, strict=True)]
+        return self.x
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): three are made a tick
 class _Sample:
+    """One sample of the truth: time, position, velocity, attitude (w, x, y, z) and body rates
+    (sequences of floats)."""
+
     time_s: float
-    p: np.ndarray
-    v: np.ndarray
-    q: np.ndarray
-    w: np.ndarray
+    p: tuple
+    v: tuple
+    q: tuple
+    w: tuple
+
+
+def _lerp3(a, b, f: float) -> tuple[float, float, float]:
+    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
 
 
 class DelayLine:
@@ -183,14 +212,23 @@ class DelayLine:
             return a
         b = h[1]
         f = (tq - a.time_s) / (b.time_s - a.time_s)
-        qb = b.q if float(a.q @ b.q) >= 0.0 else -b.q
-        q = a.q + f * (qb - a.q)
+        a0, a1, a2, a3 = a.q
+        b0, b1, b2, b3 = b.q
+        if not a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 >= 0.0:
+            b0, b1, b2, b3 = -b0, -b1, -b2, -b3
+        q0, q1, q2, q3 = (
+            a0 + f * (b0 - a0),
+            a1 + f * (b1 - a1),
+            a2 + f * (b2 - a2),
+            a3 + f * (b3 - a3),
+        )
+        n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
         return _Sample(
             tq,
-            a.p + f * (b.p - a.p),
-            a.v + f * (b.v - a.v),
-            q / np.linalg.norm(q),
-            a.w + f * (b.w - a.w),
+            _lerp3(a.p, b.p, f),
+            _lerp3(a.v, b.v, f),
+            (q0 / n, q1 / n, q2 / n, q3 / n),
+            _lerp3(a.w, b.w, f),
         )
 
 
@@ -244,27 +282,31 @@ class StateEstimateModel:
         self._advance(t)
         now = _Sample(
             t,
-            np.asarray(truth.position_enu_m, dtype=float),
-            np.asarray(truth.velocity_enu_m_s, dtype=float),
-            np.asarray(truth.attitude_wxyz, dtype=float),
-            np.asarray(truth.body_rates_flu_rad_s, dtype=float),
+            _floats(truth.position_enu_m),
+            _floats(truth.velocity_enu_m_s),
+            _floats(truth.attitude_wxyz),
+            _floats(truth.body_rates_flu_rad_s),
         )
         old = self._delay.push(now)
         old_att = self._att_delay.push(now)
+        (p0, p1, p2), (e0, e1, e2) = old.p, self.position_error.x
+        (v0, v1, v2), (u0, u1, u2) = old.v, self.velocity_error.x
+        (w0, w1, w2), (b0, b1, b2) = old_att.w, self.gyro_bias.x
         return VehicleState(
             time_s=t,
-            position_enu_m=old.p + self.position_error.value,
-            velocity_enu_m_s=old.v + self.velocity_error.value,
+            position_enu_m=np.array([p0 + e0, p1 + e1, p2 + e2]),
+            velocity_enu_m_s=np.array([v0 + u0, v1 + u1, v2 + u2]),
             # a unit quaternion times a unit quaternion: no renormalising, so that zero
             # errors hand the loop the truth bit for bit
-            attitude_wxyz=quat_mul(old_att.q, quat_exp(self.attitude_error.value)),
-            body_rates_flu_rad_s=old_att.w + self.gyro_bias.value,
+            attitude_wxyz=quat_mul(old_att.q, quat_exp(self.attitude_error.x)),
+            body_rates_flu_rad_s=np.array([w0 + b0, w1 + b1, w2 + b2]),
         )
 
     def gyro(self, time_s: float, rates_flu_rad_s: np.ndarray) -> np.ndarray:
         """A gyro sample (FLU, rad/s) with the bias at ``time_s`` added."""
         self._advance(time_s)
-        return np.asarray(rates_flu_rad_s, dtype=float) + self.gyro_bias.value
+        (r0, r1, r2), (b0, b1, b2) = _floats(rates_flu_rad_s), self.gyro_bias.x
+        return np.array([r0 + b0, r1 + b1, r2 + b2])
 
     def stamp_error_s(self) -> float:
         """The next frame's capture-stamp error (s): the sortie's camera-IMU offset plus this
@@ -281,7 +323,7 @@ class StateEstimateModel:
 
     def summary(self) -> dict[str, float]:
         """This sortie's draws (for reports): camera offset, thrust scale, gyro bias now."""
-        b = self.gyro_bias.value
+        b = self.gyro_bias.x
         return {
             "camera_offset_s": self.camera_offset_s,
             "thrust_scale": self.thrust_scale,
@@ -289,3 +331,8 @@ class StateEstimateModel:
             "gyro_bias_y_rad_s": float(b[1]),
             "gyro_bias_z_rad_s": float(b[2]),
         }
+
+
+def _floats(x) -> list[float]:
+    """A vector (ndarray or sequence) as a list of floats."""
+    return x.tolist() if isinstance(x, np.ndarray) else [float(c) for c in x]

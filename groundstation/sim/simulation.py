@@ -27,13 +27,14 @@ from onboard.loop import InterceptionLoop
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
-from .estimate import StateEstimateModel
+from .estimate import Normals, StateEstimateModel
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
 DIVERGED_SPEED_M_S = 60.0
+_DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,12 @@ class Simulation:
         keep_records: bool = True,
         observers: Sequence[SortieObserver] = (),
         target_track: tuple[list[float], list[tuple[float, float, float]]] | None = None,
+        records_dkf: bool = True,
     ) -> None:
+        """``records_dkf = False``: frames made only for :attr:`records` (no observers) leave
+        the DKF's image state and covariance diagonal None (the campaigns' traces do not read
+        them; computing them propagates the covariance every tick). What is flown is the
+        same either way."""
         self.scenario = scenario
         self.law = law
         self.seed = int(seed)
@@ -102,7 +108,7 @@ class Simulation:
                 raise ValueError(f"{name} rate {rate} Hz must divide {sim.physics_rate_hz} Hz")
         ss = np.random.SeedSequence(self.seed)
         cam_rng, wind_rng, gyro_rng, render_rng = (np.random.default_rng(s) for s in ss.spawn(4))
-        self._gyro_rng = gyro_rng
+        self._gyro_noise = Normals(gyro_rng, 3)  # the gyro's white noise, drawn in blocks
         # the estimate model's streams are the next child: the four above stay as they were
         est_seed = ss.spawn(1)[0]
         self.estimate = (
@@ -123,6 +129,7 @@ class Simulation:
             else TrackTarget(scenario.target, *target_track)
         )
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
+        self._target_moves = self.target.moves
         self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
@@ -137,6 +144,7 @@ class Simulation:
         self.step_index = 0
         self.outcome: Outcome | None = None
         self.keep_records = keep_records
+        self.records_dkf = records_dkf
         self.records: list[Frame] = []  # every control tick's frame, if keep_records
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
@@ -189,7 +197,7 @@ class Simulation:
         """The sortie now: at a control tick, what that tick computed; between ticks, the
         truth now with the last tick's loop output."""
         veh, loop = self.vehicle, self.loop
-        state = loop.dkf.state_vector()
+        state = loop.dkf.state_vector() if self.records_dkf or self.observers else None
         return Frame(
             time_s=self.time_s,
             vehicle_p_enu_m=tuple(veh.p),
@@ -246,9 +254,16 @@ class Simulation:
             self.vehicle.command(rates, thrust)
         wind = self.wind  # evaluated where each body is
         veh = self.vehicle
-        veh.step(dt, wind.at(veh.p))
-        self.target.advance(t + dt, dt, wind.at(self.target.p))
-        wind.step(dt)
+        if wind.uniform:  # the same everywhere: no lookups (this runs at every step)
+            w = wind.velocity_m_s
+            veh.step(dt, w)
+            if self._target_moves:
+                self.target.advance(t + dt, dt, w)
+        else:
+            veh.step(dt, wind.at(veh.p))
+            self.target.advance(t + dt, dt, wind.at(self.target.p))
+        if wind.gusty:
+            wind.step(dt)
         self.step_index = k + 1
         self._check_physics_outcome(t)
 
@@ -261,8 +276,9 @@ class Simulation:
                 det = est.stamp(det)
             loop.on_detection(det)
             self.last_detection = det
-        noise = self._gyro_rng.standard_normal(3) * self.scenario.sim.gyro_noise_rad_s
-        rates = np.array(veh.read_gyro()) + noise
+        sigma = self.scenario.sim.gyro_noise_rad_s
+        (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
+        rates = np.array([r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma])
         if est is None:
             loop.on_gyro(GyroSample(t, rates))
             tel = loop.tick(veh.state(t))
@@ -339,7 +355,7 @@ class Simulation:
         if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
             # closing at the start of the step, opening at its end, near: the pass is over
             self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > DIVERGED_SPEED_M_S**2:
+        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > _DIVERGED_SPEED2:
             self.outcome = Outcome.DIVERGED
         elif vp[2] <= 0.0:
             self.outcome = Outcome.CRASHED

@@ -33,6 +33,7 @@ class Target:
             [0.0, 0.0, 0.0] if spec.motion in ("static", "takeoff") else list(spec.velocity_m_s)
         )
         self.radius_m = spec.diameter_m / 2.0
+        self.moves = spec.motion != "static"  # False: advance() never changes it
         s = spec
         if s.motion == "circle":
             self._center = (s.position_m[0] - s.radius_m, s.position_m[1], s.position_m[2])
@@ -74,18 +75,27 @@ class Target:
         m = s.motion
         if m == "static":
             return
+        # written out per component: this runs at every physics step
         p0, v0, a0 = s.position_m, s.velocity_m_s, s.acceleration_m_s2
         if m == "cv":
-            self.p = [p0[i] + v0[i] * t for i in range(3)]
+            self.p = [p0[0] + v0[0] * t, p0[1] + v0[1] * t, p0[2] + v0[2] * t]
         elif m == "ca":
-            self.p = [p0[i] + v0[i] * t + 0.5 * a0[i] * t * t for i in range(3)]
-            self.v = [v0[i] + a0[i] * t for i in range(3)]
+            self.p = [
+                p0[0] + v0[0] * t + 0.5 * a0[0] * t * t,
+                p0[1] + v0[1] * t + 0.5 * a0[1] * t * t,
+                p0[2] + v0[2] * t + 0.5 * a0[2] * t * t,
+            ]
+            self.v = [v0[0] + a0[0] * t, v0[1] + a0[1] * t, v0[2] + a0[2] * t]
         elif m == "sinusoid":
             w = 2.0 * math.pi / s.period_s
             sn, cs = math.sin(w * t), math.cos(w * t)
             amp = s.amplitude_m
-            self.p = [p0[i] + v0[i] * t + amp[i] * sn for i in range(3)]
-            self.v = [v0[i] + amp[i] * w * cs for i in range(3)]
+            self.p = [
+                p0[0] + v0[0] * t + amp[0] * sn,
+                p0[1] + v0[1] * t + amp[1] * sn,
+                p0[2] + v0[2] * t + amp[2] * sn,
+            ]
+            self.v = [v0[0] + amp[0] * w * cs, v0[1] + amp[1] * w * cs, v0[2] + amp[2] * w * cs]
         elif m == "circle":
             c, r, w = self._center, s.radius_m, self._omega
             cs, sn = math.cos(w * t), math.sin(w * t)
@@ -135,6 +145,7 @@ class TrackTarget(Target):
             raise ValueError("a target track needs at least two (time, position) samples")
         self._t = list(times_s)
         self._p = [tuple(map(float, p)) for p in positions_m]
+        self.moves = True
         self.p = list(self._p[0])
         self.v = self._velocity(0)
 

@@ -36,6 +36,7 @@ class Multicopter:
         self._rate_n = 0
         self._max_rate = math.radians(spec.max_rate_deg_s)
         self._lag_dt = -1.0
+        self._mass_kg = spec.mass_kg
         self._aw = self._at = self._kd = 0.0
 
     def command(self, body_rates_flu_rad_s: np.ndarray, thrust_normalised: float) -> None:
@@ -89,7 +90,7 @@ class Multicopter:
             qw, qx, qy, qz = qw * n, qx * n, qy * n, qz * n
             self.q = [qw, qx, qy, qz]
         # thrust axis z_B in the world
-        ft = thrust_n / self.spec.mass_kg
+        ft = thrust_n / self._mass_kg
         kd = self._kd
         vx, vy, vz = self.v
         ax = ft * (2.0 * (qx * qz + qw * qy)) - kd * (vx - wind[0])

@@ -41,6 +41,7 @@ import math
 import numpy as np
 
 from ..scenario import WindSpec
+from .estimate import Normals
 
 JET_DECAY_B = 5.8  # U_c / U_0 = B D / x (Hussein et al. 1994; Pope Table 5.1)
 JET_SPREAD_S = 0.094  # r_1/2 = S x
@@ -83,6 +84,8 @@ class Wind:
         g = spec.gust_m_s
         self._sigma = (g, g, VERTICAL_GUST_RATIO * g)
         self._jet = spec.model == "jet"
+        self.uniform = not self._jet  # the same wind at every point
+        self.gusty = g > 0.0  # step() changes it
         self._ref_profile = jet_profile(spec, reference_m, on_axis=True) if self._jet else 1.0
         if self._jet and not self._ref_profile > 0.0:
             raise ValueError("the fan jet does not reach the reference point")
@@ -93,6 +96,9 @@ class Wind:
                 s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3), strict=True)
             ]
             self._update_total()
+        self._normals = Normals(rng, 3)  # the gusts' draws, the stream continued
+        self._dt_s = -1.0
+        self._a = self._b = 0.0
 
     def _update_total(self) -> None:
         m = self.spec.mean_m_s
@@ -119,13 +125,18 @@ class Wind:
         return (f * m[0], f * m[1], f * m[2])
 
     def step(self, dt: float) -> None:
-        if self.spec.gust_m_s <= 0.0:
+        if not self.gusty:
             return
-        tau = self.spec.gust_time_constant_s
-        a = math.exp(-dt / tau)
-        b = math.sqrt(1.0 - a * a)
-        n = self._rng.standard_normal(3)
+        if dt != self._dt_s:  # the factors, once per step size
+            self._dt_s = dt
+            self._a = math.exp(-dt / self.spec.gust_time_constant_s)
+            self._b = math.sqrt(1.0 - self._a * self._a)
+        a, b = self._a, self._b
+        n = self._normals.next()
+        g, s = self._gust, self._sigma
         self._gust = [
-            a * g + b * s * float(k) for g, s, k in zip(self._gust, self._sigma, n, strict=True)
+            a * g[0] + b * s[0] * n[0],
+            a * g[1] + b * s[1] * n[1],
+            a * g[2] + b * s[2] * n[2],
         ]
         self._update_total()

@@ -82,19 +82,40 @@ class DisturbanceObserverConfig:
                 raise ValueError(f"disturbance observer {name} = {value!r} is out of range")
 
 
-def _finite3(x: np.ndarray) -> bool:
-    return x.shape == (3,) and bool(np.all(np.isfinite(x)))
+def _finite3(x) -> tuple[float, float, float] | None:
+    """Three finite floats from a 3-vector (ndarray of shape (3,) or sequence), else None."""
+    if isinstance(x, np.ndarray):
+        if x.shape != (3,):
+            return None
+        x0, x1, x2 = x.tolist()
+    else:
+        try:
+            x0, x1, x2 = x
+        except (TypeError, ValueError):
+            return None
+    try:
+        x0, x1, x2 = float(x0), float(x1), float(x2)
+    except (TypeError, ValueError):
+        return None
+    if not (math.isfinite(x0) and math.isfinite(x1) and math.isfinite(x2)):
+        return None
+    return x0, x1, x2
 
 
 class DisturbanceObserver:
     """Call :meth:`update` once per control tick with the state the loop was given, then
-    :meth:`commanded` with the normalised thrust it sends; :attr:`estimate_m_s2` is d^ (ENU)."""
+    :meth:`commanded` with the normalised thrust it sends; :attr:`estimate_m_s2` is d^ (ENU).
+
+    The arithmetic is in floats, component by component (numpy's per-call cost on 3-vectors
+    is several times the arithmetic's); every operation is the one the vector form does, in
+    the same order, so the result is the same to the bit."""
 
     def __init__(self, config: DisturbanceObserverConfig) -> None:
         self.config = config
         self.estimate_m_s2 = np.zeros(3)
-        self._v_hat: np.ndarray | None = None
-        self._z_prev: np.ndarray | None = None
+        self._d = (0.0, 0.0, 0.0)  # d^ as floats (estimate_m_s2 is its array)
+        self._v_hat: tuple[float, float, float] | None = None
+        self._z_prev: tuple[float, float, float] | None = None
         self._t_prev: float | None = None
         self._elapsed_s = 0.0
         self._thrust_n = config.mass_kg * GRAVITY_M_S2  # modelled achieved thrust
@@ -118,6 +139,7 @@ class DisturbanceObserver:
         )
         if not self.enabled:
             self.estimate_m_s2 = np.zeros(3)
+            self._d = (0.0, 0.0, 0.0)
             self._v_hat = None
 
     def commanded(self, thrust_normalised: float) -> None:
@@ -132,20 +154,21 @@ class DisturbanceObserver:
     ) -> np.ndarray:
         """Advance to ``time_s`` with the measured velocity (m/s) and body z axis in the world
         (unit); returns d^ (m/s^2, ENU). Bad or out-of-order input holds the estimate."""
-        v = np.asarray(velocity_enu_m_s, dtype=float)
-        z = np.asarray(thrust_axis_enu, dtype=float)
-        if not (math.isfinite(time_s) and _finite3(v) and _finite3(z)):
+        v = _finite3(velocity_enu_m_s)
+        z = _finite3(thrust_axis_enu)
+        if v is None or z is None or not math.isfinite(time_s):
             return self.estimate_m_s2
-        zn = math.sqrt(float(z @ z))
+        z0, z1, z2 = z
+        zn = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
         if not zn > 0.5:
             return self.estimate_m_s2
-        z = z / zn
+        z = (z0 / zn, z1 / zn, z2 / zn)
         c = self.config
         if not self.enabled:
             self._t_prev, self._z_prev = time_s, z
             return self.estimate_m_s2
         if self._v_hat is None or self._t_prev is None or self._z_prev is None:
-            self._v_hat, self._t_prev, self._z_prev = v.copy(), time_s, z
+            self._v_hat, self._t_prev, self._z_prev = v, time_s, z
             self._elapsed_s = 0.0
             return self.estimate_m_s2
         dt = time_s - self._t_prev
@@ -161,16 +184,21 @@ class DisturbanceObserver:
             self._thrust_n = t_cmd + (t0 - t_cmd) * decay
         else:
             t_mean = self._thrust_n = t_cmd
-        z_mean = 0.5 * (self._z_prev + z)
-        f_model = (t_mean / c.mass_kg) * z_mean
-        f_model[2] -= GRAVITY_M_S2
-        f_model -= c.drag_per_mass_1_s * self._v_hat  # the airframe's own drag in still air
-        v_pred = self._v_hat + (f_model + self.estimate_m_s2) * dt
-        r = v - v_pred
+        # f_model = (T / m) z_mean - g e_z - c v^ (the airframe's own drag in still air)
+        zp = self._z_prev
+        k = t_mean / c.mass_kg
+        kd = c.drag_per_mass_1_s
+        h0, h1, h2 = self._v_hat
+        f0 = k * (0.5 * (zp[0] + z[0])) - kd * h0
+        f1 = k * (0.5 * (zp[1] + z[1])) - kd * h1
+        f2 = (k * (0.5 * (zp[2] + z[2])) - GRAVITY_M_S2) - kd * h2
+        e0, e1, e2 = self._d
+        p0, p1, p2 = h0 + (f0 + e0) * dt, h1 + (f1 + e1) * dt, h2 + (f2 + e2) * dt  # v_pred
+        r0, r1, r2 = v[0] - p0, v[1] - p1, v[2] - p2
         self._t_prev, self._z_prev = time_s, z
-        if math.sqrt(float(r @ r)) > c.max_innovation_m_s:
+        if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > c.max_innovation_m_s:
             # a velocity jump no force made: an estimator reset; restart v^, keep d^
-            self._v_hat = v.copy()
+            self._v_hat = v
             self.resets += 1
             return self.estimate_m_s2
         # gains that put both discrete error poles at exp(-w dt), stable for any dt; from a
@@ -179,12 +207,19 @@ class DisturbanceObserver:
         self._elapsed_s += dt
         w = max(c.bandwidth_rad_s, c.start_factor / self._elapsed_s)
         p = math.exp(-w * dt)
-        self._v_hat = v_pred + (1.0 - p * p) * r
-        d = self.estimate_m_s2 + ((1.0 - p) ** 2 / dt) * r
-        n = math.sqrt(float(d @ d))
+        g = 1.0 - p * p
+        self._v_hat = (p0 + g * r0, p1 + g * r1, p2 + g * r2)
+        g = (1.0 - p) ** 2 / dt
+        d0, d1, d2 = e0 + g * r0, e1 + g * r1, e2 + g * r2
+        n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if n > c.max_m_s2:
-            d = d * (c.max_m_s2 / n) if n > 0.0 else np.zeros(3)
-        self.estimate_m_s2 = d
+            if n > 0.0:
+                g = c.max_m_s2 / n
+                d0, d1, d2 = d0 * g, d1 * g, d2 * g
+            else:
+                d0 = d1 = d2 = 0.0
+        self._d = (d0, d1, d2)
+        self.estimate_m_s2 = d = np.array(self._d)
         return d
 
 
@@ -198,12 +233,18 @@ def feedforward_accel(
     cancelling the along-track drag as well would add up to k_drag v of pitch-down during the
     ramp, which moves the target up the image (measured: 2 of 12 static targets lost off the
     top with full feed-forward). The normal part is what bends the path and makes the miss."""
-    d = -np.asarray(disturbance_enu_m_s2, dtype=float)
-    v = np.asarray(velocity_enu_m_s, dtype=float)
-    speed = math.sqrt(float(v @ v))
+    d0, d1, d2 = (-c for c in _floats(disturbance_enu_m_s2))
+    v0, v1, v2 = _floats(velocity_enu_m_s)
+    speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     keep_tangential = min(max(2.0 - speed / v_min_m_s, 0.0), 1.0) if v_min_m_s > 0.0 else 0.0
     if keep_tangential >= 1.0 or speed < 1e-9:
-        return d
-    u = v / speed
-    tangential = float(d @ u) * u
-    return d - (1.0 - keep_tangential) * tangential
+        return np.array([d0, d1, d2])
+    u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
+    a = d0 * u0 + d1 * u1 + d2 * u2
+    g = 1.0 - keep_tangential
+    return np.array([d0 - g * (a * u0), d1 - g * (a * u1), d2 - g * (a * u2)])
+
+
+def _floats(x) -> list[float]:
+    """A 3-vector (ndarray or sequence) as floats."""
+    return x.tolist() if isinstance(x, np.ndarray) else [float(c) for c in x]

@@ -18,7 +18,7 @@ from ..gains import Gains
 from ..geometry import wrap_pi
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class GuidanceInput:
     """What a guidance law sees at one control tick."""
 
@@ -41,7 +41,7 @@ class GuidanceInput:
     target_vel_var_m2_s2: float = math.nan
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class GuidanceOutput:
     accel_desired_enu_m_s2: np.ndarray  # a_d, saturated (eq. 17)
     vel_elev_rad: float  # sigma_y (eq. 7), nan when hovering
@@ -94,12 +94,14 @@ def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: fl
 
 def normal_component(accel: np.ndarray, velocity: np.ndarray) -> float:
     """Magnitude of the part of ``accel`` normal to ``velocity`` (m/s^2)."""
-    vv = float(velocity @ velocity)
+    a0, a1, a2 = _f3(accel)
+    v0, v1, v2 = _f3(velocity)
+    vv = v0 * v0 + v1 * v1 + v2 * v2
     if vv < 1e-12:
-        return math.sqrt(float(accel @ accel))
-    a_t = (float(accel @ velocity) / vv) * velocity
-    a_n = accel - a_t
-    return math.sqrt(float(a_n @ a_n))
+        return math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    k = (a0 * v0 + a1 * v1 + a2 * v2) / vv
+    n0, n1, n2 = a0 - k * v0, a1 - k * v1, a2 - k * v2
+    return math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
 
 
 def _hover_start(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
@@ -134,24 +136,51 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
     image (forcing a nose-down pitch would fight PNG's endgame); the pursuit bias
     (:func:`pursuit_weight`) does the rest. ``fov_margin = 0`` switches it off.
     """
+    out = _fov_guard3(_f3(a_d), inp, gains)
+    return a_d if out is None else np.array(out)
+
+
+def _f3(x) -> tuple[float, float, float]:
+    """A 3-vector (ndarray or sequence) as three floats."""
+    if isinstance(x, np.ndarray):
+        x0, x1, x2 = x.tolist()
+        return x0, x1, x2
+    return float(x[0]), float(x[1]), float(x[2])
+
+
+def _saturate3(x0: float, x1: float, x2: float, limit: float) -> tuple[float, float, float]:
+    """:func:`saturate_norm` in floats (the same operations)."""
+    n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    if n > limit > 0.0:
+        g = limit / n
+        return x0 * g, x1 * g, x2 * g
+    return x0, x1, x2
+
+
+def _fov_guard3(
+    a_d: tuple[float, float, float], inp: GuidanceInput, gains: Gains
+) -> tuple[float, float, float] | None:
+    """:func:`fov_guard` in floats; None where it leaves ``a_d`` untouched."""
     if gains.fov_margin <= 0.0:
-        return a_d
+        return None
     top = inp.fov_edges_rad[0]
     if not math.isfinite(top):
-        return a_d
-    axis = inp.R_WC[:, 2]
-    hx, hy = float(axis[0]), float(axis[1])
+        return None
+    R = inp.R_WC
+    hx, hy = float(R[0, 2]), float(R[1, 2])
     hn = math.hypot(hx, hy)
     if hn < 1e-6:  # camera looking straight up or down: no heading to pitch along
-        return a_d
-    h = np.array([hx / hn, hy / hn, 0.0])
+        return None
+    h0, h1 = hx / hn, hy / hn
     lo = min_pitch_rad(inp.los_elev_rad, top, math.radians(gains.fov_margin))
-    a_f = float(a_d @ h)
-    gz = max(GRAVITY_M_S2 + float(a_d[2]), 0.1 * GRAVITY_M_S2)
+    a0, a1, a2 = a_d
+    a_f = a0 * h0 + a1 * h1 + a2 * 0.0
+    gz = max(GRAVITY_M_S2 + a2, 0.1 * GRAVITY_M_S2)
     a_f_max = max(-gz * math.tan(lo), 0.0)  # limit the pitch-down, never brake
     if a_f <= a_f_max:
-        return a_d
-    return saturate_norm(a_d + (a_f_max - a_f) * h, gains.a_max)
+        return None
+    c = a_f_max - a_f
+    return _saturate3(a0 + c * h0, a1 + c * h1, a2 + c * 0.0, gains.a_max)
 
 
 def edge_margin_rad(inp: GuidanceInput) -> float:
@@ -206,16 +235,23 @@ def zem_nulling_accel(inp: GuidanceInput, gains: Gains) -> np.ndarray:
     (R x 0.2 deg of ZEM), not differentiated. The target's velocity is the DKF's, shrunk toward
     zero by its own uncertainty (|v_t|^2 / (|v_t|^2 + tr P_v)): far away it is barely
     observable, and an unobservable estimate must not steer."""
-    v = inp.velocity_enu_m_s
+    return np.array(_zem3(inp, gains))
+
+
+def _zem3(inp: GuidanceInput, gains: Gains) -> tuple[float, float, float]:
+    """:func:`zem_nulling_accel` in floats (the same operations)."""
+    v0, v1, v2 = _f3(inp.velocity_enu_m_s)
     vt = inp.target_vel_enu_m_s
     if vt is not None:
-        vt2 = float(vt @ vt)
+        t0, t1, t2 = _f3(vt)
+        vt2 = t0 * t0 + t1 * t1 + t2 * t2
         var = inp.target_vel_var_m2_s2
         shrink = vt2 / (vt2 + var) if math.isfinite(var) and vt2 + var > 0.0 else 0.0
-        v = v - shrink * vt
-    n = inp.los_enu
-    v_perp = v - float(v @ n) * n
-    return v_perp * (-1.0 / gains.tau_zem)
+        v0, v1, v2 = v0 - shrink * t0, v1 - shrink * t1, v2 - shrink * t2
+    n0, n1, n2 = _f3(inp.los_enu)
+    vn = v0 * n0 + v1 * n1 + v2 * n2
+    k = -1.0 / gains.tau_zem
+    return (v0 - vn * n0) * k, (v1 - vn * n1) * k, (v2 - vn * n2) * k
 
 
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
@@ -225,23 +261,36 @@ def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     if speed < gains.v_min:
         a_d = fov_guard(_hover_start(inp, gains).accel_desired_enu_m_s2, inp, gains)
         return GuidanceOutput(a_d, math.nan, math.nan, True)
-    sigma_y, sigma_z = direction_angles(v / speed)
+    # in floats from here on, each operation the vector form's, in its order (bit-identical)
+    v0, v1, v2 = _f3(v)
+    u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
+    sigma_y, sigma_z = direction_angles((u0, u1, u2))
     # far away PN's LOS-rate term is mostly noise (v/R small): it fades out as the midcourse
     # ZEM-nulling term fades in (README "Range")
     w_mid = midcourse_weight(inp.range_m, gains)
     pn = 1.0 - w_mid
     sigma_yd = sigma_y + pn * gains.K_y * inp.d_los_elev_rad
     sigma_zd = sigma_z + pn * gains.K_z * inp.d_los_azim_rad
-    n_d = direction_from_angles(sigma_yd, sigma_zd)
+    ce = math.cos(sigma_yd)  # n_d (eq. 9, as direction_from_angles)
+    n0, n1, n2 = ce * math.sin(sigma_zd), ce * math.cos(sigma_zd), math.sin(sigma_yd)
     w = pursuit_weight(inp, gains)
     if w > 0.0:  # near the image's top or bottom edge: turn toward the LOS (pursuit)
-        n_d = n_d + (w * gains.k_pur * inp.dt_s) * (inp.los_enu - v / speed)
-        n_d = n_d / math.sqrt(float(n_d @ n_d))
-    v_d = ramped_speed(speed, gains, inp.dt_s) * n_d
+        k = w * gains.k_pur * inp.dt_s
+        l0, l1, l2 = _f3(inp.los_enu)
+        n0, n1, n2 = n0 + k * (l0 - u0), n1 + k * (l1 - u1), n2 + k * (l2 - u2)
+        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+    dt = inp.dt_s
+    sp = ramped_speed(speed, gains, dt)
+    d0, d1, d2 = sp * n0, sp * n1, sp * n2  # v_d
     if w_mid > 0.0:  # far away: null the ZEM (midcourse), PN's endgame takes over within r_mid
-        v_d = v_d + (w_mid * inp.dt_s) * zem_nulling_accel(inp, gains)
-    a_d = fov_guard(accel_toward_velocity(v_d, v, gains, inp.dt_s), inp, gains)
-    return GuidanceOutput(a_d, sigma_y, sigma_z, False)
+        k = w_mid * dt
+        z0, z1, z2 = _zem3(inp, gains)
+        d0, d1, d2 = d0 + k * z0, d1 + k * z1, d2 + k * z2
+    # eq. 17, saturated, then the FOV guard
+    a_d = _saturate3((d0 - v0) / dt, (d1 - v1) / dt, (d2 - v2) / dt, gains.a_max)
+    guarded = _fov_guard3(a_d, inp, gains)
+    return GuidanceOutput(np.array(a_d if guarded is None else guarded), sigma_y, sigma_z, False)
 
 
 def track_velocity_direction(

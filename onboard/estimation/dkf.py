@@ -104,6 +104,24 @@ def _transposed9(m) -> tuple:
     return (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
 
 
+def _quadratic_form(P: list, J: tuple) -> float:
+    """J P J^T for a 6x6 matrix P (nested lists) and a row J of 6 floats, skipping J's zeros."""
+    out = 0.0
+    for j in range(6):
+        c = J[j]
+        if c:
+            row = P[j]
+            out += c * (
+                row[0] * J[0]
+                + row[1] * J[1]
+                + row[2] * J[2]
+                + row[3] * J[3]
+                + row[4] * J[4]
+                + row[5] * J[5]
+            )
+    return out
+
+
 def _rows3(m) -> list:
     rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
     if len(rows) != 3:
@@ -146,7 +164,7 @@ class FusionResult(enum.Enum):
     FUTURE = "future"  # captured after the filter's current time
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
 class ImageEstimate:
     """The DKF's estimate at ``time_s`` (the time of its last prediction)."""
 
@@ -558,9 +576,10 @@ class DelayedKalmanFilter:
                 F[6] * d0 + F[7] * d1 + F[8] * d2 + F[9] * d3 + F[10] * d4 + F[11] * d5,
                 F[12] * d0 + F[13] * d1 + F[14] * d2 + F[15] * d3 + F[16] * d4 + F[17] * d5,
             )
-            xk = e.x + np.array([d0, d1, d2, d3, d4, d5])
-            xk[2] = min(max(xk[2], 1e-6), rho_max)
-            e.x, e.P = xk, None
+            x0, x1, x2, x3, x4, x5 = e.x.tolist()
+            x2 = min(max(x2 + d2, 1e-6), rho_max)
+            e.x = np.array([x0 + d0, x1 + d1, x2, x3 + d3, x4 + d4, x5 + d5])
+            e.P = None
         if not self._valid(buf[-1].x):
             self._drop_track()
         return True
@@ -677,15 +696,35 @@ class DelayedKalmanFilter:
         e = self._buf[-1]
         f = self._f
         _, tr = self._flow(e)
-        xn, yn, rho = e.x[:3].tolist()
-        R_CW = np.array(e.R_CW).reshape(3, 3)
-        u = R_CW @ (e.x[3:] - np.array(e.v_c))
-        J = np.zeros((2, _N))
-        J[0, 0], J[0, 2], J[0, 3:] = -rho * u[2], u[0] - xn * u[2], rho * (R_CW[0] - xn * R_CW[2])
-        J[1, 1], J[1, 2], J[1, 3:] = -rho * u[2], u[1] - yn * u[2], rho * (R_CW[1] - yn * R_CW[2])
-        var_r = np.einsum("ij,jk,ik->i", J, e.P, J)
+        # in floats (numpy's per-call cost on these small arrays is most of the work): J is
+        # the Jacobian of the translational flow rho (u_xy - s_xy u_z), u = R_CW (v_t - v_c)
+        xn, yn, rho, vE, vN, vU = e.x.tolist()
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = e.R_CW
+        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
+        u0 = r0 * dE + r1 * dN + r2 * dU
+        u1 = r3 * dE + r4 * dN + r5 * dU
+        u2 = r6 * dE + r7 * dN + r8 * dU
+        a = rho * u2
+        jx = (
+            -a,
+            0.0,
+            u0 - xn * u2,
+            rho * (r0 - xn * r6),
+            rho * (r1 - xn * r7),
+            rho * (r2 - xn * r8),
+        )
+        jy = (
+            0.0,
+            -a,
+            u1 - yn * u2,
+            rho * (r3 - yn * r6),
+            rho * (r4 - yn * r7),
+            rho * (r5 - yn * r8),
+        )
+        P = e.P.tolist()
+        var_r = (_quadratic_form(P, jx), _quadratic_form(P, jy))
         state = np.array([xn * f, yn * f, tr[0] * f, tr[1] * f])
-        cov = np.array([e.P[0, 0], e.P[1, 1], var_r[0], var_r[1]]) * f * f
+        cov = np.array([P[0][0] * f * f, P[1][1] * f * f, var_r[0] * f * f, var_r[1] * f * f])
         return state, cov
 
     def range_m(self) -> float | None:
