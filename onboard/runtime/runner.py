@@ -49,6 +49,7 @@ from .fc_side import FcState, FlightControllerSide, state_at
 from .ground_side import TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
+from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
 from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
@@ -117,7 +118,11 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self.fcs = FcState()
         self.loop: InterceptionLoop | None = None
         self.period_s = 1.0 / config.control_rate_hz
-        self._fc_rx: LinkReceiver | None = None  # started by run(); tick() polls without it
+        # started by run(), which takes what the links bring as it arrives; tick() polls without
+        self._fc_rx: LinkReceiver | None = None
+        self._gcs_rx: LinkReceiver | None = None
+        # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
+        self.sender = Sender(on_error=lambda msg: self._event("error", msg))
         self.scheduler = PeriodicScheduler(
             self.period_s, realtime_priority=config.realtime_priority
         )
@@ -194,15 +199,41 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             return
         self._last_hb_sent = now
         status = mavlink.MAV_STATE_ACTIVE if self.sm.flying else mavlink.MAV_STATE_STANDBY
+        self.sender.submit(self._send_heartbeats, tm.STATE_CODES.index(self.sm.state.value), status)
+
+    def _send_heartbeats(self, state_code: int, status: int) -> None:
         for link in (self.fc, self.gcs):
             if link is not None:
                 link.heartbeat(
                     mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
                     mavlink.MAV_AUTOPILOT_INVALID,
                     0,
-                    tm.STATE_CODES.index(self.sm.state.value),
+                    state_code,
                     status,
                 )
+
+    def _timesync_request(self) -> None:
+        send_request(self.fc, self.clock.now())  # stamped as it goes out
+
+    def _take_fc_batch(self, msgs: list) -> None:
+        """On a receiver thread (run()): PX4's messages taken as they arrive, under the loop's
+        lock, so a tick sees each of them entirely or not at all."""
+        with self._loop_lock:
+            self._take_all(self.fc, self._take_fc, msgs, self.clock.now())
+
+    def _take_gcs_batch(self, msgs: list) -> None:
+        """The ground's, likewise."""
+        with self._loop_lock:
+            self._take_all(self.gcs, self._take_gcs, msgs, self.clock.now())
+
+    def _take_all(self, link: MavLink, take, msgs: list, now: float) -> None:
+        for msg in msgs:
+            try:
+                take(msg, now)
+            except (ValueError, TypeError, OverflowError, KeyError, IndexError) as exc:
+                # a well-formed frame with nonsense inside (NaN where an integer belongs)
+                link.bad_frames += 1
+                self._event("warning", f"{msg.get_type()} ignored: {type(exc).__name__}")
 
     def _fuse_on_arrival(self, ev) -> None:
         """On the camera thread, as a detection arrives (run() only): fuse it into the DKF
@@ -254,17 +285,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     # ------------------------------------------------------------------ the tick
     def tick(self) -> None:
         now = self.clock.now()
-        for link, take in ((self.fc, self._take_fc), (self.gcs, self._take_gcs)):
-            if link is None:
-                continue
-            rx = self._fc_rx if link is self.fc else None
-            for msg in rx.drain() if rx is not None else link.poll():
-                try:
-                    take(msg, now)
-                except (ValueError, TypeError, OverflowError, KeyError, IndexError) as exc:
-                    # a well-formed frame with nonsense inside (NaN where an integer belongs)
-                    link.bad_frames += 1
-                    self._event("warning", f"{msg.get_type()} ignored: {type(exc).__name__}")
+        if self._fc_rx is None:  # else taken on the receiver thread as they arrive
+            self._take_all(self.fc, self._take_fc, self.fc.poll(), now)
+        if self.gcs is not None and self._gcs_rx is None:
+            self._take_all(self.gcs, self._take_gcs, self.gcs.poll(), now)
         if self.loop is None and self.camera.last_frame is not None:
             h, w = self.camera.last_frame.image.shape[:2]
             self._build_loop(w, h)
@@ -340,7 +364,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._heartbeats(now)
         if now >= self._next_timesync_s:
             self._next_timesync_s = now + TIMESYNC_EVERY_S
-            send_request(self.fc, self.clock.now())
+            self.sender.submit(self._timesync_request)
         if self._tick_n % TELEMETRY_EVERY == 0:
             fox = self.foxglove
             dkf = None
@@ -352,7 +376,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                     now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, tel, self._last_det, dkf,
                     self.params.gains, loop.guard_trips,
                 )  # fmt: skip
-        self._flush_events()
+        if self._events:
+            self.sender.submit(self._flush_events)
         self._tick_n += 1
 
     # ------------------------------------------------------------------ run
@@ -364,8 +389,14 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
-        self._fc_rx = LinkReceiver(self.fc)  # parses PX4's stream between ticks
+        # PX4's stream and the ground's messages parsed and taken between ticks
+        on_error = lambda msg: self._event("error", msg)  # noqa: E731
+        self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error)
         self._fc_rx.start()
+        if self.gcs is not None:
+            self._gcs_rx = LinkReceiver(self.gcs, self._take_gcs_batch, on_error)
+            self._gcs_rx.start()
+        self.sender.start()
         self._fusing = True
         self.camera.start()
         if self.video is not None:
@@ -396,6 +427,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         finally:
             sched.stop()
             self._fc_rx.stop()
+            if self._gcs_rx is not None:
+                self._gcs_rx.stop()
+            self.sender.stop()
             self.camera.stop()
             if self.video is not None:
                 self.video.stop()
