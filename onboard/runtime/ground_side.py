@@ -23,6 +23,7 @@ from ..link.px4 import (
 from .timing import jitter_p99_ms, rate_hz
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
+DKF_FROM_LOOP = object()  # _telemetry: the sender reads the filter's state after the tick
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
 SEVERITY = {
     "critical": mavlink.MAV_SEVERITY_CRITICAL,
@@ -138,8 +139,11 @@ class GroundSide:
             )
         )
 
-    def _telemetry(self, now: float, tel, dkf=None) -> None:
-        """``dkf``: the filter's ``state_vector()`` at this tick (None before it starts)."""
+    def _telemetry(self, now: float, tel, dkf=DKF_FROM_LOOP) -> None:
+        """``dkf``: the filter's ``state_vector()`` at this tick (None before it starts), or
+        ``DKF_FROM_LOOP``: the sender takes it from the loop under its lock, right after the
+        tick (the filter's covariance is propagated lazily, and that is the dearest part of a
+        telemetry tick; a detection fused in between is then in these fields already)."""
         if self.gcs is not None:
             self.sender.submit(self._send_telemetry, self._telemetry_snapshot(now, tel, dkf))
 
@@ -153,14 +157,19 @@ class GroundSide:
             now, self.sm.state, timing.recent_periods(), timing.overruns, self.params.version,
             self.params.runtime.law, self.camera.frames, self.camera.detections,
             self.commands_sent, self.target_size_frac, latency,
-            None if loop is None else loop.camera, None if loop is None else loop.guard_trips,
+            loop, None if loop is None else loop.guard_trips,
             self._last_det, dkf, tel, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz,
         )  # fmt: skip
 
     def _send_telemetry(self, snapshot: tuple) -> None:
         """One ``DEBUG_FLOAT_ARRAY`` from a :meth:`_telemetry_snapshot`."""
         (now, state, periods, overruns, version, law, frames, detections, commands, size,
-         latency, cam, guard_trips, det, dkf, tel, pos, vel, q) = snapshot  # fmt: skip
+         latency, loop, guard_trips, det, dkf, tel, pos, vel, q) = snapshot  # fmt: skip
+        if dkf is DKF_FROM_LOOP:
+            dkf = None
+            if loop is not None:
+                with self._loop_lock:
+                    dkf = loop.dkf.state_vector()
         vals: dict[str, float | None] = {
             "t_s": now,
             "state": tm.STATE_CODES.index(state.value),
@@ -176,7 +185,8 @@ class GroundSide:
         }
         if latency is not None:
             vals["latency_ms"] = 1000.0 * latency
-        if cam is not None:
+        if loop is not None:
+            cam = loop.camera
             vals.update(
                 image_w_px=cam.width_px,
                 image_h_px=cam.height_px,

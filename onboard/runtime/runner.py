@@ -46,7 +46,7 @@ from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .fc_side import FcState, FlightControllerSide, state_at
-from .ground_side import TELEMETRY_EVERY, GroundSide
+from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
 from .sender import Sender
@@ -133,7 +133,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             on_error=lambda msg: self._event("warning", f"camera: {msg}"),
             on_detection=self._fuse_on_arrival,
         )
-        self._loop_lock = threading.Lock()  # the loop: ticked here, fused on the camera thread
+        # the loop and PX4's state: ticked here, fused on the camera thread, taken on the
+        # receiver threads, read by the sender
+        self._loop_lock = threading.RLock()
         self._fusing = False  # run(): detections are fused on the camera thread
         self._stop = threading.Event()
         self._tick_n = 0
@@ -367,9 +369,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.sender.submit(self._timesync_request)
         if self._tick_n % TELEMETRY_EVERY == 0:
             fox = self.foxglove
-            dkf = None
-            if loop is not None and (self.gcs is not None or fox is not None):
-                dkf = loop.dkf.state_vector()
+            dkf = DKF_FROM_LOOP  # the sender's, after the tick
+            if fox is not None:  # Foxglove live takes it now
+                dkf = None if loop is None else loop.dkf.state_vector()
             self._telemetry(now, tel, dkf)
             if fox is not None and tel is not None:  # references only: never waits
                 fox.offer(
