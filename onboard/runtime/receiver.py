@@ -27,17 +27,20 @@ WAIT_S = 0.05  # longest wait on the socket before checking for stop
 class LinkReceiver(threading.Thread):
     """Parses ``link``'s input into a queue (:meth:`drain` takes everything queued) or, with
     ``on_messages``, hands each batch to it on this thread (an exception it raises is counted
-    in :attr:`errors` and passed to ``on_error``; the thread goes on)."""
+    in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` is called
+    before parsing what arrived (the scheduler's ``wait_for_slack``)."""
 
     def __init__(
         self,
         link: MavLink,
         on_messages: Callable[[list], None] | None = None,
         on_error: Callable[[str], None] | None = None,
+        gate: Callable[[], None] | None = None,
     ) -> None:
         super().__init__(name=f"rx {link.url}", daemon=True)
         self.link = link
         self.errors = 0
+        self._gate = gate
         self._on_messages = on_messages
         self._on_error = on_error
         self._queue: collections.deque = collections.deque()
@@ -56,6 +59,8 @@ class LinkReceiver(threading.Thread):
                     continue
             else:  # a source with nothing to wait on: poll at 1 kHz
                 time.sleep(0.001)
+            if self._gate is not None:
+                self._gate()
             msgs = self.link.poll()
             if not msgs:
                 continue

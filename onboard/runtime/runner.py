@@ -121,10 +121,12 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         # started by run(), which takes what the links bring as it arrives; tick() polls without
         self._fc_rx: LinkReceiver | None = None
         self._gcs_rx: LinkReceiver | None = None
-        # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
-        self.sender = Sender(on_error=lambda msg: self._event("error", msg))
         self.scheduler = PeriodicScheduler(
             self.period_s, realtime_priority=config.realtime_priority
+        )
+        # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
+        self.sender = Sender(
+            on_error=lambda msg: self._event("error", msg), gate=self.scheduler.wait_for_slack
         )
         self.camera = CameraThread(
             lambda: open_source(config.camera, self.clock, self.params.runtime.CAM_LAT_S),
@@ -393,10 +395,11 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._event("warning", note)
         # PX4's stream and the ground's messages parsed and taken between ticks
         on_error = lambda msg: self._event("error", msg)  # noqa: E731
-        self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error)
+        gate = sched.wait_for_slack
+        self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error, gate)
         self._fc_rx.start()
         if self.gcs is not None:
-            self._gcs_rx = LinkReceiver(self.gcs, self._take_gcs_batch, on_error)
+            self._gcs_rx = LinkReceiver(self.gcs, self._take_gcs_batch, on_error, gate)
             self._gcs_rx.start()
         self.sender.start()
         self._fusing = True

@@ -19,12 +19,18 @@ _STOP = object()
 
 class Sender(threading.Thread):
     """Runs submitted calls one at a time in submission order. An exception in one is counted
-    in :attr:`errors` and passed to ``on_error``; the thread goes on."""
+    in :attr:`errors` and passed to ``on_error``; the thread goes on. ``gate`` is called
+    before each (the scheduler's ``wait_for_slack``)."""
 
-    def __init__(self, on_error: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        on_error: Callable[[str], None] | None = None,
+        gate: Callable[[], None] | None = None,
+    ) -> None:
         super().__init__(name="sender", daemon=True)
         self.errors = 0
         self._on_error = on_error
+        self._gate = gate
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._running = False
 
@@ -45,6 +51,8 @@ class Sender(threading.Thread):
             if item is _STOP:
                 return
             fn, args = item
+            if self._gate is not None:
+                self._gate()
             try:
                 fn(*args)
             except Exception as exc:
