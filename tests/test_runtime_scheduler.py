@@ -45,7 +45,7 @@ def test_a_stall_re_anchors_instead_of_bursting():
 def test_other_threads_wait_for_the_tick_to_be_over():
     """A thread asking for slack while the control thread ticks goes on only after the tick
     (ordering, not timing: the tick records its end before after_tick lets the thread go)."""
-    sched = PeriodicScheduler(0.002)
+    sched = PeriodicScheduler(0.05)
     log: list[str] = []
     asked = threading.Event()
 
@@ -60,14 +60,16 @@ def test_other_threads_wait_for_the_tick_to_be_over():
         t = threading.Thread(target=helper)
         t.start()
         asked.wait(2.0)
-        time.sleep(0.02)  # the tick goes on for ten periods: the helper must still wait
+        time.sleep(0.01)  # a long tick: the helper must still wait
         log.append("tick over")
         sched.after_tick()
         t.join(2.0)
-        sched.wait_for_slack()  # the control thread asleep (not in wait()): at once
+        log.append("helper gone")
+        sched.wait_for_slack()  # the control thread asleep, its deadline ~40 ms off: at once
+        log.append("slack")
     finally:
         sched.stop()
-    assert log == ["tick over", "helper"]
+    assert log == ["tick over", "helper", "helper gone", "slack"]
     sched.wait_for_slack()  # stopped: at once
 
 

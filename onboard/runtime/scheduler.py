@@ -27,6 +27,7 @@ GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
 GC_OLDER_EVERY_S = 10.0  # and generation 1 this often
 GC_MIN_SLACK_S = 0.002  # only when this much time is left before the next deadline
 MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than this
+SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
 
 
 class PeriodicScheduler:
@@ -114,15 +115,19 @@ class PeriodicScheduler:
             self._done.notify_all()
 
     def wait_for_slack(self) -> None:
-        """For the other threads, before a piece of work: return when the control thread is
-        not spinning to a deadline or ticking (at once while it sleeps; otherwise when its
-        tick is over), so their work falls in the tick's slack."""
-        if not self._busy or not self._running:
+        """For the other threads, before a piece of work: return at once while the control
+        thread sleeps with more than ``SLACK_LEAD_S`` to go before it wakes (``spin_s`` before
+        its deadline); otherwise when its tick is over. Their work then falls in the tick's
+        slack, not at its start: under SCHED_FIFO a thread of the same priority is not
+        preempted, so work begun just before the wake-up would delay the tick by its length."""
+        if not self._running:
+            return
+        if not self._busy and self._next_s - self.spin_s - time.perf_counter() >= SLACK_LEAD_S:
             return
         with self._done:
             n = self._ticks_done
             self._done.wait_for(
-                lambda: self._ticks_done != n or not self._running or not self._busy,
+                lambda: self._ticks_done != n or not self._running,
                 timeout=MAX_HOLD_OFF_S,
             )
 
