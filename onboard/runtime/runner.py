@@ -121,6 +121,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         # started by run(), which takes what the links bring as it arrives; tick() polls without
         self._fc_rx: LinkReceiver | None = None
         self._gcs_rx: LinkReceiver | None = None
+        self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
+        self._gcs_waiting: deque = deque()
         self.scheduler = PeriodicScheduler(
             self.period_s, realtime_priority=config.realtime_priority
         )
@@ -221,14 +223,34 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def _take_fc_batch(self, msgs: list) -> None:
         """On a receiver thread (run()): PX4's messages taken as they arrive, under the loop's
-        lock, so a tick sees each of them entirely or not at all."""
-        with self._loop_lock:
-            self._take_all(self.fc, self._take_fc, msgs, self.clock.now())
+        lock, so a tick sees each of them entirely or not at all. When the lock is taken (a
+        tick, a fusion) they wait in order for whoever has it next, the next tick at the
+        latest: a late control thread running tick after tick must not leave them behind."""
+        self._fc_waiting.extend(msgs)
+        if self._loop_lock.acquire(blocking=False):
+            try:
+                self._take_waiting(self.clock.now())
+            finally:
+                self._loop_lock.release()
+
+    def _take_waiting(self, now: float) -> None:
+        """Take the links' messages the receiver threads left waiting (under the loop's lock)."""
+        for link, take, waiting in (
+            (self.fc, self._take_fc, self._fc_waiting),
+            (self.gcs, self._take_gcs, self._gcs_waiting),
+        ):
+            while waiting:
+                msgs = [waiting.popleft() for _ in range(len(waiting))]
+                self._take_all(link, take, msgs, now)
 
     def _take_gcs_batch(self, msgs: list) -> None:
         """The ground's, likewise."""
-        with self._loop_lock:
-            self._take_all(self.gcs, self._take_gcs, msgs, self.clock.now())
+        self._gcs_waiting.extend(msgs)
+        if self._loop_lock.acquire(blocking=False):
+            try:
+                self._take_waiting(self.clock.now())
+            finally:
+                self._loop_lock.release()
 
     def _take_all(self, link: MavLink, take, msgs: list, now: float) -> None:
         for msg in msgs:
@@ -289,6 +311,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     # ------------------------------------------------------------------ the tick
     def tick(self) -> None:
         now = self.clock.now()
+        self._take_waiting(now)  # what the receiver threads could not take (the lock was held)
         if self._fc_rx is None:  # else taken on the receiver thread as they arrive
             self._take_all(self.fc, self._take_fc, self.fc.poll(), now)
         if self.gcs is not None and self._gcs_rx is None:
