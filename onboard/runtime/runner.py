@@ -1,13 +1,15 @@
 """``onboard run``: the interception loop on the vehicle. The control thread ticks at a fixed
-rate (default 200 Hz); each tick reads what the flight controller and the ground sent, feeds
-the camera thread's detections to the loop, steps the offboard state machine (the failsafe
-wiring: :meth:`OnboardRuntime.tick`), sends the command to PX4 and, every few ticks,
-telemetry to the ground.
+rate (default 200 Hz); each tick reads the vehicle state the receiver threads took from what
+the flight controller and the ground sent, feeds the camera thread's detections to the loop,
+steps the offboard state machine (the failsafe wiring: :meth:`OnboardRuntime.tick`), sends
+the command to PX4 and hands the rest (telemetry every few ticks, events, heartbeats, TIMESYNC
+requests) to the sender thread, which sends it in the tick's slack.
 
 The runtime is split by concern: :mod:`.fc_side` (PX4 in and out), :mod:`.ground_side`
 (parameters, commands, telemetry, events), :mod:`.scheduler` (when the tick runs: deadlines,
-sleeping, garbage collection, priority), :mod:`.timing` (the figures), :mod:`.camera` (the
-camera thread) and this module, which wires them around the state machine.
+sleeping, garbage collection, priority, the other threads held off the tick), :mod:`.timing`
+(the figures), :mod:`.camera` (the camera thread), :mod:`.receiver` and :mod:`.sender` (the
+links' threads) and this module, which wires them around the state machine.
 All MAVLink goes through :mod:`onboard.link.px4`; the maths stays in :mod:`onboard.loop`.
 """
 
