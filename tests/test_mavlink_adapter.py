@@ -15,6 +15,7 @@ from onboard.link.px4 import (
     CMD_START,
     MODE_HOLD,
     MODE_OFFBOARD,
+    FrameEncoder,
     LinkError,
     MavLink,
     TlogWriter,
@@ -153,6 +154,52 @@ def test_signed_link_refuses_unsigned_commands_and_accepts_signed_ones():
     finally:
         for link in (onboard, unsigned, signed, wrong):
             link.close()
+
+
+class _Capture:
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+
+    def write(self, frame) -> None:
+        self.frames.append(bytes(frame))
+
+
+def test_frame_encoder_puts_pymavlink_s_bytes_on_the_wire():
+    """SET_ATTITUDE_TARGET packed directly (the control tick's send) is pymavlink's frame,
+    byte for byte: zeros, negative zero, NaN, limits, trimmed trailing zeros, the sequence
+    number wrapping; and a signed link falls back to pymavlink's signing."""
+    enc = FrameEncoder(mavlink.MAVLink_set_attitude_target_message)
+    rng = np.random.default_rng(5)
+    ref = mavlink.MAVLink(_Capture(), 1, 191)
+    link = MavLink(f"udpout:127.0.0.1:{free_port()}", 1, 191)
+    try:
+        link.mav.file = _Capture()
+        specials = [0.0, -0.0, math.nan, math.inf, 1e-40, 20.0]
+        for k in range(600):
+            t_ms = int(rng.choice([0, 1, 0xFFFFFFFF, int(rng.integers(0, 2**32))]))
+            rates = [float(rng.choice(specials)) if rng.random() < 0.3 else float(rng.normal())
+                     for _ in range(3)]  # fmt: skip
+            thrust = 0.0 if k % 7 == 0 else float(rng.random())
+            ids = [int(rng.integers(0, 2)), int(rng.integers(0, 2)), int(rng.choice([0, 7, 128]))]
+            q = (1.0, 0.0, 0.0, 0.0)
+            assert link.send_fields(enc, t_ms, *q, *rates, thrust, *ids)
+            ref.send(ref.set_attitude_target_encode(t_ms, *ids, q, *rates, thrust))
+        assert link.mav.file.frames == ref.file.frames
+        assert link.sent == 600 and link.mav.seq == ref.seq == 600 % 256
+    finally:
+        link.close()
+    key = os.urandom(32)
+    signed = MavLink(f"udpout:127.0.0.1:{free_port()}", 1, 191, key)
+    try:
+        signed.mav.file = _Capture()
+        assert signed.send_fields(enc, 5, 1.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 0.5, 1, 1, 7)
+        frame = signed.mav.file.frames[0]
+        assert frame[2] & mavlink.MAVLINK_IFLAG_SIGNED and len(frame) == 12 + 39 + 13
+        msg = mavlink.MAVLink(None, 255, 190).decode(bytearray(frame))
+        assert (msg.time_boot_ms, msg.type_mask) == (5, 7)
+        assert abs(msg.body_yaw_rate - 0.3) < 1e-6 and abs(msg.thrust - 0.5) < 1e-6
+    finally:
+        signed.close()
 
 
 def test_tlog_is_readable_by_pymavlink_and_never_overwritten(tmp_path):

@@ -1,7 +1,8 @@
-"""The onboard runtime in-process: the last-line output guard, loop overruns, and the
-parameter protocol, against sockets this test reads."""
+"""The onboard runtime in-process: the last-line output guard, loop overruns, the parameter
+protocol and PX4's messages taken off the tick, against sockets this test reads."""
 
 import math
+import threading
 import time
 
 import numpy as np
@@ -109,6 +110,42 @@ def test_parameter_protocol_read_list_and_set(tmp_path):
         assert hfov[-1] == 90.0  # out of range: the unchanged value comes back
         assert "PRG_K_BRAKE = 2.5" in (tmp_path / "params.toml").read_text()
     finally:
+        rt.camera.stop()
+        for link in (fc, gcs, rt.fc, rt.gcs):
+            link.close()
+
+
+def test_px4_messages_that_find_the_loop_busy_wait_in_order_for_the_next_tick(tmp_path):
+    rt, fc, gcs, _ = _runtime(tmp_path)
+    px4 = mavlink.MAVLink(None, 1, 1)
+
+    def position(x_m: float):
+        msg = px4.local_position_ned_encode(int(1000 * x_m), x_m, 0.0, 0.0, 0.0, 0.0, 0.0)
+        msg.pack(px4)  # stamps the sender (system 1, the autopilot) as on the wire
+        return msg
+
+    held, release = threading.Event(), threading.Event()
+
+    def fusing() -> None:  # the camera thread holding the loop's lock
+        with rt._loop_lock:
+            held.set()
+            release.wait(5.0)
+
+    try:
+        t = threading.Thread(target=fusing)
+        t.start()
+        held.wait(5.0)
+        rt._take_fc_batch([position(1.0)])  # on the receiver thread, while the lock is held
+        rt._take_fc_batch([position(2.0)])
+        assert rt.fcs.pos_enu_m is None  # waiting, not dropped, not blocking the receiver
+        release.set()
+        t.join(5.0)
+        rt.tick()
+        assert rt.fcs.pos_enu_m[1] == 2.0  # both taken by the tick, in order (NED x = ENU y)
+        rt._take_fc_batch([position(3.0)])  # the lock free: taken at once
+        assert rt.fcs.pos_enu_m[1] == 3.0
+    finally:
+        release.set()
         rt.camera.stop()
         for link in (fc, gcs, rt.fc, rt.gcs):
             link.close()

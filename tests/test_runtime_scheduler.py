@@ -1,10 +1,12 @@
 """The onboard control thread's scheduler (onboard/runtime/scheduler.py): deadlines on a
-fixed grid, re-anchoring after a stall, garbage collection held and handed back."""
+fixed grid, re-anchoring after a stall, garbage collection held and handed back, other threads
+held off while a tick runs."""
 
 from __future__ import annotations
 
 import gc
 import sys
+import threading
 import time
 
 import pytest
@@ -38,6 +40,37 @@ def test_a_stall_re_anchors_instead_of_bursting():
         sched.stop()
     assert sched.stalls >= 1
     assert nxt >= after_stall + period - 1e-4  # the next tick is a full period later
+
+
+def test_other_threads_wait_for_the_tick_to_be_over():
+    """A thread asking for slack while the control thread ticks goes on only after the tick
+    (ordering, not timing: the tick records its end before after_tick lets the thread go)."""
+    sched = PeriodicScheduler(0.05)
+    log: list[str] = []
+    asked = threading.Event()
+
+    def helper() -> None:
+        asked.set()
+        sched.wait_for_slack()
+        log.append("helper")
+
+    sched.start()
+    try:
+        sched.wait()
+        t = threading.Thread(target=helper)
+        t.start()
+        asked.wait(2.0)
+        time.sleep(0.01)  # a long tick: the helper must still wait
+        log.append("tick over")
+        sched.after_tick()
+        t.join(2.0)
+        log.append("helper gone")
+        sched.wait_for_slack()  # the control thread asleep, its deadline ~40 ms off: at once
+        log.append("slack")
+    finally:
+        sched.stop()
+    assert log == ["tick over", "helper", "helper gone", "slack"]
+    sched.wait_for_slack()  # stopped: at once
 
 
 def test_collection_is_held_during_the_loop_and_handed_back():

@@ -18,6 +18,7 @@ import os
 import socket
 import struct
 import sys
+import threading
 import time
 from collections import Counter, deque
 from collections.abc import Iterable
@@ -190,14 +191,21 @@ class MavLink:
         self._rx_times: deque[tuple[float, str]] = deque()
         self._first_rx_s: float | None = None  # when the first valid frame came
         self.tlog: TlogWriter | None = None
+        # sending is safe from several threads (the control thread's setpoints, the receiver
+        # thread's TIMESYNC answers, the ground sender's telemetry): one frame at a time, so
+        # sequence numbers and signing timestamps stay in order. A signed link also parses
+        # under it (pymavlink moves the signing timestamp forward on a valid signed frame)
+        self.send_lock = threading.Lock()
+        self._parse_lock = self.send_lock if signing_key is not None else contextlib.nullcontext()
 
     # -------------------------------------------------------------- receive
     def poll(self, max_messages: int = 500) -> list:
         """Every valid message waiting now (never blocks, never raises)."""
-        if isinstance(self.conn, mavutil.mavudp):
-            out = self._poll_datagrams(max_messages)
-        else:
-            out = self._poll_stream(max_messages)
+        with self._parse_lock:
+            if isinstance(self.conn, mavutil.mavudp):
+                out = self._poll_datagrams(max_messages)
+            else:
+                out = self._poll_stream(max_messages)
         now = time.monotonic()
         for msg in out:
             if self._first_rx_s is None:
@@ -309,12 +317,45 @@ class MavLink:
     # -------------------------------------------------------------- send
     def send(self, msg) -> bool:
         try:
-            self.mav.send(msg)
-            self.sent += 1
-            if self.tlog is not None:
-                self.tlog.write(msg.get_msgbuf())
+            with self.send_lock:
+                self.mav.send(msg)
+                self.sent += 1
+                if self.tlog is not None:
+                    self.tlog.write(msg.get_msgbuf())
             return True
         except Exception:  # OSError, a closed socket or a full serial buffer: report, go on
+            self.send_errors += 1
+            return False
+
+    def send_fields(self, encoder: FrameEncoder, *fields) -> bool:
+        """Send one message of ``encoder``'s type from its fields in wire order (the hot path's
+        :meth:`send`: no pymavlink message object; the same bytes on the wire). A signed link
+        goes through pymavlink."""
+        mav = self.mav
+        if mav.signing.sign_outgoing or mav.send_callback is not None:
+            return self.send(encoder.message(*fields))
+        try:
+            with self.send_lock:
+                frame = encoder.frame(mav.seq, mav.srcSystem, mav.srcComponent, fields)
+                mav.file.write(frame)
+                mav.seq = (mav.seq + 1) % 256
+                mav.total_packets_sent += 1
+                mav.total_bytes_sent += len(frame)
+                self.sent += 1
+                if self.tlog is not None:
+                    self.tlog.write(frame)
+            return True
+        except Exception:  # as send(): report, go on
+            self.send_errors += 1
+            return False
+
+    def send_frame(self, frame: bytes) -> bool:
+        """Pass an already-encoded frame on as it is (another link's message forwarded)."""
+        try:
+            with self.send_lock:
+                self.conn.write(frame)
+            return True
+        except Exception:
             self.send_errors += 1
             return False
 
@@ -331,6 +372,59 @@ class MavLink:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.conn.close()
+
+
+class FrameEncoder:
+    """MAVLink 2 frames of one message type, unsigned, packed directly from the fields in the
+    order of the message's wire format (pymavlink's ``unpacker``; :meth:`MavLink.send_fields`):
+    what pymavlink's ``<name>_encode`` then ``send`` put on the wire, byte for byte (trailing
+    zeros of the payload trimmed, CRC with the message's CRC_EXTRA), without building a message
+    object per frame."""
+
+    def __init__(self, message_class) -> None:
+        self.message_class = message_class
+        self._payload = message_class.unpacker
+        self._header = struct.Struct("<BBBBBBBHB")
+        self._crc_extra = bytes([message_class.crc_extra])
+        self._msg_id = message_class.id
+        self._order = _wire_order(message_class)
+
+    def frame(self, seq: int, system_id: int, component_id: int, fields) -> bytes:
+        payload = self._payload.pack(*fields)
+        n = len(payload)
+        while n > 1 and payload[n - 1] == 0:
+            n -= 1
+        msg_id = self._msg_id
+        head = self._header.pack(
+            mavlink.PROTOCOL_MARKER_V2, n, 0, 0, seq, system_id, component_id,
+            msg_id & 0xFFFF, msg_id >> 16,
+        )  # fmt: skip
+        body = head + payload[:n]
+        crc = _crc16(body[1:] + self._crc_extra)
+        return body + crc.to_bytes(2, "little")
+
+    def message(self, *fields):
+        """The pymavlink message of the same fields (for a signed link)."""
+        flat = iter(fields)
+        args: list = [None] * len(self._order)
+        for i, count in self._order:
+            args[i] = next(flat) if count == 0 else tuple(next(flat) for _ in range(count))
+        return self.message_class(*args)
+
+
+_MCRF4XX = getattr(mavlink, "mcrf4xx", None)  # fastcrc's, which pymavlink uses when installed
+
+
+def _crc16(data: bytes) -> int:
+    """MAVLink's CRC-16/MCRF4XX."""
+    return _MCRF4XX(data, 0xFFFF) if _MCRF4XX is not None else mavlink.x25crc(data).crc
+
+
+def _wire_order(message_class) -> list[tuple[int, int]]:
+    """Per field in wire order: (its position in the constructor, array length or 0)."""
+    names = message_class.fieldnames
+    wire = message_class.ordered_fieldnames
+    return [(names.index(n), k) for n, k in zip(wire, message_class.array_lengths, strict=True)]
 
 
 def _stamp_s(msg) -> float | None:

@@ -22,8 +22,8 @@ from ..link.px4 import (
     PX4_MAIN_OFFBOARD,
     TARGET_SYSTEM_ID,
     VEHICLE_SYSTEM_ID,
+    FrameEncoder,
     all_finite,
-    flu_to_frd,
     frd_to_flu,
     mavlink,
     ned_to_enu,
@@ -36,6 +36,9 @@ from .px4_params import PX4_PARAMS_READ, check
 MAX_RATE_RAD_S = 20.0
 MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
 MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
+SET_ATTITUDE_TARGET = FrameEncoder(mavlink.MAVLink_set_attitude_target_message)
+_NO_ATTITUDE = (1.0, 0.0, 0.0, 0.0)  # ignored (type mask): rates and thrust only
+_RATES_ONLY = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 200.0,
     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
@@ -154,29 +157,22 @@ class FlightControllerSide:
 
     # ------------------------------------------------------------------ outputs
     def _send_command(self, rates_flu: np.ndarray, thrust: float, now: float) -> bool:
-        rates = flu_to_frd(rates_flu)
-        ok = (
-            all_finite((*tuple(rates), thrust))
-            and 0.0 <= thrust <= 1.0
-            and all(abs(r) <= MAX_RATE_RAD_S for r in rates)
-        )
+        try:  # FLU -> FRD (frd_to_flu) on plain floats: the hot path allocates no arrays
+            x, y, z = (float(c) for c in rates_flu)
+            rates, thrust = (x, -y, -z), float(thrust)
+            ok = all(math.isfinite(c) and abs(c) <= MAX_RATE_RAD_S for c in rates) and (
+                0.0 <= thrust <= 1.0  # NaN fails too
+            )
+        except (TypeError, ValueError):
+            ok = False
         if not ok:  # the last line of defence: nothing non-finite or wild reaches PX4
             self._event("error", "output guard: bad command replaced by hover")
-            rates = np.zeros(3)
-            thrust = self.params.runtime.HOVER_THR
-        sent = self.fc.send(
-            self.fc.mav.set_attitude_target_encode(
-                int(now * 1000) & 0xFFFFFFFF,
-                VEHICLE_SYSTEM_ID,
-                AUTOPILOT_COMPONENT_ID,
-                mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE,
-                (1.0, 0.0, 0.0, 0.0),
-                float(rates[0]),
-                float(rates[1]),
-                float(rates[2]),
-                float(thrust),
-            )
-        )
+            rates, thrust = (0.0, 0.0, 0.0), float(self.params.runtime.HOVER_THR)
+        sent = self.fc.send_fields(
+            SET_ATTITUDE_TARGET,  # the message's wire order
+            int(now * 1000) & 0xFFFFFFFF, *_NO_ATTITUDE, *rates, thrust,
+            VEHICLE_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, _RATES_ONLY,
+        )  # fmt: skip
         if sent:
             self.commands_sent += 1
         return sent

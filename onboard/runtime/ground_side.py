@@ -20,8 +20,10 @@ from ..link.px4 import (
     param_id_str,
     real32,
 )
+from .timing import jitter_p99_ms, rate_hz
 
 TELEMETRY_EVERY = 4  # ticks: 50 Hz at 200 Hz
+DKF_FROM_LOOP = object()  # _telemetry: the sender reads the filter's state after the tick
 FORWARD_HZ = 25.0  # flight-controller pose passed through to the ground
 SEVERITY = {
     "critical": mavlink.MAV_SEVERITY_CRITICAL,
@@ -56,10 +58,7 @@ class GroundSide:
         if not always and now - self._last_forward.get(key, -1e9) < 1.0 / FORWARD_HZ:
             return
         self._last_forward[key] = now
-        try:
-            self.gcs.conn.write(msg.get_msgbuf())
-        except Exception:
-            self.gcs.send_errors += 1
+        self.gcs.send_frame(msg.get_msgbuf())
 
     def _take_gcs(self, msg, _now: float) -> None:
         kind = msg.get_type()
@@ -140,41 +139,66 @@ class GroundSide:
             )
         )
 
-    def _telemetry(self, now: float, tel, dkf=None) -> None:
-        """``dkf``: the filter's ``state_vector()`` at this tick (None before it starts)."""
-        if self.gcs is None:
-            return
-        loop = self.loop
-        f = self.fcs
+    def _telemetry(self, now: float, tel, dkf=DKF_FROM_LOOP) -> None:
+        """``dkf``: the filter's ``state_vector()`` at this tick (None before it starts), or
+        ``DKF_FROM_LOOP``: the sender takes it from the loop under its lock, right after the
+        tick (the filter's covariance is propagated lazily, and that is the dearest part of a
+        telemetry tick; a detection fused in between is then in these fields already)."""
+        if self.gcs is not None:
+            self.sender.submit(self._send_telemetry, self._telemetry_snapshot(now, tel, dkf))
+
+    def _telemetry_snapshot(self, now: float, tel, dkf) -> tuple:
+        """What the telemetry of this tick says, taken on the control thread: numbers and
+        references to values that are replaced, never changed in place (the encoding is
+        :meth:`_send_telemetry`'s, off the tick)."""
+        loop, f, timing = self.loop, self.fcs, self.timing
+        latency = timing.latency_total_s[-1] if timing.latency_total_s else None
+        return (
+            now, self.sm.state, timing.recent_periods(), timing.overruns, self.params.version,
+            self.params.runtime.law, self.camera.frames, self.camera.detections,
+            self.commands_sent, self.target_size_frac, latency,
+            loop, None if loop is None else loop.guard_trips,
+            self._last_det, dkf, tel, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz,
+        )  # fmt: skip
+
+    def _send_telemetry(self, snapshot: tuple) -> None:
+        """One ``DEBUG_FLOAT_ARRAY`` from a :meth:`_telemetry_snapshot`."""
+        (now, state, periods, overruns, version, law, frames, detections, commands, size,
+         latency, loop, guard_trips, det, dkf, tel, pos, vel, q) = snapshot  # fmt: skip
+        if dkf is DKF_FROM_LOOP:
+            dkf = None
+            if loop is not None:
+                with self._loop_lock:
+                    dkf = loop.dkf.state_vector()
         vals: dict[str, float | None] = {
             "t_s": now,
-            "state": tm.STATE_CODES.index(self.sm.state.value),
-            "loop_rate_hz": self.loop_rate_hz(),
-            "loop_jitter_p99_ms": self.jitter_p99_ms(),
-            "overruns": self.overruns,
-            "params_version": self.params.version,
-            "law": tm.LAW_CODES.index(self.params.runtime.law),
-            "frames": self.camera.frames,
-            "detections": self.camera.detections,
-            "commands_sent": self.commands_sent,
-            "target_size_frac": self.target_size_frac,
+            "state": tm.STATE_CODES.index(state.value),
+            "loop_rate_hz": rate_hz(periods),
+            "loop_jitter_p99_ms": jitter_p99_ms(periods, self.period_s),
+            "overruns": overruns,
+            "params_version": version,
+            "law": tm.LAW_CODES.index(law),
+            "frames": frames,
+            "detections": detections,
+            "commands_sent": commands,
+            "target_size_frac": size,
         }
-        if self.timing.latency_total_s:
-            vals["latency_ms"] = 1000.0 * self.timing.latency_total_s[-1]
+        if latency is not None:
+            vals["latency_ms"] = 1000.0 * latency
         if loop is not None:
             cam = loop.camera
             vals.update(
                 image_w_px=cam.width_px,
                 image_h_px=cam.height_px,
                 f_px=cam.f_px,
-                guard_trips=loop.guard_trips,
+                guard_trips=guard_trips,
             )
-            vals.update(tm.detection_values(self._last_det, cam))
+            vals.update(tm.detection_values(det, cam))
             if dkf is not None:
                 vals.update(tm.dkf_values(dkf[0], dkf[1]))
         if tel is not None:
             vals.update(tm.loop_values(tel))
-        vals.update(tm.pose_values(f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz))
+        vals.update(tm.pose_values(pos, vel, q))
         self.gcs.send(
             self.gcs.mav.debug_float_array_encode(
                 int(now * 1e6), tm.ARRAY_NAME.encode(), tm.ARRAY_ID, tm.pack(vals)

@@ -1,12 +1,14 @@
 """The flight controller's messages received and parsed off the control thread: a thread waits
 on the link's socket (without holding the GIL), parses what arrives with the link's own
-:meth:`~onboard.link.px4.MavLink.poll` and queues the messages; the control tick only drains
-the queue. PX4 streams about 500 messages a second at the rates the loop asks for, and parsing
-them inside the tick was most of its work beyond the loop itself.
+:meth:`~onboard.link.px4.MavLink.poll` and either queues the messages for the control tick to
+drain or hands each batch to ``on_messages`` right away (``onboard run`` takes PX4's state in
+there, under the loop's lock, so the tick only reads it). PX4 streams about 500 messages a
+second at the rates the loop asks for, and parsing and converting them inside the tick was most
+of its work beyond the loop itself.
 
-Only the receive side runs here: sending stays on the control thread. The flight-controller
-link is unsigned, so the two sides share no state of the parser; the ground link (signed, a
-few messages a second) keeps being polled by the tick.
+The flight-controller link is unsigned, so parsing here shares no state with sending
+(:meth:`~onboard.link.px4.MavLink.send` takes the link's lock); the ground link (signed, a few
+messages a second) keeps being polled by the tick.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import collections
 import select
 import threading
 import time
+from collections.abc import Callable
 
 from ..link.px4 import MavLink
 
@@ -22,11 +25,24 @@ WAIT_S = 0.05  # longest wait on the socket before checking for stop
 
 
 class LinkReceiver(threading.Thread):
-    """Parses ``link``'s input into a queue; :meth:`drain` takes everything queued."""
+    """Parses ``link``'s input into a queue (:meth:`drain` takes everything queued) or, with
+    ``on_messages``, hands each batch to it on this thread (an exception it raises is counted
+    in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` is called
+    before parsing what arrived (the scheduler's ``wait_for_slack``)."""
 
-    def __init__(self, link: MavLink) -> None:
+    def __init__(
+        self,
+        link: MavLink,
+        on_messages: Callable[[list], None] | None = None,
+        on_error: Callable[[str], None] | None = None,
+        gate: Callable[[], None] | None = None,
+    ) -> None:
         super().__init__(name=f"rx {link.url}", daemon=True)
         self.link = link
+        self.errors = 0
+        self._gate = gate
+        self._on_messages = on_messages
+        self._on_error = on_error
         self._queue: collections.deque = collections.deque()
         self._stop_event = threading.Event()
         port = getattr(link.conn, "port", None)
@@ -43,9 +59,20 @@ class LinkReceiver(threading.Thread):
                     continue
             else:  # a source with nothing to wait on: poll at 1 kHz
                 time.sleep(0.001)
+            if self._gate is not None:
+                self._gate()
             msgs = self.link.poll()
-            if msgs:
+            if not msgs:
+                continue
+            if self._on_messages is None:
                 self._queue.extend(msgs)
+                continue
+            try:
+                self._on_messages(msgs)
+            except Exception as exc:  # a handler's bug must not stop PX4's state coming in
+                self.errors += 1
+                if self._on_error is not None:
+                    self._on_error(f"receiver: {type(exc).__name__}: {exc}")
 
     def drain(self) -> list:
         """Every message parsed since the last call, oldest first."""

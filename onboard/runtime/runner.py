@@ -1,13 +1,15 @@
 """``onboard run``: the interception loop on the vehicle. The control thread ticks at a fixed
-rate (default 200 Hz); each tick reads what the flight controller and the ground sent, feeds
-the camera thread's detections to the loop, steps the offboard state machine (the failsafe
-wiring: :meth:`OnboardRuntime.tick`), sends the command to PX4 and, every few ticks,
-telemetry to the ground.
+rate (default 200 Hz); each tick reads the vehicle state the receiver threads took from what
+the flight controller and the ground sent, feeds the camera thread's detections to the loop,
+steps the offboard state machine (the failsafe wiring: :meth:`OnboardRuntime.tick`), sends
+the command to PX4 and hands the rest (telemetry every few ticks, events, heartbeats, TIMESYNC
+requests) to the sender thread, which sends it in the tick's slack.
 
 The runtime is split by concern: :mod:`.fc_side` (PX4 in and out), :mod:`.ground_side`
 (parameters, commands, telemetry, events), :mod:`.scheduler` (when the tick runs: deadlines,
-sleeping, garbage collection, priority), :mod:`.timing` (the figures), :mod:`.camera` (the
-camera thread) and this module, which wires them around the state machine.
+sleeping, garbage collection, priority, the other threads held off the tick), :mod:`.timing`
+(the figures), :mod:`.camera` (the camera thread), :mod:`.receiver` and :mod:`.sender` (the
+links' threads) and this module, which wires them around the state machine.
 All MAVLink goes through :mod:`onboard.link.px4`; the maths stays in :mod:`onboard.loop`.
 """
 
@@ -46,9 +48,10 @@ from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
 from .fc_side import FcState, FlightControllerSide, state_at
-from .ground_side import TELEMETRY_EVERY, GroundSide
+from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler
+from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
 from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
@@ -117,9 +120,17 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self.fcs = FcState()
         self.loop: InterceptionLoop | None = None
         self.period_s = 1.0 / config.control_rate_hz
-        self._fc_rx: LinkReceiver | None = None  # started by run(); tick() polls without it
+        # started by run(), which takes what the links bring as it arrives; tick() polls without
+        self._fc_rx: LinkReceiver | None = None
+        self._gcs_rx: LinkReceiver | None = None
+        self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
+        self._gcs_waiting: deque = deque()
         self.scheduler = PeriodicScheduler(
             self.period_s, realtime_priority=config.realtime_priority
+        )
+        # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
+        self.sender = Sender(
+            on_error=lambda msg: self._event("error", msg), gate=self.scheduler.wait_for_slack
         )
         self.camera = CameraThread(
             lambda: open_source(config.camera, self.clock, self.params.runtime.CAM_LAT_S),
@@ -128,7 +139,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             on_error=lambda msg: self._event("warning", f"camera: {msg}"),
             on_detection=self._fuse_on_arrival,
         )
-        self._loop_lock = threading.Lock()  # the loop: ticked here, fused on the camera thread
+        # the loop and PX4's state: ticked here, fused on the camera thread, taken on the
+        # receiver threads, read by the sender
+        self._loop_lock = threading.RLock()
         self._fusing = False  # run(): detections are fused on the camera thread
         self._stop = threading.Event()
         self._tick_n = 0
@@ -194,15 +207,61 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             return
         self._last_hb_sent = now
         status = mavlink.MAV_STATE_ACTIVE if self.sm.flying else mavlink.MAV_STATE_STANDBY
+        self.sender.submit(self._send_heartbeats, tm.STATE_CODES.index(self.sm.state.value), status)
+
+    def _send_heartbeats(self, state_code: int, status: int) -> None:
         for link in (self.fc, self.gcs):
             if link is not None:
                 link.heartbeat(
                     mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
                     mavlink.MAV_AUTOPILOT_INVALID,
                     0,
-                    tm.STATE_CODES.index(self.sm.state.value),
+                    state_code,
                     status,
                 )
+
+    def _timesync_request(self) -> None:
+        send_request(self.fc, self.clock.now())  # stamped as it goes out
+
+    def _take_fc_batch(self, msgs: list) -> None:
+        """On a receiver thread (run()): PX4's messages taken as they arrive, under the loop's
+        lock, so a tick sees each of them entirely or not at all. When the lock is taken (a
+        tick, a fusion) they wait in order for whoever has it next, the next tick at the
+        latest: a late control thread running tick after tick must not leave them behind."""
+        self._fc_waiting.extend(msgs)
+        if self._loop_lock.acquire(blocking=False):
+            try:
+                self._take_waiting(self.clock.now())
+            finally:
+                self._loop_lock.release()
+
+    def _take_waiting(self, now: float) -> None:
+        """Take the links' messages the receiver threads left waiting (under the loop's lock)."""
+        for link, take, waiting in (
+            (self.fc, self._take_fc, self._fc_waiting),
+            (self.gcs, self._take_gcs, self._gcs_waiting),
+        ):
+            while waiting:
+                msgs = [waiting.popleft() for _ in range(len(waiting))]
+                self._take_all(link, take, msgs, now)
+
+    def _take_gcs_batch(self, msgs: list) -> None:
+        """The ground's, likewise."""
+        self._gcs_waiting.extend(msgs)
+        if self._loop_lock.acquire(blocking=False):
+            try:
+                self._take_waiting(self.clock.now())
+            finally:
+                self._loop_lock.release()
+
+    def _take_all(self, link: MavLink, take, msgs: list, now: float) -> None:
+        for msg in msgs:
+            try:
+                take(msg, now)
+            except (ValueError, TypeError, OverflowError, KeyError, IndexError) as exc:
+                # a well-formed frame with nonsense inside (NaN where an integer belongs)
+                link.bad_frames += 1
+                self._event("warning", f"{msg.get_type()} ignored: {type(exc).__name__}")
 
     def _fuse_on_arrival(self, ev) -> None:
         """On the camera thread, as a detection arrives (run() only): fuse it into the DKF
@@ -254,17 +313,11 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     # ------------------------------------------------------------------ the tick
     def tick(self) -> None:
         now = self.clock.now()
-        for link, take in ((self.fc, self._take_fc), (self.gcs, self._take_gcs)):
-            if link is None:
-                continue
-            rx = self._fc_rx if link is self.fc else None
-            for msg in rx.drain() if rx is not None else link.poll():
-                try:
-                    take(msg, now)
-                except (ValueError, TypeError, OverflowError, KeyError, IndexError) as exc:
-                    # a well-formed frame with nonsense inside (NaN where an integer belongs)
-                    link.bad_frames += 1
-                    self._event("warning", f"{msg.get_type()} ignored: {type(exc).__name__}")
+        self._take_waiting(now)  # what the receiver threads could not take (the lock was held)
+        if self._fc_rx is None:  # else taken on the receiver thread as they arrive
+            self._take_all(self.fc, self._take_fc, self.fc.poll(), now)
+        if self.gcs is not None and self._gcs_rx is None:
+            self._take_all(self.gcs, self._take_gcs, self.gcs.poll(), now)
         if self.loop is None and self.camera.last_frame is not None:
             h, w = self.camera.last_frame.image.shape[:2]
             self._build_loop(w, h)
@@ -340,19 +393,20 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._heartbeats(now)
         if now >= self._next_timesync_s:
             self._next_timesync_s = now + TIMESYNC_EVERY_S
-            send_request(self.fc, self.clock.now())
+            self.sender.submit(self._timesync_request)
         if self._tick_n % TELEMETRY_EVERY == 0:
             fox = self.foxglove
-            dkf = None
-            if loop is not None and (self.gcs is not None or fox is not None):
-                dkf = loop.dkf.state_vector()
+            dkf = DKF_FROM_LOOP  # the sender's, after the tick
+            if fox is not None:  # Foxglove live takes it now
+                dkf = None if loop is None else loop.dkf.state_vector()
             self._telemetry(now, tel, dkf)
             if fox is not None and tel is not None:  # references only: never waits
                 fox.offer(
                     now, f.pos_enu_m, f.vel_enu_m_s, f.q_wxyz, tel, self._last_det, dkf,
                     self.params.gains, loop.guard_trips,
                 )  # fmt: skip
-        self._flush_events()
+        if self._events:
+            self.sender.submit(self._flush_events)
         self._tick_n += 1
 
     # ------------------------------------------------------------------ run
@@ -364,8 +418,15 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
-        self._fc_rx = LinkReceiver(self.fc)  # parses PX4's stream between ticks
+        # PX4's stream and the ground's messages parsed and taken between ticks
+        on_error = lambda msg: self._event("error", msg)  # noqa: E731
+        gate = sched.wait_for_slack
+        self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error, gate)
         self._fc_rx.start()
+        if self.gcs is not None:
+            self._gcs_rx = LinkReceiver(self.gcs, self._take_gcs_batch, on_error, gate)
+            self._gcs_rx.start()
+        self.sender.start()
         self._fusing = True
         self.camera.start()
         if self.video is not None:
@@ -396,6 +457,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         finally:
             sched.stop()
             self._fc_rx.stop()
+            if self._gcs_rx is not None:
+                self._gcs_rx.stop()
+            self.sender.stop()
             self.camera.stop()
             if self.video is not None:
                 self.video.stop()

@@ -19,6 +19,22 @@ def _ms(x: float | None) -> float | None:
     return None if x is None else 1000.0 * x
 
 
+def rate_hz(recent: list[tuple[float, float]]) -> float:
+    """The achieved rate over (tick start s, period s) pairs, oldest first."""
+    if len(recent) < 2:
+        return 0.0
+    span = recent[-1][0] - recent[0][0]
+    return (len(recent) - 1) / span if span > 0 else 0.0
+
+
+def jitter_p99_ms(recent: list[tuple[float, float]], period_s: float) -> float:
+    """The 99th percentile of |period - nominal| over (tick start s, period s) pairs, ms."""
+    if not recent:
+        return 0.0
+    dev = sorted(abs(per - period_s) for _, per in recent)
+    return 1000.0 * dev[min(len(dev) - 1, int(0.99 * len(dev)))]
+
+
 class LoopTiming:
     def __init__(self, period_s: float, keep: int) -> None:
         self.period_s = period_s
@@ -64,18 +80,16 @@ class LoopTiming:
         if detected_s is not None:
             self.latency_after_detection_s.append(sent_s - detected_s)
 
+    def recent_periods(self) -> list[tuple[float, float]]:
+        """A copy of the last second's (tick start s, period s), for the figures off the
+        control thread."""
+        return list(self._recent)
+
     def loop_rate_hz(self) -> float:
-        p = self._recent
-        if len(p) < 2:
-            return 0.0
-        span = p[-1][0] - p[0][0]
-        return (len(p) - 1) / span if span > 0 else 0.0
+        return rate_hz(self._recent)
 
     def jitter_p99_ms(self) -> float:
-        if not self._recent:
-            return 0.0
-        dev = sorted(abs(per - self.period_s) for _, per in self._recent)
-        return 1000.0 * dev[min(len(dev) - 1, int(0.99 * len(dev)))]
+        return jitter_p99_ms(self._recent, self.period_s)
 
     def figures(self) -> dict:
         per = self.periods_all
