@@ -178,9 +178,11 @@ class Figures:
 
 
 def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty: float) -> Figures:
-    """The objective (minimised). ``success-cep`` is lexicographic: its CEP term stays below
-    half of one sortie's share of the HIT rate, so no CEP gain buys back a lost hit. The
-    saturation penalty adds ``penalty x`` the mean share of saturated ticks to any objective."""
+    """The objective (minimised). The saturation penalty adds ``penalty x`` the mean share of
+    saturated ticks (in metres for the CEP objectives). ``success-cep`` is lexicographic: its
+    tie-break c/(c + 1 m)/(2 N), c = CEP + penalty x saturated share, stays below half of one
+    sortie's share of the HIT rate whatever the penalty, so no CEP gain buys back a lost hit,
+    and when every sortie hits the CEP is not drowned by a penalty outside the tie-break."""
     n = len(outcomes)
     if n == 0:
         raise ValueError("no sorties to score")
@@ -188,16 +190,29 @@ def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty:
     success = success_rate([o.result["outcome"] for o in outcomes])
     cep = float(misses[n // 2] if n % 2 else 0.5 * (misses[n // 2 - 1] + misses[n // 2]))
     sat = sum(float((o.trace or {}).get("saturated_fraction", 0.0)) for o in outcomes) / n
+    cost = saturation_penalty * sat
     if objective == "success-cep":
-        loss = (1.0 - success) + cep / (cep + 1.0) / (2 * n)
+        c = cep + cost
+        loss = (1.0 - success) + c / (c + 1.0) / (2 * n)
     elif objective == "cep":
-        loss = cep
+        loss = cep + cost
     elif objective == "success":
-        loss = 1.0 - success
+        loss = (1.0 - success) + cost
     else:
         raise TuneError(f"unknown objective {objective!r}")
-    loss += saturation_penalty * sat
     return Figures(n, success, cep, sum(misses) / n, sat, loss)
+
+
+def objective_formula(objective: str, saturation_penalty: float) -> str:
+    """The objective in words and symbols, with the penalty where :func:`score` adds it."""
+    text = OBJECTIVE_HELP[objective]
+    if not saturation_penalty:
+        return text
+    if objective == "success-cep":
+        return text.replace("CEP/(CEP + 1 m)", "c/(c + 1 m)") + (
+            f", c = CEP + {saturation_penalty:g} m x saturated share"
+        )
+    return text + f" + {saturation_penalty:g}{' m' if objective == 'cep' else ''} x saturated share"
 
 
 def evaluate(
@@ -378,8 +393,7 @@ def run_tune(
         "storage": storage_url,
         "command": command,
         "definition": defn.to_json_dict(),
-        "objective_formula": OBJECTIVE_HELP[defn.objective]
-        + (f" + {defn.saturation_penalty:g} x saturated share" if defn.saturation_penalty else ""),
+        "objective_formula": objective_formula(defn.objective, defn.saturation_penalty),
         "trials_wanted": trials,
         "trials_run_now": remaining,
         "trials_complete": states.count("COMPLETE"),
