@@ -463,10 +463,16 @@ def write_tune_report(
 
     out.mkdir(parents=True, exist_ok=True)
     complete = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    # The success-cep loss spans decades (a lost hit costs 1/N, a centimetre of CEP 1e-4):
+    # on a linear axis every trial that hits looks the same, so plot log10(loss) when it can.
+    log = bool(complete) and all(t.value is not None and t.value > 0 for t in complete)
+    kw: dict[str, Any] = (
+        {"target": lambda t: math.log10(t.value), "target_name": "log10(loss)"} if log else {}
+    )
     plots = {
         "optimization_history.png": lambda: ovm.plot_optimization_history(study),
-        "param_importances.png": lambda: ovm.plot_param_importances(study),
-        "parallel_coordinate.png": lambda: ovm.plot_parallel_coordinate(study),
+        "param_importances.png": lambda: ovm.plot_param_importances(study, **kw),
+        "parallel_coordinate.png": lambda: ovm.plot_parallel_coordinate(study, **kw),
     }
     files, skipped = [], []
     for name, plot in plots.items():
@@ -477,6 +483,9 @@ def write_tune_report(
             warnings.simplefilter("ignore")
             ax = plot()
         fig = ax.figure if hasattr(ax, "figure") else ax.flat[0].figure
+        if log and name == "optimization_history.png":
+            ax.set_yscale("log")  # keeps Optuna's best-so-far line, which a target would drop
+            ax.set_ylabel("loss (log scale)")
         fig.set_size_inches(13 if name.startswith("parallel") else 9, 6)
         fig.tight_layout()
         fig.savefig(out / name, dpi=100)
