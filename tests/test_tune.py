@@ -19,6 +19,7 @@ from groundstation.campaigns.tune import (
     TuneError,
     build_tune_jobs,
     evaluate,
+    open_study,
     parse_gain_space,
     score,
 )
@@ -104,6 +105,19 @@ def test_every_hit_the_cep_leads_and_saturation_only_nudges():
     # equal CEP: the one that saturates less wins
     calm = [_outcome(i, "HIT", 0.035, sat=0.0) for i in range(n)]
     assert score(calm, "success-cep", DEFAULT_SATURATION_PENALTY).loss < a.loss
+
+
+def test_a_study_scored_by_an_older_objective_is_refused(tmp_path):
+    import optuna
+
+    defn = TuneDefinition(TARGET, parse_gain_space("K_y,K_z"), n=1)
+    url = f"sqlite:///{tmp_path / 'studies.db'}"
+    old = {k: v for k, v in defn.to_json_dict().items() if k != "objective_version"}
+    optuna.create_study(storage=url, study_name="s").set_user_attr("definition", old)
+    with pytest.raises(TuneError, match="differs in objective_version"):
+        open_study(url, "s", defn, 0)
+    open_study(f"sqlite:///{tmp_path / 'new.db'}", "s", defn, 0)  # a new one is fine
+    assert open_study(f"sqlite:///{tmp_path / 'new.db'}", "s", defn, 0).study_name == "s"
 
 
 def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():

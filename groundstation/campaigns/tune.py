@@ -33,6 +33,9 @@ from .tune_options import DEFAULT_N, DEFAULT_SATURATION_PENALTY, OBJECTIVE_HELP,
 DEFAULT_OUT_ROOT = Path("logs") / "tune"
 HEARTBEAT_S = 20  # a trial whose process stopped beating for GRACE_S is failed and retried
 GRACE_S = 90
+# 2: success-cep's saturation penalty inside the CEP tie-break; a study scored with another
+# version is refused rather than mixed (its losses are on another scale)
+OBJECTIVE_VERSION = 2
 
 
 class TuneError(CampaignError):
@@ -104,6 +107,7 @@ class TuneDefinition:
     overrides: tuple[tuple[str, Any], ...] = ()
     objective: str = "success-cep"
     saturation_penalty: float = DEFAULT_SATURATION_PENALTY
+    objective_version: int = OBJECTIVE_VERSION
 
     def to_json_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
