@@ -19,9 +19,11 @@ from groundstation.campaigns.tune import (
     TuneError,
     build_tune_jobs,
     evaluate,
+    open_study,
     parse_gain_space,
     score,
 )
+from groundstation.campaigns.tune_options import DEFAULT_SATURATION_PENALTY
 from groundstation.cli import main
 from onboard.gains import GAIN_SPECS, Gains
 
@@ -74,14 +76,48 @@ def test_success_comes_before_cep_and_saturation_costs():
     assert a.success_rate == 0.75 and b.success_rate == 0.5 and a.loss < b.loss
     assert a.cep_m == pytest.approx(0.53) and b.cep_m == pytest.approx(0.1505)
     assert score(more_hits, "cep", 0.0).loss == pytest.approx(0.53)
-    # equal hits: the lower CEP wins; saturation adds penalty x mean saturated share
+    # equal hits: the lower CEP wins; saturation adds penalty x mean saturated share, to the
+    # CEP (in metres) inside success-cep's tie-break, so it never outweighs a hit
     tight = [_outcome(i, "HIT", 0.01) for i in range(4)]
     loose = [_outcome(i, "HIT", 0.05) for i in range(4)]
     assert score(tight, "success-cep", 0.0).loss < score(loose, "success-cep", 0.0).loss
     sat = [_outcome(i, "HIT", 0.01, sat=0.5) for i in range(4)]
-    assert score(sat, "success-cep", 0.1).loss == pytest.approx(
-        score(tight, "success-cep", 0.0).loss + 0.05
-    )
+    assert score(sat, "success-cep", 0.1).loss == pytest.approx(0.06 / 1.06 / 8)
+    assert score(sat, "cep", 0.1).loss == pytest.approx(0.06)
+    assert score(sat, "success", 0.1).loss == pytest.approx(0.05)
+    all_saturated = [_outcome(i, "HIT", 0.9, sat=1.0) for i in range(4)]
+    one_miss = [_outcome(i, "HIT" if i else "MISS", 0.01) for i in range(4)]
+    assert score(all_saturated, "success-cep", 5.0).loss < score(one_miss, "success-cep", 0).loss
+
+
+def test_every_hit_the_cep_leads_and_saturation_only_nudges():
+    # today's wind defaults: every sortie hits, CEP 0.035 m with 9 % of ticks saturated; a gain
+    # set that never saturates but spreads the misses to 0.05 m must not rank first (it did
+    # when the penalty sat outside success-cep's tie-break: 0.05 x 9 % outweighed 15 mm)
+    n = 20
+    defaults = [_outcome(i, "HIT", 0.035, sat=0.09) for i in range(n)]
+    calm_but_wide = [_outcome(i, "HIT", 0.05, sat=0.0) for i in range(n)]
+    a = score(defaults, "success-cep", DEFAULT_SATURATION_PENALTY)
+    b = score(calm_but_wide, "success-cep", DEFAULT_SATURATION_PENALTY)
+    assert a.loss < b.loss
+    c = 0.035 + DEFAULT_SATURATION_PENALTY * 0.09
+    assert a.loss == pytest.approx(c / (c + 1.0) / (2 * n), rel=1e-12)
+    # equal CEP: the one that saturates less wins
+    calm = [_outcome(i, "HIT", 0.035, sat=0.0) for i in range(n)]
+    assert score(calm, "success-cep", DEFAULT_SATURATION_PENALTY).loss < a.loss
+
+
+def test_a_study_scored_by_an_older_objective_is_refused(tmp_path):
+    import optuna
+
+    defn = TuneDefinition(TARGET, parse_gain_space("K_y,K_z"), n=1)
+    url = f"sqlite:///{tmp_path / 'studies.db'}"
+    old = {k: v for k, v in defn.to_json_dict().items() if k != "objective_version"}
+    optuna.create_study(storage=url, study_name="s").set_user_attr("definition", old)
+    with pytest.raises(TuneError, match="differs in objective_version"):
+        open_study(url, "s", defn, 0)
+    open_study(f"sqlite:///{tmp_path / 'new.db'}", "s", defn, 0)  # a new one is fine
+    assert open_study(f"sqlite:///{tmp_path / 'new.db'}", "s", defn, 0).study_name == "s"
 
 
 def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():

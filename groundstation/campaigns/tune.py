@@ -33,6 +33,9 @@ from .tune_options import DEFAULT_N, DEFAULT_SATURATION_PENALTY, OBJECTIVE_HELP,
 DEFAULT_OUT_ROOT = Path("logs") / "tune"
 HEARTBEAT_S = 20  # a trial whose process stopped beating for GRACE_S is failed and retried
 GRACE_S = 90
+# 2: success-cep's saturation penalty inside the CEP tie-break; a study scored with another
+# version is refused rather than mixed (its losses are on another scale)
+OBJECTIVE_VERSION = 2
 
 
 class TuneError(CampaignError):
@@ -104,6 +107,7 @@ class TuneDefinition:
     overrides: tuple[tuple[str, Any], ...] = ()
     objective: str = "success-cep"
     saturation_penalty: float = DEFAULT_SATURATION_PENALTY
+    objective_version: int = OBJECTIVE_VERSION
 
     def to_json_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -178,9 +182,11 @@ class Figures:
 
 
 def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty: float) -> Figures:
-    """The objective (minimised). ``success-cep`` is lexicographic: its CEP term stays below
-    half of one sortie's share of the HIT rate, so no CEP gain buys back a lost hit. The
-    saturation penalty adds ``penalty x`` the mean share of saturated ticks to any objective."""
+    """The objective (minimised). The saturation penalty adds ``penalty x`` the mean share of
+    saturated ticks (in metres for the CEP objectives). ``success-cep`` is lexicographic: its
+    tie-break c/(c + 1 m)/(2 N), c = CEP + penalty x saturated share, stays below half of one
+    sortie's share of the HIT rate whatever the penalty, so no CEP gain buys back a lost hit,
+    and when every sortie hits the CEP is not drowned by a penalty outside the tie-break."""
     n = len(outcomes)
     if n == 0:
         raise ValueError("no sorties to score")
@@ -188,16 +194,29 @@ def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty:
     success = success_rate([o.result["outcome"] for o in outcomes])
     cep = float(misses[n // 2] if n % 2 else 0.5 * (misses[n // 2 - 1] + misses[n // 2]))
     sat = sum(float((o.trace or {}).get("saturated_fraction", 0.0)) for o in outcomes) / n
+    cost = saturation_penalty * sat
     if objective == "success-cep":
-        loss = (1.0 - success) + cep / (cep + 1.0) / (2 * n)
+        c = cep + cost
+        loss = (1.0 - success) + c / (c + 1.0) / (2 * n)
     elif objective == "cep":
-        loss = cep
+        loss = cep + cost
     elif objective == "success":
-        loss = 1.0 - success
+        loss = (1.0 - success) + cost
     else:
         raise TuneError(f"unknown objective {objective!r}")
-    loss += saturation_penalty * sat
     return Figures(n, success, cep, sum(misses) / n, sat, loss)
+
+
+def objective_formula(objective: str, saturation_penalty: float) -> str:
+    """The objective in words and symbols, with the penalty where :func:`score` adds it."""
+    text = OBJECTIVE_HELP[objective]
+    if not saturation_penalty:
+        return text
+    if objective == "success-cep":
+        return text.replace("CEP/(CEP + 1 m)", "c/(c + 1 m)") + (
+            f", c = CEP + {saturation_penalty:g} m x saturated share"
+        )
+    return text + f" + {saturation_penalty:g}{' m' if objective == 'cep' else ''} x saturated share"
 
 
 def evaluate(
@@ -378,8 +397,7 @@ def run_tune(
         "storage": storage_url,
         "command": command,
         "definition": defn.to_json_dict(),
-        "objective_formula": OBJECTIVE_HELP[defn.objective]
-        + (f" + {defn.saturation_penalty:g} x saturated share" if defn.saturation_penalty else ""),
+        "objective_formula": objective_formula(defn.objective, defn.saturation_penalty),
         "trials_wanted": trials,
         "trials_run_now": remaining,
         "trials_complete": states.count("COMPLETE"),
@@ -449,10 +467,16 @@ def write_tune_report(
 
     out.mkdir(parents=True, exist_ok=True)
     complete = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    # The success-cep loss spans decades (a lost hit costs 1/N, a centimetre of CEP 1e-4):
+    # on a linear axis every trial that hits looks the same, so plot log10(loss) when it can.
+    log = bool(complete) and all(t.value is not None and t.value > 0 for t in complete)
+    kw: dict[str, Any] = (
+        {"target": lambda t: math.log10(t.value), "target_name": "log10(loss)"} if log else {}
+    )
     plots = {
         "optimization_history.png": lambda: ovm.plot_optimization_history(study),
-        "param_importances.png": lambda: ovm.plot_param_importances(study),
-        "parallel_coordinate.png": lambda: ovm.plot_parallel_coordinate(study),
+        "param_importances.png": lambda: ovm.plot_param_importances(study, **kw),
+        "parallel_coordinate.png": lambda: ovm.plot_parallel_coordinate(study, **kw),
     }
     files, skipped = [], []
     for name, plot in plots.items():
@@ -463,6 +487,9 @@ def write_tune_report(
             warnings.simplefilter("ignore")
             ax = plot()
         fig = ax.figure if hasattr(ax, "figure") else ax.flat[0].figure
+        if log and name == "optimization_history.png":
+            ax.set_yscale("log")  # keeps Optuna's best-so-far line, which a target would drop
+            ax.set_ylabel("loss (log scale)")
         fig.set_size_inches(13 if name.startswith("parallel") else 9, 6)
         fig.tight_layout()
         fig.savefig(out / name, dpi=100)
