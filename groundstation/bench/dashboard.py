@@ -4,6 +4,7 @@ headless Chromium (no display needed)."""
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import time
 from pathlib import Path
@@ -11,6 +12,44 @@ from pathlib import Path
 from tqdm import tqdm
 
 from ..scenario import load_scenario
+
+_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
+
+
+def _cpu_s(stat_path: str) -> float | None:
+    """User + system CPU seconds of a process or thread (Linux /proc), None if unreadable."""
+    try:
+        with open(stat_path) as f:
+            fields = f.read().rpartition(")")[2].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) * _TICK_S
+
+
+def _cpu_sample(sim_tid: int | None, chromium: str) -> dict[str, float]:
+    """CPU seconds so far: this process, its simulator thread, every Chromium process, and
+    the whole machine (Linux /proc; empty elsewhere)."""
+    if not os.path.isdir("/proc/self/task"):
+        return {}
+    out = {"station": _cpu_s("/proc/self/stat") or 0.0, "browser": 0.0}
+    if sim_tid is not None:
+        out["simulator"] = _cpu_s(f"/proc/self/task/{sim_tid}/stat") or 0.0
+    real = os.path.realpath(chromium)
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                exe = f.read().split(b"\0", 1)[0].decode(errors="replace")
+        except OSError:
+            continue
+        if exe and os.path.realpath(exe) in (real, chromium):
+            out["browser"] += _cpu_s(f"/proc/{pid}/stat") or 0.0
+    try:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+        out["machine"] = (sum(ticks) - ticks[3] - ticks[4]) * _TICK_S  # all but idle, iowait
+    except (OSError, ValueError, IndexError):
+        pass
+    return out
 
 
 def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = False) -> int:
@@ -20,7 +59,6 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     second the server sent it (delivered), its page received, applied to the plots' series and
     readouts (applied) and showed in a redrawn frame (painted); and the load average, which
     other work on the machine raises."""
-    import os
     import shutil
     import tempfile
 
@@ -66,10 +104,13 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
                 "[performance.now(), window.peregrine.received || 0,"
                 " window.peregrine.applied ?? null, window.peregrine.updates]"
             )
+            sim_tid = getattr(getattr(sess, "_thread", None), "native_id", None)
             sent0, pub0, t0 = dict(hub.sent), hub.published, time.perf_counter()
+            cpu0 = _cpu_sample(sim_tid, chromium)
             c0 = [pg.evaluate(probe) for pg in pages]
             time.sleep(seconds)
             sent1, pub1, elapsed = dict(hub.sent), hub.published, time.perf_counter() - t0
+            cpu1 = _cpu_sample(sim_tid, chromium)
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
             c1 = [pg.evaluate(probe) for pg in pages]
@@ -103,6 +144,12 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "applied_hz": applied,
         "painted_hz": painted,
         "software_webgl": software,
+        # CPU used in the window, in % of one core: the ground station (this process), its
+        # simulator thread, Chromium (pages, 3D views, GPU and browser processes), and every
+        # other process on the machine
+        "cpu_percent_of_a_core": {
+            k: round(100 * (cpu1[k] - cpu0[k]) / elapsed, 1) for k in cpu1 if k in cpu0
+        },
         "load_average_before_after": [round(load_before, 2), round(load_after, 2)],
     }
     if as_json:
@@ -135,4 +182,15 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     line("received by each page:", received)
     line("applied to each page's plots and readouts:", applied, target=True)
     line("painted (frames showing new data) per page:", painted)
+    cpu = dict(figures["cpu_percent_of_a_core"])
+    if "machine" in cpu:
+        cpu["other processes"] = round(
+            cpu.pop("machine") - cpu.get("station", 0.0) - cpu.get("browser", 0.0), 1
+        )
+    if cpu:
+        print(
+            "  CPU in the window, % of one core: "
+            + ", ".join(f"{k} {v:.0f}" for k, v in cpu.items())
+            + " (the simulator thread is part of the station)"
+        )
     return 0
