@@ -26,22 +26,28 @@ def _cpu_s(stat_path: str) -> float | None:
     return (int(fields[11]) + int(fields[12])) * _TICK_S
 
 
-def _cpu_sample(sim_tid: int | None, chromium: str) -> dict[str, float]:
-    """CPU seconds so far: this process, its simulator thread, every Chromium process, and
-    the whole machine (Linux /proc; empty elsewhere)."""
+def _cpu_sample(sim_tid: int | None) -> dict[str, float]:
+    """CPU seconds so far: this process, its simulator thread, its child processes (Playwright's
+    driver and Chromium: pages, 3D views, GPU and browser processes), and the whole machine
+    (Linux /proc; empty elsewhere)."""
     if not os.path.isdir("/proc/self/task"):
         return {}
+    me = os.getpid()
     out = {"station": _cpu_s("/proc/self/stat") or 0.0, "browser": 0.0}
     if sim_tid is not None:
         out["simulator"] = _cpu_s(f"/proc/self/task/{sim_tid}/stat") or 0.0
-    real = os.path.realpath(chromium)
+    parent: dict[int, int] = {}
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
-            with open(f"/proc/{pid}/cmdline", "rb") as f:
-                exe = f.read().split(b"\0", 1)[0].decode(errors="replace")
-        except OSError:
+            with open(f"/proc/{pid}/stat") as f:
+                parent[int(pid)] = int(f.read().rpartition(")")[2].split()[1])
+        except (OSError, ValueError, IndexError):
             continue
-        if exe and os.path.realpath(exe) in (real, chromium):
+    for pid in parent:
+        up, hops = parent.get(pid), 0
+        while up and up != me and hops < 64:
+            up, hops = parent.get(up), hops + 1
+        if up == me:
             out["browser"] += _cpu_s(f"/proc/{pid}/stat") or 0.0
     try:
         with open("/proc/stat") as f:
@@ -106,11 +112,11 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
             )
             sim_tid = getattr(getattr(sess, "_thread", None), "native_id", None)
             sent0, pub0, t0 = dict(hub.sent), hub.published, time.perf_counter()
-            cpu0 = _cpu_sample(sim_tid, chromium)
+            cpu0 = _cpu_sample(sim_tid)
             c0 = [pg.evaluate(probe) for pg in pages]
             time.sleep(seconds)
             sent1, pub1, elapsed = dict(hub.sent), hub.published, time.perf_counter() - t0
-            cpu1 = _cpu_sample(sim_tid, chromium)
+            cpu1 = _cpu_sample(sim_tid)
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
             c1 = [pg.evaluate(probe) for pg in pages]
@@ -145,8 +151,8 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "painted_hz": painted,
         "software_webgl": software,
         # CPU used in the window, in % of one core: the ground station (this process), its
-        # simulator thread, Chromium (pages, 3D views, GPU and browser processes), and every
-        # other process on the machine
+        # simulator thread, the browser (Chromium's pages, 3D views, GPU and browser processes
+        # and Playwright's driver), and the whole machine
         "cpu_percent_of_a_core": {
             k: round(100 * (cpu1[k] - cpu0[k]) / elapsed, 1) for k in cpu1 if k in cpu0
         },
