@@ -108,6 +108,7 @@ class SimSession(SessionView, SessionReplay):
         self._gains_pending: Gains | None = None
         self.run_wall_s = 0.0  # wall time spent running (for the real-time ratio)
         self.run_sim_s = 0.0
+        self.published_behind = 0  # snapshots after which publishing slowed (the sim lagged)
         self.scene_errors = 0
         self.last_scene_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
@@ -389,9 +390,10 @@ class SimSession(SessionView, SessionReplay):
             now2 = time.perf_counter()
             if now2 >= next_publish:
                 self._publish()
-                period = (
-                    1.0 / BEHIND_PUBLISH_HZ if was_running and lagging else self.publish_period_s
-                )
+                period = self.publish_period_s
+                if was_running and lagging:
+                    period = 1.0 / BEHIND_PUBLISH_HZ
+                    self.published_behind += 1
                 # on a fixed grid: a snapshot published late (a long step, a thread that waited
                 # for a CPU) does not push the later ones back; one more than half a period late
                 # starts the grid again half a period on

@@ -111,11 +111,13 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
                 " window.peregrine.applied ?? null, window.peregrine.updates]"
             )
             sim_tid = getattr(getattr(sess, "_thread", None), "native_id", None)
+            behind0 = sess.published_behind
             sent0, pub0, t0 = dict(hub.sent), hub.published, time.perf_counter()
             cpu0 = _cpu_sample(sim_tid)
             c0 = [pg.evaluate(probe) for pg in pages]
             time.sleep(seconds)
             sent1, pub1, elapsed = dict(hub.sent), hub.published, time.perf_counter() - t0
+            behind1 = sess.published_behind
             cpu1 = _cpu_sample(sim_tid)
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
@@ -145,6 +147,9 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "seconds": seconds,
         "sim_real_time_share": share,
         "snapshots_published_hz": round((pub1 - pub0) / elapsed, 1),
+        # snapshots after which the session slowed publishing (the simulator more than
+        # BEHIND_TOLERANCE_S behind the clock)
+        "snapshots_published_behind": behind1 - behind0,
         "telemetry_delivered_hz": delivered,
         "received_hz": received,
         "applied_hz": applied,
@@ -184,6 +189,10 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         print(text)
 
     line("published by the session (one for all):", [figures["snapshots_published_hz"]])
+    print(
+        f"  {'':<44s}{figures['snapshots_published_behind']} of {pub1 - pub0} followed by the"
+        " slower rate (the simulator > 0.1 s behind the clock)"
+    )
     line("delivered by the server to each viewer:", list(delivered))
     line("received by each page:", received)
     line("applied to each page's plots and readouts:", applied, target=True)
