@@ -36,7 +36,12 @@ from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_histo
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
-BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is behind the clock
+BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator lags the clock
+# how far (wall seconds) the simulator may trail the clock before publishing slows down: one
+# slow step (a rendered frame, the garbage collector, a browser taking the CPU for a few ms) is
+# caught up at the next iteration and must not cost the viewers a 100 ms gap; a simulator that
+# stays behind (too little CPU) is more than 10 control ticks behind within a tenth of a second
+BEHIND_TOLERANCE_S = 0.1
 MAX_EVENTS = 200
 
 
@@ -103,6 +108,7 @@ class SimSession(SessionView, SessionReplay):
         self._gains_pending: Gains | None = None
         self.run_wall_s = 0.0  # wall time spent running (for the real-time ratio)
         self.run_sim_s = 0.0
+        self.published_behind = 0  # snapshots after which publishing slowed (the sim lagged)
         self.scene_errors = 0
         self.last_scene_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
@@ -338,7 +344,7 @@ class SimSession(SessionView, SessionReplay):
         next_publish = 0.0
         last_wall = time.perf_counter()
         last_wall_replay = last_wall
-        was_running = behind = False
+        was_running = behind = lagging = False
         while not self._stop.is_set():
             now = time.perf_counter()
             if was_running:  # charge the whole last iteration (stepping, publishing, sleeping)
@@ -359,7 +365,7 @@ class SimSession(SessionView, SessionReplay):
                 # per 100 ticks, about 1 Hz), and keeps most of its time for catching up
                 deadline = max(next_publish, now + 0.002)
                 if math.isinf(self.speed):
-                    behind = False
+                    behind = lagging = False
                     while not sim.done and time.perf_counter() < deadline:
                         self._advance_one()
                 else:
@@ -367,6 +373,7 @@ class SimSession(SessionView, SessionReplay):
                     while not sim.done and sim.time_s < target and time.perf_counter() < deadline:
                         self._advance_one()
                     behind = sim.time_s < target
+                    lagging = target - sim.time_s > BEHIND_TOLERANCE_S * self.speed
                 self.run_sim_s += sim.time_s - t_before
                 if sim.done:
                     self.state = "finished"
@@ -383,8 +390,14 @@ class SimSession(SessionView, SessionReplay):
             now2 = time.perf_counter()
             if now2 >= next_publish:
                 self._publish()
-                slow = was_running and behind
-                next_publish = now2 + (1.0 / BEHIND_PUBLISH_HZ if slow else self.publish_period_s)
+                period = self.publish_period_s
+                if was_running and lagging:
+                    period = 1.0 / BEHIND_PUBLISH_HZ
+                    self.published_behind += 1
+                # on a fixed grid: a snapshot published late (a long step, a thread that waited
+                # for a CPU) does not push the later ones back; one more than half a period late
+                # starts the grid again half a period on
+                next_publish = max(next_publish + period, now2 + 0.5 * period)
             # behind the clock: no nap (the 2 ms nap otherwise lets the web server's thread,
             # which needs the GIL for every send, fan the snapshots out)
             self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)

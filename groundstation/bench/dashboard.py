@@ -4,6 +4,7 @@ headless Chromium (no display needed)."""
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import time
 from pathlib import Path
@@ -12,15 +13,60 @@ from tqdm import tqdm
 
 from ..scenario import load_scenario
 
+_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
+
+
+def _cpu_s(stat_path: str) -> float | None:
+    """User + system CPU seconds of a process or thread (Linux /proc), None if unreadable."""
+    try:
+        with open(stat_path) as f:
+            fields = f.read().rpartition(")")[2].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) * _TICK_S
+
+
+def _cpu_sample(sim_tid: int | None) -> dict[str, float]:
+    """CPU seconds so far: this process, its simulator thread, its child processes (Playwright's
+    driver and Chromium: pages, 3D views, GPU and browser processes), and the whole machine
+    (Linux /proc; empty elsewhere)."""
+    if not os.path.isdir("/proc/self/task"):
+        return {}
+    me = os.getpid()
+    out = {"station": _cpu_s("/proc/self/stat") or 0.0, "browser": 0.0}
+    if sim_tid is not None:
+        out["simulator"] = _cpu_s(f"/proc/self/task/{sim_tid}/stat") or 0.0
+    parent: dict[int, int] = {}
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                parent[int(pid)] = int(f.read().rpartition(")")[2].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    for pid in parent:
+        up, hops = parent.get(pid), 0
+        while up and up != me and hops < 64:
+            up, hops = parent.get(up), hops + 1
+        if up == me:
+            out["browser"] += _cpu_s(f"/proc/{pid}/stat") or 0.0
+    try:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+        out["machine"] = (sum(ticks) - ticks[3] - ticks[4]) * _TICK_S  # all but idle, iowait
+    except (OSError, ValueError, IndexError):
+        pass
+    return out
+
 
 def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = False) -> int:
     """The dashboard at 1x with ``tabs`` viewers open and visible at once (headless Chromium:
     no display needed), rendered camera, each with its 3D view, image plane and plots. Prints
     the share of real time the simulator keeps and, per viewer, the telemetry messages per
     second the server sent it (delivered), its page received, applied to the plots' series and
-    readouts (applied) and showed in a redrawn frame (painted); and the load average, which
-    other work on the machine raises."""
-    import os
+    readouts (applied) and showed in a redrawn frame (painted); how many snapshots the session
+    published at its slower rate (the simulator behind the clock); the CPU the station, its
+    simulator thread, the browser and other processes used in the window; and the load
+    average, which other work on the machine raises."""
     import shutil
     import tempfile
 
@@ -66,10 +112,15 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
                 "[performance.now(), window.peregrine.received || 0,"
                 " window.peregrine.applied ?? null, window.peregrine.updates]"
             )
+            sim_tid = getattr(getattr(sess, "_thread", None), "native_id", None)
+            behind0 = sess.published_behind
             sent0, pub0, t0 = dict(hub.sent), hub.published, time.perf_counter()
+            cpu0 = _cpu_sample(sim_tid)
             c0 = [pg.evaluate(probe) for pg in pages]
             time.sleep(seconds)
             sent1, pub1, elapsed = dict(hub.sent), hub.published, time.perf_counter() - t0
+            behind1 = sess.published_behind
+            cpu1 = _cpu_sample(sim_tid)
             # over the whole sortie so far: a catch-up after a stall cannot flatter it
             share = sess.sim.time_s / (time.perf_counter() - start_wall)
             c1 = [pg.evaluate(probe) for pg in pages]
@@ -98,11 +149,20 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "seconds": seconds,
         "sim_real_time_share": share,
         "snapshots_published_hz": round((pub1 - pub0) / elapsed, 1),
+        # snapshots after which the session slowed publishing (the simulator more than
+        # BEHIND_TOLERANCE_S behind the clock)
+        "snapshots_published_behind": behind1 - behind0,
         "telemetry_delivered_hz": delivered,
         "received_hz": received,
         "applied_hz": applied,
         "painted_hz": painted,
         "software_webgl": software,
+        # CPU used in the window, in % of one core: the ground station (this process), its
+        # simulator thread, the browser (Chromium's pages, 3D views, GPU and browser processes
+        # and Playwright's driver), and the whole machine
+        "cpu_percent_of_a_core": {
+            k: round(100 * (cpu1[k] - cpu0[k]) / elapsed, 1) for k in cpu1 if k in cpu0
+        },
         "load_average_before_after": [round(load_before, 2), round(load_after, 2)],
     }
     if as_json:
@@ -131,8 +191,23 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         print(text)
 
     line("published by the session (one for all):", [figures["snapshots_published_hz"]])
+    print(
+        f"  {'':<44s}{figures['snapshots_published_behind']} of {pub1 - pub0} followed by the"
+        " slower rate (the simulator > 0.1 s behind the clock)"
+    )
     line("delivered by the server to each viewer:", list(delivered))
     line("received by each page:", received)
     line("applied to each page's plots and readouts:", applied, target=True)
     line("painted (frames showing new data) per page:", painted)
+    cpu = dict(figures["cpu_percent_of_a_core"])
+    if "machine" in cpu:
+        cpu["other processes"] = round(
+            cpu.pop("machine") - cpu.get("station", 0.0) - cpu.get("browser", 0.0), 1
+        )
+    if cpu:
+        print(
+            "  CPU in the window, % of one core: "
+            + ", ".join(f"{k} {v:.0f}" for k, v in cpu.items())
+            + " (the simulator thread is part of the station)"
+        )
     return 0
