@@ -163,11 +163,11 @@ def test_closed_loop_hits_a_target_28_deg_up():
     no_ladder = plain.replace(t_coast=0.0, t_reacq=0.0, t_search=0.0)
     res = Simulation(sc, "png", seed=3, gains=no_ladder, keep_records=False).run()
     assert res.outcome == "TARGET_LOST"
-    # ... and with them it finds the target again and hits, barely (measured 0.26 m; the
-    # hit radius is 0.3 m): the FOV-aware terms are still what hits it squarely
+    # ... and with them it finds the target again and hits (measured 0.042 m; 0.26 m, barely
+    # inside the 0.3 m hit radius, before the latency prediction became the default)
     sim = Simulation(sc, "png", seed=3, gains=plain, keep_records=True)
     res = sim.run()
-    assert res.outcome == "HIT" and 0.15 < res.miss_m < 0.3, res
+    assert res.outcome == "HIT" and res.miss_m < 0.1, res
     assert any(f.telemetry.mode is not LoopMode.TRACKING for f in sim.records[10:])
 
 

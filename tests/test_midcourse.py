@@ -130,7 +130,9 @@ def test_attitude_latency_prediction():
     assert_allclose(propagate_rotation(R, np.zeros(3), 0.01), R)
     assert_allclose(propagate_rotation(R, np.array([1.0, -2.0, 0.5]), 0.0), R, atol=1e-15)
     assert_allclose(propagate_rotation(R, np.array([np.nan, 0.0, 0.0]), 0.01), R)
-    assert Gains().t_att_lag == 0.0  # off by default (README "Envelope maps")
+    # 0 by default: onboard run carries PX4's stamped attitude to the tick itself (and the
+    # simulator does the same); the velocity it uses unstamped, the model's 20 ms old
+    assert Gains().t_att_lag == 0.0 and Gains().t_vel_lag == 0.02
 
 
 def test_velocity_latency_prediction_in_the_loop():

@@ -37,9 +37,11 @@ attitude lag (att_lag_s)      10 ms    Attitude and body rates: ATTITUDE_QUATERN
                                        at 200 Hz (runner.py's STREAM_RATES_HZ, up to 5 ms
                                        old) from an output predictor updated per integrated
                                        IMU sample (``IMU_INTEG_RATE`` 200 Hz, up to 5 ms),
-                                       plus ~1 ms on the link. The loop pairs this attitude
-                                       with an image estimate predicted to the tick, so the
-                                       lag shows as a line-of-sight error of body rate x lag.
+                                       plus ~1 ms on the link. PX4 stamps it with its sample
+                                       time and ``onboard run`` carries it to the tick with
+                                       the gyro (fc_side.state_at); the simulator hands it
+                                       to the loop the same way (Simulation), so the lag
+                                       costs only the gyro's error over it.
 gyro bias (gyro_bias_rad_s,   3e-3     Turn-on bias per axis N(0, 3e-3 rad/s = 0.17 deg/s):
 gyro_bias_walk_rad_s_sqrt_s)  rad/s,   what stays in the raw gyro (HIGHRES_IMU, which the
                               1e-4     onboard runtime reads) after PX4's calibration, from

@@ -17,13 +17,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from onboard.camera_model import CameraModel
-from onboard.datatypes import ControlTelemetry, Detection, GyroSample
+from onboard.datatypes import ControlTelemetry, Detection, GyroSample, VehicleState
 from onboard.enums import LoopMode, Outcome
 from onboard.estimation.dkf import DkfConfig
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
+from onboard.runtime.fc_side import FcState, state_at
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
@@ -267,6 +268,21 @@ class Simulation:
         self.step_index = k + 1
         self._check_physics_outcome(t)
 
+    def _as_the_runtime_hands_it(self, est: VehicleState, gyro: np.ndarray) -> VehicleState:
+        """The estimated state as ``onboard run`` hands it to the loop: PX4 stamps the attitude
+        with its sample time, ``estimate.att_lag_s`` before the tick, and the runtime carries
+        it to the tick with the latest gyro sample (``fc_side.state_at``, the same code);
+        position and velocity it uses unstamped, as they come (``gains.t_vel_lag``)."""
+        fc = FcState(
+            pos_enu_m=est.position_enu_m,
+            vel_enu_m_s=est.velocity_enu_m_s,
+            q_wxyz=est.attitude_wxyz,
+            q_time_s=est.time_s - self.estimate.spec.att_lag_s,
+            rates_flu_rad_s=est.body_rates_flu_rad_s,
+            gyro_flu_rad_s=gyro,
+        )
+        return state_at(fc, est.time_s)
+
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
         loop = self.loop
@@ -283,8 +299,9 @@ class Simulation:
             loop.on_gyro(GyroSample(t, rates))
             tel = loop.tick(veh.state(t))
         else:
-            loop.on_gyro(GyroSample(t, est.gyro(t, rates)))
-            tel = loop.tick(est.vehicle_state(veh.state(t)))
+            gyro = est.gyro(t, rates)
+            loop.on_gyro(GyroSample(t, gyro))
+            tel = loop.tick(self._as_the_runtime_hands_it(est.vehicle_state(veh.state(t)), gyro))
         for r in loop.last_fusion:
             if r.value in ("accepted", "initialised"):
                 self._fused += 1
