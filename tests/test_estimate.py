@@ -211,7 +211,7 @@ def test_the_recorded_scenario_names_the_estimate_that_flew():
 
 def test_the_simulator_hands_the_loop_the_attitude_carried_to_the_tick():
     """PX4 stamps its attitude with the sample time and ``onboard run`` carries it to the tick
-    with the gyro (fc_side.state_at); the simulator does the same with the model's attitude,
+    with the gyro (fc_state.state_at); the simulator does the same with the model's attitude,
     att_lag_s old. Only that lag on (no gyro noise): the attitude the loop gets is the truth
     at the tick to within the rate change over the lag, a small fraction of the lag's own
     error (the truth one 10 ms tick earlier)."""

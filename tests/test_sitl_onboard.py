@@ -21,7 +21,7 @@ from onboard.geometry import (
     rotmat_to_quat,
 )
 from onboard.link.params import PARAM_IDS, ParamTable, mavlink_param_id
-from onboard.runtime.fc_side import MAX_PROPAGATION_S, FcState, state_at
+from onboard.runtime.fc_state import MAX_PROPAGATION_S, FcState, state_at
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
 from .sitl_rig import free_port

@@ -39,7 +39,7 @@ attitude lag (att_lag_s)      10 ms    Attitude and body rates: ATTITUDE_QUATERN
                                        IMU sample (``IMU_INTEG_RATE`` 200 Hz, up to 5 ms),
                                        plus ~1 ms on the link. PX4 stamps it with its sample
                                        time and ``onboard run`` carries it to the tick with
-                                       the gyro (fc_side.state_at); the simulator hands it
+                                       the gyro (fc_state.state_at); the simulator hands it
                                        to the loop the same way (Simulation), so the lag
                                        costs only the gyro's error over it.
 gyro bias (gyro_bias_rad_s,   3e-3     Turn-on bias per axis N(0, 3e-3 rad/s = 0.17 deg/s):

@@ -24,7 +24,7 @@ from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
-from onboard.runtime.fc_side import FcState, state_at
+from onboard.runtime.fc_state import FcState, state_at
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
@@ -271,7 +271,7 @@ class Simulation:
     def _as_the_runtime_hands_it(self, est: VehicleState, gyro: np.ndarray) -> VehicleState:
         """The estimated state as ``onboard run`` hands it to the loop: PX4 stamps the attitude
         with its sample time, ``estimate.att_lag_s`` before the tick, and the runtime carries
-        it to the tick with the latest gyro sample (``fc_side.state_at``, the same code);
+        it to the tick with the latest gyro sample (``fc_state.state_at``, the same code);
         position and velocity it uses unstamped, as they come (``gains.t_vel_lag``)."""
         fc = FcState(
             pos_enu_m=est.position_enu_m,

@@ -29,6 +29,12 @@ os.environ.setdefault("MAVLINK20", "1")  # before pymavlink picks its wire proto
 
 from pymavlink import mavutil
 
+from ..constants import (  # declared there, imported from here too
+    PX4_MAIN_AUTO,
+    PX4_MAIN_OFFBOARD,
+    PX4_MAIN_POSCTL,
+    PX4_SUB_AUTO_LOITER,
+)
 from ..geometry import quat_to_rotmat, rotmat_to_quat
 
 mavutil.set_dialect("common")
@@ -46,11 +52,6 @@ GCS_COMPONENT_ID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 CMD_START = mavlink.MAV_CMD_USER_1  # 31010: arm, enter offboard and intercept
 CMD_ABORT = mavlink.MAV_CMD_USER_2  # 31011: brake and hold, hand back to PX4 hold mode
 
-# PX4 custom modes: main mode in bits 16-23, sub mode (AUTO) in bits 24-31
-PX4_MAIN_POSCTL = 3
-PX4_MAIN_AUTO = 4
-PX4_MAIN_OFFBOARD = 6
-PX4_SUB_AUTO_LOITER = 3
 
 DEFAULT_SITL_URL = "udpout:127.0.0.1:14540"  # PX4 SITL sends its offboard link to 14540
 DEFAULT_ONBOARD_FC_URL = "udpin:127.0.0.1:14540"

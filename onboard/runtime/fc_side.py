@@ -10,16 +10,13 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..datatypes import GyroSample, VehicleState
-from ..geometry import propagate_attitude
+from ..datatypes import GyroSample
 from ..link.px4 import (
     AUTOPILOT_COMPONENT_ID,
     ONBOARD_COMPONENT_ID,
-    PX4_MAIN_OFFBOARD,
     TARGET_SYSTEM_ID,
     VEHICLE_SYSTEM_ID,
     FrameEncoder,
@@ -34,8 +31,6 @@ from ..link.timesync import on_timesync
 from .px4_params import PX4_PARAMS_READ, check
 
 MAX_RATE_RAD_S = 20.0
-MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
-MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
 SET_ATTITUDE_TARGET = FrameEncoder(mavlink.MAVLink_set_attitude_target_message)
 _NO_ATTITUDE = (1.0, 0.0, 0.0, 0.0)  # ignored (type mask): rates and thrust only
 _RATES_ONLY = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
@@ -44,42 +39,6 @@ STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 200.0,
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100.0,
 }
-
-
-@dataclass
-class FcState:
-    """What the flight controller last said (ENU/FLU, onboard clock seconds)."""
-
-    heartbeat_rx_s: float | None = None
-    last_rx_s: float | None = None
-    armed: bool = False
-    custom_mode: int = 0
-    pos_enu_m: np.ndarray | None = None
-    vel_enu_m_s: np.ndarray | None = None
-    q_wxyz: np.ndarray | None = None
-    q_time_s: float | None = None  # when the attitude was sampled (PX4's stamp, our clock)
-    rates_flu_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    gyro_flu_rad_s: np.ndarray | None = None  # the latest HIGHRES_IMU gyro sample
-
-    @property
-    def offboard(self) -> bool:
-        return ((self.custom_mode >> 16) & 0xFF) == PX4_MAIN_OFFBOARD
-
-
-def state_at(fc: FcState, now_s: float) -> VehicleState:
-    """The vehicle state for a control tick at ``now_s`` (position and velocity required):
-    the last attitude PX4 sent, propagated from its sample time to the tick with the latest
-    gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
-    ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale. The loop
-    pairs it with an image estimate predicted to the tick, so an attitude left a stream
-    period old would show as a line-of-sight error of rate x age."""
-    q = fc.q_wxyz
-    if fc.q_time_s is not None:
-        dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
-        rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
-        if float(np.linalg.norm(rates)) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
-            q = propagate_attitude(q, rates, dt)
-    return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)
 
 
 class FlightControllerSide:

@@ -47,7 +47,8 @@ from ..link.timesync import TimesyncEstimator, send_request
 from ..loop import InterceptionLoop
 from ..perception.detector import RedBalloonDetector
 from .camera import CameraThread, Clock, open_source
-from .fc_side import FcState, FlightControllerSide, state_at
+from .fc_side import FlightControllerSide
+from .fc_state import FcState, state_at
 from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .scheduler import PeriodicScheduler

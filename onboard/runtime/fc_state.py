@@ -1,0 +1,52 @@
+"""What the flight controller last said (:class:`FcState`) and the vehicle state a control
+tick is handed from it (:func:`state_at`). Pure: no MAVLink here, so the simulator hands its
+loop the state by the same code without importing pymavlink."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..constants import PX4_MAIN_OFFBOARD
+from ..datatypes import VehicleState
+from ..geometry import propagate_attitude
+
+MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
+MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
+
+
+@dataclass
+class FcState:
+    """What the flight controller last said (ENU/FLU, onboard clock seconds)."""
+
+    heartbeat_rx_s: float | None = None
+    last_rx_s: float | None = None
+    armed: bool = False
+    custom_mode: int = 0
+    pos_enu_m: np.ndarray | None = None
+    vel_enu_m_s: np.ndarray | None = None
+    q_wxyz: np.ndarray | None = None
+    q_time_s: float | None = None  # when the attitude was sampled (PX4's stamp, our clock)
+    rates_flu_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_flu_rad_s: np.ndarray | None = None  # the latest HIGHRES_IMU gyro sample
+
+    @property
+    def offboard(self) -> bool:
+        return ((self.custom_mode >> 16) & 0xFF) == PX4_MAIN_OFFBOARD
+
+
+def state_at(fc: FcState, now_s: float) -> VehicleState:
+    """The vehicle state for a control tick at ``now_s`` (position and velocity required):
+    the last attitude PX4 sent, propagated from its sample time to the tick with the latest
+    gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
+    ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale. The loop
+    pairs it with an image estimate predicted to the tick, so an attitude left a stream
+    period old would show as a line-of-sight error of rate x age."""
+    q = fc.q_wxyz
+    if fc.q_time_s is not None:
+        dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
+        rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
+        if float(np.linalg.norm(rates)) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
+            q = propagate_attitude(q, rates, dt)
+    return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)
