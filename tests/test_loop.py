@@ -7,6 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from onboard.camera_model import CameraModel
+from onboard.control.reacquire import search_yaw_rate
 from onboard.datatypes import Detection, GyroSample, LoopMode, VehicleParams, VehicleState
 from onboard.gains import Gains
 from onboard.geometry import attitude_from_yaw_pitch_roll, rotmat_to_quat
@@ -151,10 +152,19 @@ def test_search_before_the_first_detection_flies_the_launch_course():
     # the cue is the launch heading (the camera looked north at the first tick): v_search =
     # 8 m/s along it
     assert_allclose(tel.accel_desired_enu_m_s2, [0.0, 5.0, 0.0], atol=1e-9)  # k_brake 7, a_max
-    # the camera weaves about it: 0.1 s into the search psi_d = 40 deg sin(2 pi 0.1 / 3) =
-    # 8.3 deg left of north, psi_d' = 1.43 rad/s, plus k_R 0.145 capped at w_search = 0.6
-    w = 2.0 * math.pi / 3.0
-    assert tel.yaw_rate_cmd_rad_s == pytest.approx(math.radians(40.0) * w * math.cos(0.1 * w) + 0.6)
+    # the camera weaves about it, the amplitude growing over two periods (6 s): 0.1 s into
+    # the search psi_d = 40 deg (0.1 / 6) sin(2 pi 0.1 / 3) = 0.139 deg left of north,
+    # psi_d' = 0.048 rad/s, plus k_R = 8 times the heading error
+    w, amp, r = 2.0 * math.pi / 3.0, math.radians(40.0), 0.1 / 6.0
+    psi_dot = amp * (r * w * math.cos(0.1 * w) + math.sin(0.1 * w) / 6.0)
+    err = amp * r * math.sin(0.1 * w)
+    assert tel.yaw_rate_cmd_rad_s == pytest.approx(psi_dot + 8.0 * err, rel=1e-9)
+    # once grown, the full weave: 40 deg to each side, 1.46 rad/s at the crossing
+    t = 7.5  # 2.5 periods: psi_d = 0, crossing the course to the right
+    north = np.array([0.0, 1.0, 0.0])
+    rate = search_yaw_rate(north, north, 1.0, Gains(), search_time_s=t)
+    assert rate == pytest.approx(amp * w * math.cos(w * t), rel=1e-9)
+    assert rate == pytest.approx(-1.462, abs=1e-3)
     g = Gains(weave_deg=0.0)
     loop = _loop(gains=g)
     for k in range(0, 60):

@@ -125,6 +125,9 @@ def search_accel(
     return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
 
 
+WEAVE_RAMP_PERIODS = 2.0  # weave periods over which its amplitude grows from 0
+
+
 def search_yaw_rate(
     cue_enu: np.ndarray | None,
     camera_axis_enu: np.ndarray,
@@ -144,16 +147,24 @@ def search_yaw_rate(
     axis = horizontal_unit(camera_axis_enu)
     if axis is None:
         return 0.0
-    amp = math.radians(gains.weave_deg)
     w = 2.0 * math.pi / gains.t_weave
+    # the weave's amplitude grows over its first WEAVE_RAMP_PERIODS periods: the course
+    # itself is flown first, where a target near it (the cue's likeliest place) comes into
+    # view as the vehicle pitches down to accelerate, and the sweep widens the longer the
+    # search lasts
+    ramp_s = WEAVE_RAMP_PERIODS * gains.t_weave
+    r = min(search_time_s / ramp_s, 1.0) if ramp_s > 0.0 else 1.0
+    r_dot = 1.0 / ramp_s if r < 1.0 else 0.0
+    amp = math.radians(gains.weave_deg)
+    s, c = math.sin(w * search_time_s), math.cos(w * search_time_s)
     # headings as angles from +x (east) counter-clockwise: the rate about +z turns them
     err = wrap_pi(
         math.atan2(float(cue_enu[1]), float(cue_enu[0]))
-        + amp * math.sin(w * search_time_s)
+        + amp * r * s
         - math.atan2(float(axis[1]), float(axis[0]))
     )
     correction = min(max(gains.k_R * err, -gains.w_search), gains.w_search)
-    return amp * w * math.cos(w * search_time_s) + correction
+    return amp * (r * w * c + r_dot * s) + correction
 
 
 _FLOOR_TAU_S = 0.25  # the floor guard's velocity-loop time constant (about 2 / k_R)
