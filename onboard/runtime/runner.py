@@ -229,7 +229,14 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         lock, so a tick sees each of them entirely or not at all. When the lock is taken (a
         tick, a fusion) they wait in order for whoever has it next, the next tick at the
         latest: a late control thread running tick after tick must not leave them behind."""
-        self._fc_waiting.extend(msgs)
+        self._offer(self._fc_waiting, msgs)
+
+    def _take_gcs_batch(self, msgs: list) -> None:
+        """The ground's, likewise."""
+        self._offer(self._gcs_waiting, msgs)
+
+    def _offer(self, waiting: deque, msgs: list) -> None:
+        waiting.extend(msgs)
         if self._loop_lock.acquire(blocking=False):
             try:
                 self._take_waiting(self.clock.now())
@@ -245,15 +252,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             while waiting:
                 msgs = [waiting.popleft() for _ in range(len(waiting))]
                 self._take_all(link, take, msgs, now)
-
-    def _take_gcs_batch(self, msgs: list) -> None:
-        """The ground's, likewise."""
-        self._gcs_waiting.extend(msgs)
-        if self._loop_lock.acquire(blocking=False):
-            try:
-                self._take_waiting(self.clock.now())
-            finally:
-                self._loop_lock.release()
 
     def _take_all(self, link: MavLink, take, msgs: list, now: float) -> None:
         for msg in msgs:
