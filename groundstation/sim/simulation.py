@@ -229,7 +229,7 @@ class Simulation:
             if self._check_loop_outcome(t):
                 self._tell_finish(None)
                 return
-        self._physics_step(k, t)
+        self._physics_steps(k, 1)
         if self.outcome is not None:
             self._tell_finish(None)
 
@@ -245,28 +245,77 @@ class Simulation:
         for o in self.observers:
             o.image(t, self.camera.last_frame)
 
-    def _physics_step(self, k: int, t: float) -> None:
-        """Integrate vehicle, target and wind from step k (time t) to k + 1, then check the
-        outcome."""
+    def _physics_steps(self, k0: int, n: int) -> None:
+        """Integrate vehicle, target and wind from step k0 over ``n`` steps (no camera frame
+        or control tick due in between), checking the outcome after each and stopping at
+        one. One vehicle generator (:meth:`Multicopter.integrate`) and the outcome check in
+        locals: this is the simulator's hot path."""
         dt = self.dt_s
         cmds = self._commands
-        while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
-            _, rates, thrust = cmds.popleft()
-            self.vehicle.command(rates, thrust)
         wind = self.wind  # evaluated where each body is
+        uniform, gusty = wind.uniform, wind.gusty
+        target, moves = self.target, self._target_moves
         veh = self.vehicle
-        if wind.uniform:  # the same everywhere: no lookups (this runs at every step)
-            w = wind.velocity_m_s
-            veh.step(dt, w)
-            if self._target_moves:
-                self.target.advance(t + dt, dt, w)
-        else:
-            veh.step(dt, wind.at(veh.p))
-            self.target.advance(t + dt, dt, wind.at(self.target.p))
-        if wind.gusty:
-            wind.step(dt)
-        self.step_index = k + 1
-        self._check_physics_outcome(t)
+        tp = target.p
+        hit_r = self.hit_radius_m
+        miss = self.miss_m
+        r0x, r0y, r0z = self._rel
+        vp = veh.p  # where the vehicle is at the start of a step (for the wind there)
+        steps = veh.integrate(dt)
+        steps.send(None)
+        k = k0
+        try:
+            for k in range(k0, k0 + n):
+                t = k * dt
+                while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
+                    _, rates, thrust = cmds.popleft()
+                    veh.command(rates, thrust)
+                if uniform:  # the same everywhere: no lookups
+                    w = wind.velocity_m_s
+                    px, py, pz, vx, vy, vz, fin = steps.send(w)
+                    if moves:
+                        target.advance(t + dt, dt, w)
+                        tp = target.p
+                else:
+                    px, py, pz, vx, vy, vz, fin = steps.send(wind.at(vp))
+                    target.advance(t + dt, dt, wind.at(tp))
+                    tp = target.p
+                    vp = (px, py, pz)
+                if gusty:
+                    wind.step(dt)
+                # closest approach inside the step just taken (as closest_in_step, inlined),
+                # then hit/miss, divergence and ground contact
+                r1x, r1y, r1z = tp[0] - px, tp[1] - py, tp[2] - pz
+                d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
+                dd = d0 * d0 + d1 * d1 + d2 * d2
+                r0d = r0x * d0 + r0y * d1 + r0z * d2
+                s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+                c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
+                dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+                r0x, r0y, r0z = r1x, r1y, r1z
+                if dist < miss:
+                    miss = dist
+                    self.miss_m = dist
+                    self.closest_time_s = t + s * dt
+                    self.closest_speed_m_s = math.sqrt(vx**2 + vy**2 + vz**2)
+                    self.closest_rel_m = (c0, c1, c2)
+                    self.closest_vel_m_s = (vx, vy, vz)
+                if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
+                    # closing at the start of the step, opening at its end, near: it is over
+                    self.outcome = Outcome.HIT if miss <= hit_r else Outcome.MISS
+                elif (
+                    not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))
+                    or vx * vx + vy * vy + vz * vz > _DIVERGED_SPEED2
+                ):
+                    self.outcome = Outcome.DIVERGED
+                elif pz <= 0.0:
+                    self.outcome = Outcome.CRASHED
+                if self.outcome is not None:
+                    break
+        finally:
+            steps.close()
+            self._rel = (r0x, r0y, r0z)
+            self.step_index = k + 1
 
     def _as_the_runtime_hands_it(self, est: VehicleState, gyro: np.ndarray) -> VehicleState:
         """The estimated state as ``onboard run`` hands it to the loop: PX4 stamps the attitude
@@ -347,36 +396,6 @@ class Simulation:
             self.outcome = Outcome.HIT if contact else Outcome.TIMEOUT
         return self.outcome is not None
 
-    def _check_physics_outcome(self, t0: float) -> None:
-        """Closest approach inside the step just taken (as :func:`closest_in_step`, inlined:
-        this runs every physics step), then hit/miss, divergence and ground contact."""
-        r0x, r0y, r0z = self._rel
-        tp, vp = self.target.p, self.vehicle.p
-        r1x, r1y, r1z = tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2]
-        self._rel = (r1x, r1y, r1z)
-        d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        r0d = r0x * d0 + r0y * d1 + r0z * d2
-        s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
-        c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
-        dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-        veh = self.vehicle
-        v = veh.v
-        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-        if dist < self.miss_m:
-            self.miss_m = dist
-            self.closest_time_s = t0 + s * self.dt_s
-            self.closest_speed_m_s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-            self.closest_rel_m = (c0, c1, c2)
-            self.closest_vel_m_s = (v[0], v[1], v[2])
-        if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
-            # closing at the start of the step, opening at its end, near: the pass is over
-            self.outcome = Outcome.HIT if self.miss_m <= self.hit_radius_m else Outcome.MISS
-        elif not (veh.finite() and math.isfinite(r1x + r1y + r1z)) or vv > _DIVERGED_SPEED2:
-            self.outcome = Outcome.DIVERGED
-        elif vp[2] <= 0.0:
-            self.outcome = Outcome.CRASHED
-
     def _tell_finish(self, reason: str | None) -> None:
         if self.finished:
             return
@@ -402,7 +421,7 @@ class Simulation:
         until done, scheduled by control period: a camera frame or control tick where one is
         due, and between ticks only physics steps."""
         cam_div, ctl_div, dt = self._camera_div, self._control_div, self.dt_s
-        physics = self._physics_step
+        physics = self._physics_steps
         while self.outcome is None:
             k = self.step_index
             t = k * dt
@@ -412,12 +431,8 @@ class Simulation:
                 self._control_tick(t)
                 if self._check_loop_outcome(t):
                     break
-            physics(k, t)
-            # physics-only steps up to the next control tick or camera frame
-            k += 1
-            while self.outcome is None and k % ctl_div and k % cam_div:
-                physics(k, k * dt)
-                k += 1
+            # physics steps up to the next control tick or camera frame
+            physics(k, min(ctl_div - k % ctl_div, cam_div - k % cam_div))
         self._tell_finish(None)
         return self.result()
 
