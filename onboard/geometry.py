@@ -55,39 +55,58 @@ def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:
     ).reshape(3, 3)
 
 
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a b of quaternions (w, x, y, z)."""
+def _floats(v) -> list:
+    """A short vector as Python floats (arithmetic on numpy scalars costs several times more
+    and gives the same IEEE results)."""
+    return v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
+
+
+def quat_mul_floats(a, b) -> tuple[float, float, float, float]:
+    """Hamilton product a b of quaternions (w, x, y, z) given as sequences of floats, as a
+    tuple of floats (:func:`quat_mul` without the arrays)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
     )
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a b of quaternions (w, x, y, z)."""
+    return np.array(quat_mul_floats(_floats(a), _floats(b)))
+
+
+def quat_exp_floats(rotvec_rad) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of a rotation vector (rad, a sequence of floats), as a
+    tuple of floats (:func:`quat_exp` without the arrays)."""
+    x, y, z = rotvec_rad
+    ang = math.sqrt(x * x + y * y + z * z)
+    if ang < 1e-12:
+        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
+    s = math.sin(0.5 * ang) / ang
+    return (math.cos(0.5 * ang), s * x, s * y, s * z)
 
 
 def quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) of a rotation vector (rad)."""
-    x, y, z = rotvec_rad
-    ang = math.sqrt(x * x + y * y + z * z)
-    if ang < 1e-12:
-        return np.array([1.0, 0.5 * rotvec_rad[0], 0.5 * rotvec_rad[1], 0.5 * rotvec_rad[2]])
-    s = math.sin(0.5 * ang) / ang
-    return np.array([math.cos(0.5 * ang), s * x, s * y, s * z])
+    return np.array(quat_exp_floats(_floats(rotvec_rad)))
 
 
 def propagate_attitude(q_wxyz: np.ndarray, rates_flu_rad_s: np.ndarray, dt_s: float) -> np.ndarray:
     """The attitude ``dt_s`` later at constant body rates: q exp(omega dt) (body-frame
     rotation; exact for constant rates, renormalised). ``dt_s`` may be negative (back in
-    time); ``dt_s = 0`` returns ``q_wxyz`` unchanged."""
+    time); ``dt_s = 0`` returns ``q_wxyz`` unchanged. In floats: the same operations in the
+    same order as the array form (the norm's sum of squares in index order)."""
     if dt_s == 0.0:
         return np.asarray(q_wxyz, dtype=float)
-    w = np.asarray(rates_flu_rad_s, dtype=float) * dt_s
-    q = quat_mul(np.asarray(q_wxyz, dtype=float), quat_exp(w))
-    return q / math.sqrt(float(q @ q))
+    r0, r1, r2 = _floats(rates_flu_rad_s)
+    dt = float(dt_s)
+    q0, q1, q2, q3 = quat_mul_floats(_floats(q_wxyz), quat_exp_floats((r0 * dt, r1 * dt, r2 * dt)))
+    n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    return np.array((q0 / n, q1 / n, q2 / n, q3 / n))
 
 
 def propagate_rotation(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:

@@ -93,7 +93,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from onboard.datatypes import Detection, VehicleState
-from onboard.geometry import quat_exp, quat_mul
+from onboard.geometry import quat_exp_floats, quat_mul_floats
 
 from ..scenario import EstimateSpec
 
@@ -280,15 +280,20 @@ class StateEstimateModel:
     def vehicle_state(self, truth: VehicleState) -> VehicleState:
         """The estimate the loop sees at ``truth.time_s``: the truth ``lag_s`` ago with the
         position, velocity and attitude errors, body rates with the gyro bias."""
-        t = truth.time_s
-        self._advance(t)
-        now = _Sample(
-            t,
+        return self.vehicle_state_of(
+            truth.time_s,
             _floats(truth.position_enu_m),
             _floats(truth.velocity_enu_m_s),
             _floats(truth.attitude_wxyz),
             _floats(truth.body_rates_flu_rad_s),
         )
+
+    def vehicle_state_of(self, t: float, p, v, q, w) -> VehicleState:
+        """:meth:`vehicle_state` of the truth at ``t`` given as sequences of floats: position
+        (m, ENU), velocity (m/s, ENU), attitude (w, x, y, z) and body rates (rad/s, FLU)
+        (the simulator's own state, without making arrays of it first)."""
+        self._advance(t)
+        now = _Sample(t, p, v, q, w)
         old = self._delay.push(now)
         old_att = self._att_delay.push(now)
         (p0, p1, p2), (e0, e1, e2) = old.p, self.position_error.x
@@ -300,7 +305,9 @@ class StateEstimateModel:
             velocity_enu_m_s=np.array([v0 + u0, v1 + u1, v2 + u2]),
             # a unit quaternion times a unit quaternion: no renormalising, so that zero
             # errors hand the loop the truth bit for bit
-            attitude_wxyz=quat_mul(old_att.q, quat_exp(self.attitude_error.x)),
+            attitude_wxyz=np.array(
+                quat_mul_floats(old_att.q, quat_exp_floats(self.attitude_error.x))
+            ),
             body_rates_flu_rad_s=np.array([w0 + b0, w1 + b1, w2 + b2]),
         )
 

@@ -343,14 +343,15 @@ class Simulation:
             self.last_detection = det
         sigma = self.scenario.sim.gyro_noise_rad_s
         (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
-        rates = np.array([r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma])
+        rates = [r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma]
         if est is None:
-            loop.on_gyro(GyroSample(t, rates))
+            loop.on_gyro(GyroSample(t, np.array(rates)))
             tel = loop.tick(veh.state(t))
         else:
             gyro = est.gyro(t, rates)
             loop.on_gyro(GyroSample(t, gyro))
-            tel = loop.tick(self._as_the_runtime_hands_it(est.vehicle_state(veh.state(t)), gyro))
+            truth = (tuple(veh.p), tuple(veh.v), tuple(veh.q), tuple(veh.w))
+            tel = loop.tick(self._as_the_runtime_hands_it(est.vehicle_state_of(t, *truth), gyro))
         for r in loop.last_fusion:
             if r.value in ("accepted", "initialised"):
                 self._fused += 1
