@@ -289,7 +289,14 @@ class Simulation:
                 d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
                 dd = d0 * d0 + d1 * d1 + d2 * d2
                 r0d = r0x * d0 + r0y * d1 + r0z * d2
-                s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+                if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0) without the calls
+                    s = -r0d / dd
+                    if s < 0.0:
+                        s = 0.0
+                    elif s > 1.0:
+                        s = 1.0
+                else:
+                    s = 0.0
                 c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
                 dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
                 r0x, r0y, r0z = r1x, r1y, r1z

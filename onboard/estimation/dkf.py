@@ -194,6 +194,10 @@ class _Entry:
         self.Q = None
 
 
+def _meas_time(m: _Meas) -> float:
+    return m.t
+
+
 class _Meas:
     __slots__ = ("r_px", "t", "z")
 
@@ -346,15 +350,16 @@ class DelayedKalmanFilter:
                 self._drop_track()
         buf = self._buf
         buf.append(entry)
-        horizon = time_s - self.config.buffer_s
+        horizon = time_s - self._config.buffer_s
         while len(buf) > 2 and buf[1].t <= horizon:
             if buf[1].P is None and buf[1].x is not None:
                 self._covariance(1)  # the oldest entry is where P is propagated from
             buf.popleft()
-        # measurements before the oldest buffered state can never be replayed again
-        cut = bisect.bisect_left(self._meas, self._buf[0].t, key=lambda m: m.t)
-        if cut:
-            del self._meas[:cut]
+        # measurements before the oldest buffered state can never be replayed again (they
+        # are in capture order: none to cut unless the first one is)
+        meas = self._meas
+        if meas and meas[0].t < buf[0].t:
+            del meas[: bisect.bisect_left(meas, buf[0].t, key=_meas_time)]
 
     @staticmethod
     def _valid(x: np.ndarray) -> bool:
