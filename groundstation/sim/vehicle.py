@@ -47,7 +47,22 @@ class Multicopter:
             if isinstance(body_rates_flu_rad_s, np.ndarray)
             else body_rates_flu_rad_s
         )
-        self.cmd_w = [min(max(float(c), -lim), lim) for c in w]
+        c0, c1, c2 = w
+        c0, c1, c2 = float(c0), float(c1), float(c2)
+        # min(max(c, -lim), lim) per axis, written out (a NaN stays NaN either way)
+        if c0 < -lim:
+            c0 = -lim
+        if c0 > lim:
+            c0 = lim
+        if c1 < -lim:
+            c1 = -lim
+        if c1 > lim:
+            c1 = lim
+        if c2 < -lim:
+            c2 = -lim
+        if c2 > lim:
+            c2 = lim
+        self.cmd_w = [c0, c1, c2]
         t = min(max(float(thrust_normalised), 0.0), 1.0)
         self.cmd_thrust_n = t * self.params.max_thrust_n
 

@@ -78,6 +78,7 @@ from ..camera_model import CameraModel
 from ..datatypes import Detection
 
 _TIME_EPS_S = 1e-9
+_F64 = np.dtype(np.float64)  # the descriptor of ordinary float arrays
 _N = 6  # state size
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
@@ -88,7 +89,7 @@ _F_LOWER = (
 
 def _floats3(v) -> tuple[float, float, float]:
     """Three floats from a 3-vector (ndarray or sequence)."""
-    if isinstance(v, np.ndarray) and v.shape == (3,) and v.dtype == np.float64:
+    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,):
         return tuple(v.tolist())
     out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
     if len(out) != 3:
@@ -192,6 +193,10 @@ class _Entry:
         self.P = None
         self.F = None
         self.Q = None
+
+
+def _entry_time(e: _Entry) -> float:
+    return e.t
 
 
 def _meas_time(m: _Meas) -> float:
@@ -444,8 +449,7 @@ class DelayedKalmanFilter:
         return FusionResult.ACCEPTED if accepted else FusionResult.GATED
 
     def _index_at_or_before(self, t: float) -> int:
-        times = [e.t for e in self._buf]
-        return max(bisect.bisect_right(times, t + _TIME_EPS_S) - 1, 0)
+        return max(bisect.bisect_right(self._buf, t + _TIME_EPS_S, key=_entry_time) - 1, 0)
 
     def _drop_track(self) -> None:
         if self._initialised:
