@@ -177,10 +177,10 @@ class ImageEstimate:
 
 
 class _Entry:
-    """One buffered prediction: inputs held over (previous entry, t], the state at t, the
-    transition F from the previous entry's state (its first three rows, 18 floats row-major;
-    the rest is the identity), the process noise Q's diagonal over the step, and P at t once
-    it has been propagated (None until then)."""
+    """One buffered prediction: inputs held over (previous entry, t], the state at t (6
+    floats), the transition F from the previous entry's state (its first three rows, 18 floats
+    row-major; the rest is the identity), the process noise Q's diagonal over the step, and P
+    at t once it has been propagated (None until then)."""
 
     __slots__ = ("F", "P", "Q", "R_CW", "t", "v_c", "w", "x")
 
@@ -248,10 +248,10 @@ class DelayedKalmanFilter:
         self._radius_m = 0.5 * c.target_diameter_m
 
     # ----------------------------------------------------------------- propagation
-    def _step_x(self, x: np.ndarray, e: _Entry, dt: float):
-        """Propagate x by dt with entry e's inputs: returns (x', F's first three rows, Q's
-        diagonal)."""
-        xn, yn, rho, vE, vN, vU = x.tolist()
+    def _step_x(self, x: tuple, e: _Entry, dt: float):
+        """Propagate x (6 floats) by dt with entry e's inputs: returns (x' as 6 floats, F's
+        first three rows, Q's diagonal)."""
+        xn, yn, rho, vE, vN, vU = x
         wx, wy, wz = e.w
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = e.R_CW
         dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
@@ -277,7 +277,7 @@ class DelayedKalmanFilter:
         )  # fmt: skip
         qi, qv = self._q_img * dt, self._q_v * dt
         Q = (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
-        return np.array([x1, y1, rho1, vE, vN, vU]), F, Q
+        return (x1, y1, rho1, vE, vN, vU), F, Q
 
     @staticmethod
     def _propagate(P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
@@ -367,9 +367,9 @@ class DelayedKalmanFilter:
             del meas[: bisect.bisect_left(meas, buf[0].t, key=_meas_time)]
 
     @staticmethod
-    def _valid(x: np.ndarray) -> bool:
-        """Finite, in front of the camera and within ~76 degrees of the axis."""
-        xn, yn, rho, vE, vN, vU = x.tolist()
+    def _valid(x: tuple) -> bool:
+        """Finite, in front of the camera and within ~76 degrees of the axis (x: 6 floats)."""
+        xn, yn, rho, vE, vN, vU = x
         return (
             abs(xn) < _MAX_ABS_N
             and abs(yn) < _MAX_ABS_N
@@ -457,7 +457,7 @@ class DelayedKalmanFilter:
             # random walk: from there on only its variance grows, by q_v per second)
             for e in reversed(self._buf):
                 if e.x is not None and e.P is not None:
-                    v, P_vv = e.x[3:].copy(), e.P[3:, 3:].copy()
+                    v, P_vv = np.array(e.x[3:]), e.P[3:, 3:].copy()
                     if math.isfinite(float(v.sum() + P_vv.sum())):
                         self._memory = (e.t, v, P_vv)
                     break
@@ -466,7 +466,7 @@ class DelayedKalmanFilter:
         self._meas = []
         self._initialised = False
 
-    def _carried(self, m: _Meas) -> tuple[np.ndarray, np.ndarray] | None:
+    def _carried(self, m: _Meas) -> tuple[tuple, np.ndarray] | None:
         """The state and covariance to restart a track from at m (capture time m.t), keeping
         what the old track still knows (DESIGN.md §4; README "Track loss"), or None when it
         knows nothing useful. The image point is m's. The target velocity is the old track's,
@@ -501,14 +501,14 @@ class DelayedKalmanFilter:
                 # m where the old track predicted it: keep depth and velocity with their
                 # covariance, reset the image point (variance 1, ~45 deg: uncorrelated) and
                 # fuse m into it (the point, then its size against the carried depth)
-                x0 = x.copy()
+                x0 = x
                 P0 = P.copy()
                 P0[:2, :] = 0.0
                 P0[:, :2] = 0.0
                 P0[0, 0] = P0[1, 1] = 1.0
                 x0, P0, ok = self._update(x0, P0, m)
                 return (x0, P0) if ok else None
-            v, P_vv = x[3:].copy(), P[3:, 3:].copy()
+            v, P_vv = x[3:], P[3:, 3:].copy()
         elif self._memory is not None:
             t0, v, P_vv = self._memory
             P_vv = P_vv + np.eye(3) * (self._q_v * max(m.t - t0, 0.0))
@@ -517,11 +517,11 @@ class DelayedKalmanFilter:
         else:
             return None
         x0, P0 = self._fresh(m)
-        x0[3:] = v
+        x0 = (*x0[:3], *(v.tolist() if isinstance(v, np.ndarray) else v))
         P0[3:, 3:] = P_vv
         return x0, P0
 
-    def _fresh(self, m: _Meas) -> tuple[np.ndarray, np.ndarray]:
+    def _fresh(self, m: _Meas) -> tuple[tuple, np.ndarray]:
         """A new track's state and covariance at m: the image point, the depth from the
         apparent size (or the prior range), the target velocity 0 +- init_target_speed_m_s."""
         c = self.config
@@ -539,7 +539,7 @@ class DelayedKalmanFilter:
         rho = min(rho, self._rho_max)
         s_n = c.meas_noise_px / self._f
         s_v = c.init_target_speed_m_s
-        x0 = np.array([xn, yn, rho, 0.0, 0.0, 0.0])
+        x0 = (xn, yn, rho, 0.0, 0.0, 0.0)
         P0 = np.diag([s_n**2, s_n**2, s_rho**2, s_v**2, s_v**2, s_v**2])
         return x0, P0
 
@@ -573,7 +573,8 @@ class DelayedKalmanFilter:
         self._meas.append(m)
         self._last_accepted_s = max(self._last_accepted_s, m.t)
         x, P, _, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
-        d0, d1, d2, d3, d4, d5 = (x - nxt.x).tolist()
+        (a0, a1, a2, a3, a4, a5), (b0, b1, b2, b3, b4, b5) = x, nxt.x
+        d0, d1, d2, d3, d4, d5 = a0 - b0, a1 - b1, a2 - b2, a3 - b3, a4 - b4, a5 - b5
         nxt.x, nxt.P = x, P
         rho_max = self._rho_max
         for k in range(j + 2, len(buf)):
@@ -585,9 +586,9 @@ class DelayedKalmanFilter:
                 F[6] * d0 + F[7] * d1 + F[8] * d2 + F[9] * d3 + F[10] * d4 + F[11] * d5,
                 F[12] * d0 + F[13] * d1 + F[14] * d2 + F[15] * d3 + F[16] * d4 + F[17] * d5,
             )
-            x0, x1, x2, x3, x4, x5 = e.x.tolist()
+            x0, x1, x2, x3, x4, x5 = e.x
             x2 = min(max(x2 + d2, 1e-6), rho_max)
-            e.x = np.array([x0 + d0, x1 + d1, x2, x3 + d3, x4 + d4, x5 + d5])
+            e.x = (x0 + d0, x1 + d1, x2, x3 + d3, x4 + d4, x5 + d5)
             e.P = None
         if not self._valid(buf[-1].x):
             self._drop_track()
@@ -620,11 +621,11 @@ class DelayedKalmanFilter:
             self._drop_track()
         return new_accepted
 
-    def _update(self, x: np.ndarray, P: np.ndarray, m: _Meas):
+    def _update(self, x: tuple | np.ndarray, P: np.ndarray, m: _Meas):
         """Gated EKF update with the image point, then (sequentially, relinearised at the
         updated state) the apparent radius if usable and within its own gate. Joseph form in
         closed form for the 2-D and the scalar measurement (equal to filterpy's ``update``;
-        tested), cheap enough for every replayed fusion."""
+        tested), cheap enough for every replayed fusion. Returns x as 6 floats."""
         r = self._r_point
         y0, y1 = float(m.z[0] - x[0]), float(m.z[1] - x[1])
         s00, s01, s11 = float(P[0, 0]) + r, float(P[0, 1]), float(P[1, 1]) + r
@@ -656,7 +657,7 @@ class DelayedKalmanFilter:
                 A = P - np.outer(k, Ph)
                 P = A - np.outer(A @ hs, k) + var_s * np.outer(k, k)
         x[2] = min(max(x[2], 1e-6), self._rho_max)
-        return x, 0.5 * (P + P.T), True
+        return tuple(x.tolist()), 0.5 * (P + P.T), True
 
     # ----------------------------------------------------------------- outputs
     def lost(self, now_s: float | None = None) -> bool:
@@ -665,7 +666,7 @@ class DelayedKalmanFilter:
 
     def _flow(self, e: _Entry) -> tuple[tuple[float, float], tuple[float, float]]:
         """Image-point rate at entry e (normalised/s): (rotational, translational)."""
-        xn, yn, rho, vE, vN, vU = e.x.tolist()
+        xn, yn, rho, vE, vN, vU = e.x
         wx, wy, wz = e.w
         r = e.R_CW
         dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
@@ -707,7 +708,7 @@ class DelayedKalmanFilter:
         _, tr = self._flow(e)
         # in floats (numpy's per-call cost on these small arrays is most of the work): J is
         # the Jacobian of the translational flow rho (u_xy - s_xy u_z), u = R_CW (v_t - v_c)
-        xn, yn, rho, vE, vN, vU = e.x.tolist()
+        xn, yn, rho, vE, vN, vU = e.x
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = e.R_CW
         dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
         u0 = r0 * dE + r1 * dN + r2 * dU
@@ -741,7 +742,7 @@ class DelayedKalmanFilter:
         None without a track."""
         if not self._initialised or not self._buf or self._buf[-1].x is None:
             return None
-        xn, yn, rho = self._buf[-1].x[:3].tolist()
+        xn, yn, rho = self._buf[-1].x[:3]
         return math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
 
     def image_std_px(self) -> tuple[float, float] | None:
@@ -763,8 +764,8 @@ class DelayedKalmanFilter:
         if self._covariance(len(self._buf) - 1) is None:
             return None
         e = self._buf[-1]
-        xn, yn, rho = e.x[:3].tolist()
-        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, e.x[3:].copy(), e.P.copy()
+        xn, yn, rho = e.x[:3]
+        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, np.array(e.x[3:]), e.P.copy()
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
