@@ -19,7 +19,7 @@ import numpy as np
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample, VehicleState
 from onboard.enums import LoopMode, Outcome
-from onboard.estimation.dkf import DkfConfig
+from onboard.estimation.dkf import DkfConfig, FusionResult
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
@@ -360,7 +360,7 @@ class Simulation:
             truth = (tuple(veh.p), tuple(veh.v), tuple(veh.q), tuple(veh.w))
             tel = loop.tick(self._as_the_runtime_hands_it(est.vehicle_state_of(t, *truth), gyro))
         for r in loop.last_fusion:
-            if r.value in ("accepted", "initialised"):
+            if r is FusionResult.ACCEPTED or r is FusionResult.INITIALISED:
                 self._fused += 1
             else:
                 self._rejected += 1
