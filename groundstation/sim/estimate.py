@@ -112,11 +112,12 @@ class Normals:
         self._i = 0
 
     def next(self) -> list[float]:
-        if self._i >= len(self._buf):
+        i = self._i
+        if i >= len(self._buf):
             self._buf = self._rng.standard_normal((self._block, self._dim)).tolist()
-            self._i = 0
-        self._i += 1
-        return self._buf[self._i - 1]
+            i = 0
+        self._i = i + 1
+        return self._buf[i]
 
 
 class GaussMarkov:
@@ -130,6 +131,7 @@ class GaussMarkov:
         self.sigma = float(sigma)
         self.tau_s = float(tau_s)
         self._normals = Normals(rng, dim)
+        self._three = dim == 3
         s = self.sigma
         self.x = [s * n for n in self._normals.next()]
         self._dt_s = -1.0
@@ -145,7 +147,7 @@ class GaussMarkov:
             self._a = math.exp(-dt_s / self.tau_s)
             self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
         a, b, x, n = self._a, self._b, self.x, self._normals.next()
-        if len(x) == 3:  # the estimate's vectors, written out (a comprehension costs twice)
+        if self._three:  # the estimate's vectors, written out (a comprehension costs twice)
             self.x = [a * x[0] + b * n[0], a * x[1] + b * n[1], a * x[2] + b * n[2]]
         else:
             self.x = [a * xi + b * ni for xi, ni in zip(x, n, strict=True)]
@@ -162,6 +164,7 @@ class RandomWalk:
     ) -> None:
         self.walk = float(walk_per_sqrt_s)
         self._normals = Normals(rng, dim)
+        self._three = dim == 3
         s = float(initial)
         self.x = [s * n for n in self._normals.next()]
 
@@ -171,7 +174,7 @@ class RandomWalk:
 
     def step(self, dt_s: float) -> list[float]:
         s, x, n = self.walk * math.sqrt(dt_s), self.x, self._normals.next()
-        if len(x) == 3:  # as GaussMarkov.step
+        if self._three:  # as GaussMarkov.step
             self.x = [x[0] + s * n[0], x[1] + s * n[1], x[2] + s * n[2]]
         else:
             self.x = [xi + s * ni for xi, ni in zip(x, n, strict=True)]
@@ -207,7 +210,8 @@ class DelayLine:
         h = self._hist
         h.append(s)
         tq = s.time_s - self.lag_s
-        while len(h) >= 2 and h[1].time_s <= tq + 1e-12:
+        tq_eps = tq + 1e-12
+        while len(h) >= 2 and h[1].time_s <= tq_eps:
             h.popleft()
         a = h[0]
         if len(h) == 1 or tq <= a.time_s + 1e-12:
