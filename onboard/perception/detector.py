@@ -139,7 +139,7 @@ class RedBalloonDetector:
         y0, y1 = max(math.floor(v - half), 0), min(math.ceil(v + half), h)
         if x1 - x0 < 3 or y1 - y0 < 3:  # predicted off the frame
             return None
-        if (x1 - x0) * (y1 - y0) >= 0.5 * w * h:  # as dear as the frame: search it whole
+        if x0 == 0 and y0 == 0 and x1 == w and y1 == h:  # the whole frame anyway
             return None
         return x0, y0, x1, y1
 
@@ -220,10 +220,10 @@ class RedBalloonDetector:
         h, w = frame.shape[:2]
         x0, y0 = max(x - 1, 0), max(y - 1, 0)
         x1, y1 = min(x + bw + 1, w), min(y + bh + 1, h)
-        roi = frame[y0:y1, x0:x1].astype(np.float32)
-        red = np.clip(roi[:, :, 2] - np.maximum(roi[:, :, 0], roi[:, :, 1]), 0.0, None)
-        grown = cv2.dilate(mask[y0 - oy : y1 - oy, x0 - ox : x1 - ox], self._dilate_kernel) > 0
-        wgt = np.where(grown, red, 0.0)
+        b, g, r = cv2.split(frame[y0:y1, x0:x1])
+        red = cv2.subtract(r, cv2.max(b, g))  # R - max(G, B) clipped at 0, exact in uint8
+        grown = cv2.dilate(mask[y0 - oy : y1 - oy, x0 - ox : x1 - ox], self._dilate_kernel)
+        wgt = cv2.bitwise_and(red, red, mask=grown).astype(np.float32)
         total = float(wgt.sum())
         if total <= 0.0:
             return x + bw / 2.0, y + bh / 2.0
