@@ -132,7 +132,7 @@ class RedBalloonDetector:
         if c.full_frame_every and self._since_full >= c.full_frame_every - 1:
             return None
         h, w = shape_hw
-        half = 0.5 * tr.size_px + c.roi_growth * tr.size_px + c.roi_margin_px
+        half = self._half_window_px(tr.size_px)
         u = tr.center_px[0] + tr.vel_px_s[0] * dt
         v = tr.center_px[1] + tr.vel_px_s[1] * dt
         x0, x1 = max(math.floor(u - half), 0), min(math.ceil(u + half), w)
@@ -143,7 +143,13 @@ class RedBalloonDetector:
             return None
         return x0, y0, x1, y1
 
+    def _half_window_px(self, size_px: float) -> float:
+        c = self.config
+        return 0.5 * size_px + c.roi_growth * size_px + c.roi_margin_px
+
     def _update_track(self, det: Detection | None, shape_hw: tuple[int, int]) -> None:
+        """Keep the detection as the track; its image velocity from the previous one, unless
+        the blob jumped farther than a window (another blob, or the target found again)."""
         if det is None:
             self._track = None
             return
@@ -151,11 +157,11 @@ class RedBalloonDetector:
         vel = (0.0, 0.0)
         if tr is not None:
             dt = det.capture_time_s - tr.time_s
-            if 0.0 < dt <= self.config.roi_max_gap_s:
-                vel = (
-                    (det.center_px[0] - tr.center_px[0]) / dt,
-                    (det.center_px[1] - tr.center_px[1]) / dt,
-                )
+            du = det.center_px[0] - tr.center_px[0]
+            dv = det.center_px[1] - tr.center_px[1]
+            half = self._half_window_px(tr.size_px)
+            if 0.0 < dt <= self.config.roi_max_gap_s and max(abs(du), abs(dv)) <= half:
+                vel = (du / dt, dv / dt)
         size = max(det.bbox_px[2], det.bbox_px[3])
         self._track = _Track(det.capture_time_s, det.center_px, size, vel, tuple(shape_hw))
 
