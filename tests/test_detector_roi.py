@@ -4,6 +4,7 @@ used, and the full frame is searched whenever the window is not clean or holds n
 
 import dataclasses
 
+import cv2
 import numpy as np
 import pytest
 
@@ -11,6 +12,7 @@ from groundstation.scenario import load_scenario, parse_overrides, with_override
 from groundstation.sim.render import GROUND_BGR, SKY_BGR, draw_balloon
 from groundstation.sim.simulation import Simulation
 from onboard.perception import RedBalloonConfig, RedBalloonDetector
+from onboard.perception.detector import min_redness
 
 FRAME_S = 1.0 / 30.0
 
@@ -197,3 +199,43 @@ def test_a_rendered_sortie_flies_the_same_with_and_without_the_window(overrides)
     assert stats.windowed > 0.8 * (stats.windowed + stats.full)  # the window did the work
     if overrides:
         assert f_roi.false_detections > 0 and f_roi.dropped > 0
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        RedBalloonConfig(),
+        RedBalloonConfig(min_saturation=1, min_value=0, hue_band_deg=12),
+        RedBalloonConfig(min_saturation=200, min_value=120, hue_band_deg=29),
+        RedBalloonConfig(min_saturation=60, min_value=60, hue_band_deg=5),
+    ],
+    ids=["default", "loosest", "wide-band", "narrow-band"],
+)
+def test_the_red_box_bound_holds_for_every_colour(config):
+    """A full-frame search masks only the box around pixels with R - max(G, B) >=
+    min_redness: over all 2^24 BGR colours, every colour in the mask reaches it."""
+    det = RedBalloonDetector(config)
+    bound = min_redness(config)
+    assert bound is not None and bound >= 1
+    v = np.arange(256, dtype=np.uint8)
+    b, g, r = np.meshgrid(v, v, v, indexing="ij")
+    colours = np.stack([b, g, r], axis=-1).reshape(4096, 4096, 3)
+    in_mask = det.mask(colours) > 0
+    redness = colours[:, :, 2].astype(np.int16) - np.maximum(colours[:, :, 0], colours[:, :, 1])
+    assert in_mask.any()
+    assert redness[in_mask].min() >= bound
+    assert min_redness(RedBalloonConfig(min_saturation=0)) is None  # greys would pass
+    assert min_redness(RedBalloonConfig(hue_band_deg=30)) is None
+
+
+def test_a_full_search_masks_only_the_red_box_and_finds_the_same():
+    det = RedBalloonDetector(RedBalloonConfig(roi=False))
+    frame = _frame([(100.0, 80.0, 6.0), (500.0, 400.0, 14.0)], noise_seed=12, boxes=[])
+    assert det.red_box(frame) == pytest.approx((93, 73, 515, 415), abs=2)
+    assert det.red_box(_frame([], noise_seed=13)) is None  # sky and ground: nothing red
+    full_mask = det.mask(frame)
+    contours = cv2.findContours(full_mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
+    assert len(contours) == 2
+    found = det.detect(frame, 0.0)
+    x, y, bw, bh = cv2.boundingRect(max(contours, key=cv2.contourArea))
+    assert found.bbox_px == (float(x), float(y), float(bw), float(bh))

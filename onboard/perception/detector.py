@@ -50,6 +50,20 @@ class RedBalloonConfig:
     full_frame_every: int = 30  # frames: a full search at least this often (0: never)
 
 
+def min_redness(config: RedBalloonConfig) -> int | None:
+    """A lower bound of R - max(G, B) over the colours in the mask (OpenCV's 8-bit HSV), or
+    None when there is none to use. In the mask, H is within ``hue_band_deg`` (< 30) of red,
+    so R is the largest channel, and |G - B| <= (band + 0.5) / 30 of diff = R - min(G, B)
+    (H = 30 (G - B) / diff, rounded); S >= min_saturation makes diff >= V (S - 0.5) / 255
+    with V = R >= min_value. One less than the floor of their product, at least 1 (R is the
+    strict maximum: a tie gives H = 30 or 150). Checked over all 2^24 colours in the tests."""
+    c = config
+    if c.min_saturation < 1 or c.hue_band_deg >= 30:
+        return None  # greys (S = 0) or green/blue-dominant hues may pass: no bound used
+    bound = c.min_value * (c.min_saturation - 0.5) / 255.0 * (1.0 - (c.hue_band_deg + 0.5) / 30.0)
+    return max(1, math.floor(bound) - 1)
+
+
 @dataclass
 class RoiStats:
     """How the frames were searched: ``windowed`` answered from the window alone, ``full``
@@ -82,6 +96,7 @@ class RedBalloonDetector:
         self._hi1 = np.array([c.hue_band_deg, 255, 255], np.uint8)
         self._lo2 = np.array([180 - c.hue_band_deg, c.min_saturation, c.min_value], np.uint8)
         self._hi2 = np.array([180, 255, 255], np.uint8)
+        self._min_redness = min_redness(c)
         self._dilate_kernel = np.ones((3, 3), np.uint8)
         self._track: _Track | None = None
         self._since_full = 0
@@ -165,6 +180,19 @@ class RedBalloonDetector:
         size = max(det.bbox_px[2], det.bbox_px[3])
         self._track = _Track(det.capture_time_s, det.center_px, size, vel, tuple(shape_hw))
 
+    def red_box(self, frame_bgr: np.ndarray) -> tuple[int, int, int, int] | None:
+        """The box (x0, y0, x1, y1 px, end exclusive) around every pixel whose R - max(G, B)
+        reaches :func:`min_redness`, grown by one pixel (so its sides inside the frame hold
+        no mask pixel), or None when there is none: the mask is empty outside it."""
+        redness = cv2.subtract(frame_bgr[:, :, 2], cv2.max(frame_bgr[:, :, 0], frame_bgr[:, :, 1]))
+        if self._min_redness > 1:
+            redness = cv2.threshold(redness, self._min_redness - 1, 255, cv2.THRESH_BINARY)[1]
+        x, y, bw, bh = cv2.boundingRect(redness)
+        if bw == 0:
+            return None
+        h, w = frame_bgr.shape[:2]
+        return max(x - 1, 0), max(y - 1, 0), min(x + bw + 1, w), min(y + bh + 1, h)
+
     def detect_in(
         self,
         frame_bgr: np.ndarray,
@@ -176,6 +204,14 @@ class RedBalloonDetector:
         each blob found is whole and its figures are those of the full-frame search. Not clean
         returns (None, False) at once."""
         h, w = frame_bgr.shape[:2]
+        if window is None and self._min_redness is not None:
+            # only the box around every pixel red enough to be in the mask needs the mask
+            box = self.red_box(frame_bgr)
+            if box is None:
+                return None, True
+            det, clean = self.detect_in(frame_bgr, capture_time_s, box)
+            if clean:  # always (the box's inner sides hold no mask pixel); else search all
+                return det, True
         if window is None:
             ox, oy = 0, 0
             mask = self.mask(frame_bgr)
