@@ -30,12 +30,8 @@ class FrameRenderer:
         self._corner_list = [(0.0, 0.0), (float(w), 0.0), (float(w), float(h)), (0.0, float(h))]
         self._rng = rng
         # a few noise frames, picked at random each time: seeded, and cheap per frame
-        self._noise_up = [
-            rng.integers(0, noise_level + 1, (h, w, 3), dtype=np.uint8) for _ in range(3)
-        ]
-        self._noise_down = [
-            rng.integers(0, noise_level + 1, (h, w, 3), dtype=np.uint8) for _ in range(3)
-        ]
+        self._noise_up = [uniform_uint8(rng, noise_level, (h, w, 3)) for _ in range(3)]
+        self._noise_down = [uniform_uint8(rng, noise_level, (h, w, 3)) for _ in range(3)]
         # The frame is (frame + up[k]) - down[k + 1], each saturating. Every colour drawn (and
         # every anti-aliased mix of two) lies in [lo, hi]; when noise_level <= lo and
         # hi + noise_level <= 255 neither step saturates, so it equals one wrapping uint8
@@ -43,9 +39,8 @@ class FrameRenderer:
         n = len(self._noise_up)
         channels = [c for col in _COLOURS for c in col]
         self._one_pass = noise_level <= min(channels) and max(channels) + noise_level <= 255
-        self._noise_net = [
-            (self._noise_up[k].astype(np.int16) - self._noise_down[(k + 1) % n]).astype(np.uint8)
-            for k in range(n)
+        self._noise_net = [  # uint8 arithmetic wraps: the difference mod 256
+            np.subtract(self._noise_up[k], self._noise_down[(k + 1) % n]) for k in range(n)
         ]
 
     def _ground_polygon(self, R_WC: np.ndarray) -> np.ndarray | None:
@@ -114,6 +109,19 @@ class FrameRenderer:
         if abs(u) > lim + r_px or abs(v) > lim + r_px or r_px > 1e5:
             return
         draw_balloon(frame, u, v, r_px)
+
+
+def uniform_uint8(rng: np.random.Generator, high: int, shape: tuple[int, ...]) -> np.ndarray:
+    """``rng.integers(0, high + 1, shape, dtype=np.uint8)``, the same numbers and the same use
+    of the stream, about 10 times cheaper when ``high + 1`` is a power of two from 2 to 128:
+    numpy then takes each value as the top bits of one byte of its 32-bit draws (Lemire's
+    method never rejects), and ``rng.bytes`` hands out those same bytes (tests check both)."""
+    n = high + 1
+    if not (1 < n <= 128 and n & (n - 1) == 0):
+        return rng.integers(0, n, shape, dtype=np.uint8)
+    count = math.prod(shape)
+    raw = np.frombuffer(rng.bytes(count), np.uint8)
+    return (raw >> (9 - n.bit_length())).reshape(shape)
 
 
 def draw_balloon(frame: np.ndarray, u: float, v: float, r_px: float) -> None:
