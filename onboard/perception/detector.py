@@ -120,7 +120,6 @@ class RedBalloonDetector:
             raise ValueError("capture_time_s must be finite")
         window = self.window(frame_bgr.shape[:2], capture_time_s)
         self.last_window_px = window
-        det = None
         if window is not None:
             det, clean = self.detect_in(frame_bgr, capture_time_s, window)
             if clean and det is not None:
