@@ -1,5 +1,5 @@
 """Target detectors: BGR frame in, :class:`~onboard.datatypes.Detection` (or nothing) out."""
 
-from .detector import Detector, RedBalloonDetector
+from .detector import Detector, RedBalloonConfig, RedBalloonDetector, RoiStats
 
-__all__ = ["Detector", "RedBalloonDetector"]
+__all__ = ["Detector", "RedBalloonConfig", "RedBalloonDetector", "RoiStats"]

@@ -75,14 +75,17 @@ class SitlCameraSource:
 
     def _recv_exact(self, n: int) -> bytes:
         buf = bytearray(n)
-        view = memoryview(buf)
-        got = 0
+        self._recv_into(memoryview(buf))
+        return bytes(buf)
+
+    def _recv_into(self, view: memoryview) -> None:
+        """Fill ``view`` (bytes) from the stream."""
+        n, got = len(view), 0
         while got < n:
             k = self._sock.recv_into(view[got:], n - got)
             if k == 0:
                 raise CameraError("SITL camera stream closed")
             got += k
-        return bytes(buf)
 
     def read(self) -> Frame:
         if self._sock is None:
@@ -99,11 +102,12 @@ class SitlCameraSource:
                 raise CameraError("SITL camera stream: not a frame header")
             if n != w * h * 3 or not (0.0 <= age_s < 5.0):
                 raise CameraError("SITL camera stream: inconsistent frame header")
-            pixels = self._recv_exact(n)
+            # straight into the frame's own array: no copy of ~1 MB per frame
+            image = np.empty((h, w, 3), np.uint8)
+            self._recv_into(memoryview(image).cast("B"))
         except (OSError, CameraError) as exc:
             self.close()
             raise CameraError(str(exc)) from None
-        image = np.frombuffer(pixels, np.uint8).reshape(h, w, 3)
         return Frame(seq, received - age_s, received, image)
 
     def close(self) -> None:
