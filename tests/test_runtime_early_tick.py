@@ -297,3 +297,31 @@ def test_an_early_tick_is_no_more_sensitive_to_one_sample_than_a_grid_tick():
     assert d_grid > 0.05  # the perturbation matters
     assert d_early == pytest.approx(d_grid, rel=0.25)
     assert d_elapsed > 3.0 * d_grid
+
+
+@pytest.mark.parametrize("fused", [True, False])
+def test_a_tick_falling_due_during_a_fusion_waits_for_it_asleep(fused):
+    """A fusion running at the deadline: the tick starts when it is in (re-anchored there,
+    counted as a grid tick, its lateness in the jitter), not on the lock as tick work."""
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    blocks: list[float] = []
+    fake_block = clock.block
+
+    def block(timeout_s: float) -> None:
+        blocks.append(clock.t - 100.0)
+        fake_block(timeout_s)
+
+    sched._block = block
+    clock.at(100.0098, sched.input_begins)  # in the spin before the 10 ms deadline
+    if fused:
+        clock.at(100.0104, lambda: (sched.request_tick(), sched.input_done(False)))
+    else:
+        clock.at(100.0104, lambda: sched.input_done(False))  # screened out: nothing fused
+    starts = _run(clock, sched, 4)
+    t = [s for s, _ in starts]
+    assert [e for _, e in starts] == [False, False, False, False]
+    assert t[2] == pytest.approx(0.0104, abs=1e-5)
+    assert t[3] == pytest.approx(0.0154, abs=1e-5)
+    assert sched.input_waits == 1 and sched.input_wait_max_s == pytest.approx(0.0004, abs=1e-5)
+    assert sched.early_ticks == 0

@@ -277,10 +277,17 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             return
         if ev.image_size != (loop.camera.width_px, loop.camera.height_px):
             return  # the tick reports it and ignores the frame
-        with self._loop_lock:
-            loop.on_detection(ev.detection)
-            if loop.fuse_detections() and self.config.early_tick:
-                self.scheduler.request_tick()
+        sched = self.scheduler
+        sched.input_begins()  # a tick falling due now waits for this fusion, asleep
+        fused = False
+        try:
+            with self._loop_lock:
+                loop.on_detection(ev.detection)
+                fused = bool(loop.fuse_detections())
+                if fused and self.config.early_tick:
+                    sched.request_tick()
+        finally:
+            sched.input_done(False)
 
     # ------------------------------------------------------------------ timing figures
     @property
@@ -299,6 +306,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "frames": self.camera.frames,
             "commands_sent": self.commands_sent,
             "scheduler_stalls": self.scheduler.stalls,
+            "ticks_waiting_for_a_fusion": self.scheduler.input_waits,
+            "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
             "early_tick": self.config.early_tick,
             "gc_runs_in_slack": self.scheduler.gc_runs,
             "realtime_priority": self.config.realtime_priority,
@@ -451,6 +460,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 cpu0 = time.thread_time()
                 self.timing.tick_started(start, sched.early)
                 with self._loop_lock:  # the camera thread fuses into the same loop
+                    self.timing.lock_waited(time.perf_counter() - start)
                     sched.served()  # a detection fused before this point is in this tick
                     self.tick()
                 now = time.perf_counter()

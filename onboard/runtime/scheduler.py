@@ -40,6 +40,7 @@ GC_MIN_SLACK_S = 0.002  # only when this much time is left before the next deadl
 MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than this
 SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
 MIN_GAP_FRACTION = 0.2  # an early tick starts no sooner than this many periods after the last
+MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for an input
 
 
 class PeriodicScheduler:
@@ -74,6 +75,10 @@ class PeriodicScheduler:
         self._next_s = 0.0
         self._last_start_s = -math.inf
         self._requested = False  # request_tick() since the last served()
+        self._inputting = False  # input_begins() without input_done(): a fusion running
+        self._awaiting_input = False  # wait() is blocked until it is done
+        self.input_waits = 0  # due ticks that waited for a running fusion to end
+        self.input_wait_max_s = 0.0
         self._wake = threading.Condition(threading.Lock())
         self._next_young_s = self._next_older_s = 0.0
         self._switch_interval = sys.getswitchinterval()
@@ -112,6 +117,21 @@ class PeriodicScheduler:
             self._requested = True
             self._wake.notify()
 
+    def input_begins(self) -> None:
+        """From the requesting thread, before it takes the lock to hand an input over (a
+        fusion, some 0.3-1 ms): a tick falling due meanwhile waits for it, asleep, instead of
+        spinning against it for the GIL and then waiting for the lock as tick work."""
+        self._inputting = True
+
+    def input_done(self, request: bool) -> None:
+        """The input is in (then ``request``: tick now, see :meth:`request_tick`) or came to
+        nothing: a tick waiting for it goes on either way."""
+        with self._wake:
+            self._inputting = False
+            if request:
+                self._requested = True
+            self._wake.notify()
+
     def served(self) -> None:
         """On the control thread, as the tick takes its inputs (under the lock the requester
         holds while handing one over): the requests made so far are in this tick."""
@@ -121,6 +141,8 @@ class PeriodicScheduler:
         """Sleep ``timeout_s``, or less if a request comes (none pending: one that is already
         pending is waiting for the minimum gap, a plain sleep)."""
         with self._wake:
+            if self._awaiting_input and not self._inputting:
+                return  # the input came in before this lock was taken
             if not self._requested:
                 self._wake.wait(timeout_s)
                 return
@@ -143,6 +165,8 @@ class PeriodicScheduler:
             start = now
         else:
             earliest = self._last_start_s + self.min_gap_s  # of an early tick
+            give_up = deadline + MAX_INPUT_WAIT_FRACTION * period
+            waited_from = None
             while True:
                 target = deadline
                 if self._requested and earliest < deadline:
@@ -154,12 +178,27 @@ class PeriodicScheduler:
             self._busy = True
             while True:
                 now = clock()
+                if self._inputting and not self._requested and now < give_up:
+                    # a fusion is running: asleep until it is in (it asks for this tick)
+                    # rather than spinning against it for the GIL, then waiting for the lock
+                    if waited_from is None:
+                        waited_from = now
+                    self._awaiting_input = True
+                    self._block(give_up - now)
+                    self._awaiting_input = False
+                    continue
                 if now >= deadline:
                     break
                 if self._requested and now >= earliest:
                     early = True
                     break
-            start = now if early else deadline
+            start = deadline
+            if early:
+                start = now
+            elif waited_from is not None and now > deadline:  # late: re-anchored there
+                start = now
+                self.input_waits += 1
+                self.input_wait_max_s = max(self.input_wait_max_s, now - deadline)
         self.early = early
         if early:
             self.early_ticks += 1
