@@ -81,7 +81,7 @@ class InterceptionLoop:
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
         self.dkf.carry_max_s = self.gains.t_carry
-        self._gyro_sum = np.zeros(3)
+        self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
         self._gyro_n = 0
         self._detections: list[Detection] = []
         self._prev_time_s: float | None = None
@@ -135,7 +135,9 @@ class InterceptionLoop:
         self._pending_gains = gains
 
     def on_gyro(self, sample: GyroSample) -> None:
-        self._gyro_sum += sample.rates_flu_rad_s
+        s0, s1, s2 = self._gyro_sum
+        r0, r1, r2 = (float(c) for c in sample.rates_flu_rad_s)
+        self._gyro_sum = (s0 + r0, s1 + r1, s2 + r2)
         self._gyro_n += 1
 
     def on_detection(self, detection: Detection) -> None:
@@ -275,23 +277,33 @@ class InterceptionLoop:
             dt = self.nominal_dt_s
         hold = dt if hold_s is None or not hold_s > 0.0 else hold_s
 
-        gyro = self._gyro_sum / self._gyro_n if self._gyro_n else state.body_rates_flu_rad_s
-        self._gyro_sum = np.zeros(3)
-        self._gyro_n = 0
+        n_gyro = self._gyro_n
+        if n_gyro:
+            g0, g1, g2 = self._gyro_sum
+            gyro = np.array((g0 / n_gyro, g1 / n_gyro, g2 / n_gyro))
+            self._gyro_sum = (0.0, 0.0, 0.0)
+            self._gyro_n = 0
+        else:
+            gyro = state.body_rates_flu_rad_s
         R_WB = quat_to_rotmat(state.attitude_wxyz)
         if gains.t_att_lag > 0.0:
             R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
         v_est = state.velocity_enu_m_s
         v = v_est
-        if gains.t_vel_lag > 0.0:
+        lag = gains.t_vel_lag
+        if lag > 0.0:
             # the velocity estimate is t_vel_lag old: add the acceleration since, from the
-            # thrust last commanded along the thrust axis, gravity and the observer's d^
-            a = R_WB[:, 2] * (self._thrust_n / self.vehicle.mass_kg)
-            a[2] -= GRAVITY_M_S2
+            # thrust last commanded along the thrust axis, gravity and the observer's d^ (in
+            # floats: numpy's elementwise operations, in the same order, to the bit)
+            k = self._thrust_n / self.vehicle.mass_kg
+            z0, z1, z2 = R_WB[:, 2].tolist()
+            a0, a1, a2 = z0 * k, z1 * k, z2 * k - GRAVITY_M_S2
             if self.disturbance.enabled:
-                a = a + self.disturbance.estimate_m_s2
-            v = v_est + gains.t_vel_lag * a
+                d0, d1, d2 = self.disturbance.estimate_floats
+                a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
+            v0, v1, v2 = v_est.tolist()
+            v = np.array((v0 + lag * a0, v1 + lag * a1, v2 + lag * a2))
         self._last_velocity = v
         if self._first_tick_s is None:
             self._first_tick_s = t

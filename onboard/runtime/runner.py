@@ -18,14 +18,13 @@ All MAVLink goes through :mod:`onboard.link.px4`; the maths stays in :mod:`onboa
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from ..camera_model import CameraModel
 from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams
@@ -373,7 +372,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 target_lost=tel is not None and tel.mode is LoopMode.LOST,
                 target_stale=tel is not None and tel.mode in _STALE_MODES,
                 target_size_frac=self.target_size_frac,
-                speed_m_s=0.0 if f.vel_enu_m_s is None else float(np.linalg.norm(f.vel_enu_m_s)),
+                speed_m_s=0.0 if f.vel_enu_m_s is None else math.hypot(*f.vel_enu_m_s.tolist()),
             )
         )
         for ev in decision.events:
