@@ -465,6 +465,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 now = time.perf_counter()
                 work = now - start
                 overran = self.timing.tick_done(work, time.thread_time() - cpu0)
+                self.sender.flush()  # what the tick handed off, to the sender thread now
                 if overran and now - self._last_overrun_report > 5.0:
                     self._last_overrun_report = now
                     self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
