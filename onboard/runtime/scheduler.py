@@ -20,7 +20,9 @@ spinning, then ticks at once instead of at the next deadline (never sooner than
 tick, so the early tick's command is held a whole period and no grid tick follows it closely.
 A request the tick has already taken in is withdrawn with :meth:`PeriodicScheduler.served`
 (called under the lock the requester holds while it hands the input over): one input, one
-tick.
+tick. A tick falling due while an input is being handed over (:meth:`input_begins` ..
+:meth:`input_done`, the fusion under the loop's lock) waits for it asleep, at most half a
+period, and starts when it is in, re-anchored there.
 """
 
 from __future__ import annotations
