@@ -81,7 +81,7 @@ class InterceptionLoop:
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
         self.dkf.carry_max_s = self.gains.t_carry
-        self._gyro_sum = np.zeros(3)
+        self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
         self._gyro_n = 0
         self._detections: list[Detection] = []
         self._prev_time_s: float | None = None
@@ -112,6 +112,7 @@ class InterceptionLoop:
             )
         )
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
+        self._dq_flown: tuple[float, float, float] | None = None  # (dq_y, dq_z, hold_s)
         self._los_last = None  # (e_px, R_WC, LOS angles) of the last tick that flew the law
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
         # the image's top/bottom edges above body x (upright: a portrait camera's long side)
@@ -134,7 +135,9 @@ class InterceptionLoop:
         self._pending_gains = gains
 
     def on_gyro(self, sample: GyroSample) -> None:
-        self._gyro_sum += sample.rates_flu_rad_s
+        s0, s1, s2 = self._gyro_sum
+        r0, r1, r2 = (float(c) for c in sample.rates_flu_rad_s)
+        self._gyro_sum = (s0 + r0, s1 + r1, s2 + r2)
         self._gyro_n += 1
 
     def on_detection(self, detection: Detection) -> None:
@@ -236,10 +239,32 @@ class InterceptionLoop:
         self._fused_early.extend(out)
         return out
 
+    def _dq_unflown(self, elapsed_s: float) -> tuple[float, float] | None:
+        """The part of the last command's LOS change (dq_y, dq_z, rad) not flown because it
+        was held ``elapsed_s`` instead of its hold, or None."""
+        last = self._dq_flown
+        if last is None or not elapsed_s < last[2]:
+            return None
+        rest = 1.0 - elapsed_s / last[2]
+        return last[0] * rest, last[1] * rest
+
     # ------------------------------------------------------------------ the tick
-    def tick(self, state: VehicleState, brake: bool = False) -> ControlTelemetry:
+    def tick(
+        self, state: VehicleState, brake: bool = False, hold_s: float | None = None
+    ) -> ControlTelemetry:
         """One control tick at ``state.time_s``; with ``brake`` the estimate keeps running but
-        the command brakes and holds (an operator abort)."""
+        the command brakes and holds (an operator abort).
+
+        ``hold_s``: how long this command will be held, until the next tick (s). Eq. 17's dt
+        and the per-command terms (speed ramp, pursuit, midcourse) take the hold; the DKF's
+        prediction and the LOS low-pass take the time elapsed since the last tick. A tick
+        sooner than the last command's hold cut that command short: the part of its LOS
+        change not flown (the fraction of its hold left) is added to this one's, so the turn
+        summed over the commands stays K times the LOS change (with the low-pass on, the LOS
+        change is filtered as a rate instead, over the elapsed time, per hold). None: the
+        hold is the elapsed time, as on a fixed grid (the simulator: nothing else changes).
+        The runtime passes its period: an early tick re-anchors its grid, so its command is
+        held a whole period."""
         t = state.time_s
         if self._pending_gains is not None:
             self.gains, self._pending_gains = self._pending_gains, None
@@ -250,24 +275,35 @@ class InterceptionLoop:
         dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
         if not dt > 0.0:
             dt = self.nominal_dt_s
+        hold = dt if hold_s is None or not hold_s > 0.0 else hold_s
 
-        gyro = self._gyro_sum / self._gyro_n if self._gyro_n else state.body_rates_flu_rad_s
-        self._gyro_sum = np.zeros(3)
-        self._gyro_n = 0
+        n_gyro = self._gyro_n
+        if n_gyro:
+            g0, g1, g2 = self._gyro_sum
+            gyro = np.array((g0 / n_gyro, g1 / n_gyro, g2 / n_gyro))
+            self._gyro_sum = (0.0, 0.0, 0.0)
+            self._gyro_n = 0
+        else:
+            gyro = state.body_rates_flu_rad_s
         R_WB = quat_to_rotmat(state.attitude_wxyz)
         if gains.t_att_lag > 0.0:
             R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
         v_est = state.velocity_enu_m_s
         v = v_est
-        if gains.t_vel_lag > 0.0:
+        lag = gains.t_vel_lag
+        if lag > 0.0:
             # the velocity estimate is t_vel_lag old: add the acceleration since, from the
-            # thrust last commanded along the thrust axis, gravity and the observer's d^
-            a = R_WB[:, 2] * (self._thrust_n / self.vehicle.mass_kg)
-            a[2] -= GRAVITY_M_S2
+            # thrust last commanded along the thrust axis, gravity and the observer's d^ (in
+            # floats: numpy's elementwise operations, in the same order, to the bit)
+            k = self._thrust_n / self.vehicle.mass_kg
+            z0, z1, z2 = R_WB[:, 2].tolist()
+            a0, a1, a2 = z0 * k, z1 * k, z2 * k - GRAVITY_M_S2
             if self.disturbance.enabled:
-                a = a + self.disturbance.estimate_m_s2
-            v = v_est + gains.t_vel_lag * a
+                d0, d1, d2 = self.disturbance.estimate_floats
+                a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
+            v0, v1, v2 = v_est.tolist()
+            v = np.array((v0 + lag * a0, v1 + lag * a1, v2 + lag * a2))
         self._last_velocity = v
         if self._first_tick_s is None:
             self._first_tick_s = t
@@ -298,6 +334,7 @@ class InterceptionLoop:
             mode = LoopMode.BRAKE
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
+            self._dq_flown = None
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -335,11 +372,23 @@ class InterceptionLoop:
                         line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
                     )
                 dq_y, dq_z = los_change(q_y, q_z, *q_prev)
+                if hold_s is not None and gains.tau_los > 0.0 and hold != dt:
+                    # low-passed as a rate: the change over dt, per hold
+                    dq_y *= hold / dt
+                    dq_z *= hold / dt
             self._los_last = (e_est, R_WC, (q_y, q_z))
             if gains.tau_los > 0.0:
                 dq_y = smooth_los_change(self._dq_filt[0], dq_y, dt, gains.tau_los)
                 dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
                 self._dq_filt = (dq_y, dq_z)
+            elif hold_s is not None:
+                # the last command's LOS change not flown: this tick cut its hold short (an
+                # early tick), so the turn summed over the commands stays K times the LOS's
+                carry = self._dq_unflown(dt)
+                if carry is not None:
+                    dq_y += carry[0]
+                    dq_z += carry[1]
+                self._dq_flown = (dq_y, dq_z, hold)
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
             mean_range = self.dkf.range_m() if gains.tau_zem > 0.0 else None
@@ -355,7 +404,7 @@ class InterceptionLoop:
                     var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             out = self._law(
                 GuidanceInput(
-                    *(dt, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
+                    *(hold, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
                     range_m=range_m,
                     target_vel_enu_m_s=v_t,
                     target_vel_var_m2_s2=var_v,

@@ -149,6 +149,13 @@ def run_sitl_bench(
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
+        "early_ticks": stats.get("early_ticks"),
+        "early_gap_median_ms": stats.get("early_gap_median_ms"),
+        "ticks": stats.get("ticks"),
+        "lock_wait_p99_ms": stats.get("lock_wait_p99_ms"),
+        "lock_wait_max_ms": stats.get("lock_wait_max_ms"),
+        "ticks_waiting_for_a_fusion": stats.get("ticks_waiting_for_a_fusion"),
+        "fusion_wait_max_ms": stats.get("fusion_wait_max_ms"),
         "camera_delay_s": delay_s,
         "capture_to_command_median_ms": stats.get("latency_total_median_ms"),
         "beyond_camera_median_ms": stats.get("latency_beyond_camera_median_ms"),
@@ -186,6 +193,12 @@ def run_sitl_bench(
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
     )
     print(f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target 200")
+    if figures["early_ticks"] is not None:
+        print(
+            f"  early ticks (a detection fused, the grid re-anchored) {figures['early_ticks']}, "
+            f"median {f(figures['early_gap_median_ms'])} ms after the previous tick (not counted "
+            "in the rate and jitter)"
+        )
     print(
         f"  period jitter p99 {f(figures['jitter_p99_ms'])} ms (max {f(figures['jitter_max_ms'])})"
         + verdict(figures["jitter_p99_ms"], TARGETS_MS["jitter_p99"])
@@ -199,6 +212,13 @@ def run_sitl_bench(
         f"    of which the control thread's CPU time: median {f(figures['tick_cpu_median_ms'])}"
         f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
     )
+    if figures["lock_wait_p99_ms"] is not None:
+        print(
+            f"    of which waiting for the loop's lock: p99 {f(figures['lock_wait_p99_ms'])} ms"
+            f" (max {f(figures['lock_wait_max_ms'])}); ticks that waited (asleep, before they "
+            f"started) for a fusion to end: {figures['ticks_waiting_for_a_fusion']} (at most "
+            f"{f(figures['fusion_wait_max_ms'])} ms past the deadline)"
+        )
     print(
         f"  overruns {figures['overruns']}, stalls re-anchored {figures['scheduler_stalls']}"
         f"  target 0 in {seconds:g} s: {'met' if figures['overruns'] == 0 else 'NOT MET'}"

@@ -123,6 +123,11 @@ class DisturbanceObserver:
         self.resets = 0
 
     @property
+    def estimate_floats(self) -> tuple[float, float, float]:
+        """d^ (m/s^2, ENU) as three floats: :attr:`estimate_m_s2`'s values."""
+        return self._d
+
+    @property
     def enabled(self) -> bool:
         return self.config.bandwidth_rad_s > 0.0
 

@@ -4,6 +4,7 @@ loop the state by the same code without importing pymavlink."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,6 +48,6 @@ def state_at(fc: FcState, now_s: float) -> VehicleState:
     if fc.q_time_s is not None:
         dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
         rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
-        if float(np.linalg.norm(rates)) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
+        if math.hypot(*rates.tolist()) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
             q = propagate_attitude(q, rates, dt)
     return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)

@@ -1,6 +1,8 @@
 """``onboard run``: the interception loop on the vehicle. The control thread ticks at a fixed
-rate (default 200 Hz); each tick reads the vehicle state the receiver threads took from what
-the flight controller and the ground sent, feeds the camera thread's detections to the loop,
+rate (default 200 Hz), and at once when the camera thread has fused a detection (the early
+tick: the grid re-anchors a period after it, so every command is held a period); each tick
+reads the vehicle state the receiver threads took from what the flight controller and the
+ground sent, feeds the camera thread's detections to the loop,
 steps the offboard state machine (the failsafe wiring: :meth:`OnboardRuntime.tick`), sends
 the command to PX4 and hands the rest (telemetry every few ticks, events, heartbeats, TIMESYNC
 requests) to the sender thread, which sends it in the tick's slack.
@@ -16,14 +18,13 @@ All MAVLink goes through :mod:`onboard.link.px4`; the maths stays in :mod:`onboa
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from ..camera_model import CameraModel
 from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams
@@ -77,6 +78,7 @@ class RuntimeConfig:
     realtime_priority: int | None = None  # SCHED_FIFO priority of the control thread (1-99)
     video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
     foxglove: tuple[str, int] | None = None  # (host, port): Foxglove live (onboard run --foxglove)
+    early_tick: bool = True  # tick as soon as a detection is fused, not at the next deadline
 
 
 class OnboardRuntime(FlightControllerSide, GroundSide):
@@ -144,6 +146,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         # receiver threads, read by the sender
         self._loop_lock = threading.RLock()
         self._fusing = False  # run(): detections are fused on the camera thread
+        self._hold_s: float | None = None  # run(): how long a command is held (the period)
         self._stop = threading.Event()
         self._tick_n = 0
         self._events: deque[tuple[str, str]] = deque()
@@ -264,17 +267,26 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def _fuse_on_arrival(self, ev) -> None:
         """On the camera thread, as a detection arrives (run() only): fuse it into the DKF
-        now, so the next tick only predicts and commands. (The tick is not started early: the
-        guidance's eq. 17 divides by the tick's dt, so an off-grid tick would command a
-        multiple of the acceleration.)"""
+        now and ask for a tick at once (the early tick: the scheduler re-anchors its grid
+        there, and the tick's command is held a period, eq. 17's dt: see
+        ``InterceptionLoop.tick``'s ``hold_s``). The request is made under the loop's lock, so
+        a tick that takes the lock after it has the fusion in it and withdraws it."""
         loop = self.loop
         if not self._fusing or loop is None or ev.detection is None:
             return
         if ev.image_size != (loop.camera.width_px, loop.camera.height_px):
             return  # the tick reports it and ignores the frame
-        with self._loop_lock:
-            loop.on_detection(ev.detection)
-            loop.fuse_detections()
+        sched = self.scheduler
+        sched.input_begins()  # a tick falling due now waits for this fusion, asleep
+        fused = False
+        try:
+            with self._loop_lock:
+                loop.on_detection(ev.detection)
+                fused = bool(loop.fuse_detections())
+                if fused and self.config.early_tick:
+                    sched.request_tick()
+        finally:
+            sched.input_done(False)
 
     # ------------------------------------------------------------------ timing figures
     @property
@@ -293,6 +305,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "frames": self.camera.frames,
             "commands_sent": self.commands_sent,
             "scheduler_stalls": self.scheduler.stalls,
+            "ticks_waiting_for_a_fusion": self.scheduler.input_waits,
+            "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
+            "early_tick": self.config.early_tick,
             "gc_runs_in_slack": self.scheduler.gc_runs,
             "realtime_priority": self.config.realtime_priority,
             "bad_frames_fc": self.fc.bad_frames,
@@ -311,6 +326,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     # ------------------------------------------------------------------ the tick
     def tick(self) -> None:
+        """One tick of the runtime (run() calls it on the grid and early, for a detection)."""
         now = self.clock.now()
         self._take_waiting(now)  # what the receiver threads could not take (the lock was held)
         if self._fc_rx is None:  # else taken on the receiver thread as they arrive
@@ -339,7 +355,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         f = self.fcs
         tel = None
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
-            tel = loop.tick(state_at(f, now), brake=self.sm.state is State.BRAKING)
+            tel = loop.tick(state_at(f, now), self.sm.state is State.BRAKING, self._hold_s)
         if self.video is not None:
             self.video_overlay = overlay_of(
                 self._last_det, tel and tel.e_est_px, loop and loop.camera, now
@@ -356,7 +372,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 target_lost=tel is not None and tel.mode is LoopMode.LOST,
                 target_stale=tel is not None and tel.mode in _STALE_MODES,
                 target_size_frac=self.target_size_frac,
-                speed_m_s=0.0 if f.vel_enu_m_s is None else float(np.linalg.norm(f.vel_enu_m_s)),
+                speed_m_s=0.0 if f.vel_enu_m_s is None else math.hypot(*f.vel_enu_m_s.tolist()),
             )
         )
         for ev in decision.events:
@@ -435,16 +451,21 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._event("info", f"Foxglove live on {self.foxglove.live.url()}")
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         end = None if duration_s is None else time.perf_counter() + duration_s
+        # every command is held a period: an early tick re-anchors the grid (eq. 17's dt)
+        self._hold_s = self.period_s
         try:
             while not self._stop.is_set():
                 start = sched.wait()
                 cpu0 = time.thread_time()
-                self.timing.tick_started(start)
+                self.timing.tick_started(start, sched.early)
                 with self._loop_lock:  # the camera thread fuses into the same loop
+                    self.timing.lock_waited(time.perf_counter() - start)
+                    sched.served()  # a detection fused before this point is in this tick
                     self.tick()
                 now = time.perf_counter()
                 work = now - start
                 overran = self.timing.tick_done(work, time.thread_time() - cpu0)
+                self.sender.flush()  # what the tick handed off, to the sender thread now
                 if overran and now - self._last_overrun_report > 5.0:
                     self._last_overrun_report = now
                     self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")

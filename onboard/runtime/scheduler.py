@@ -12,15 +12,28 @@ a thread that has it keeps it for up to the switch interval: work of theirs that
 the control thread is spinning or ticking delays the tick by that much. They call
 :meth:`PeriodicScheduler.wait_for_slack` before each piece of work, which returns at once while
 the control thread sleeps and otherwise waits, without the GIL, until its tick is done.
+
+Early ticks: another thread with a new input for the tick (the camera thread, right after it
+fused a detection) calls :meth:`PeriodicScheduler.request_tick`; the control thread, asleep or
+spinning, then ticks at once instead of at the next deadline (never sooner than
+``min_gap_s`` after the previous tick's start) and the grid re-anchors one period after that
+tick, so the early tick's command is held a whole period and no grid tick follows it closely.
+A request the tick has already taken in is withdrawn with :meth:`PeriodicScheduler.served`
+(called under the lock the requester holds while it hands the input over): one input, one
+tick. A tick falling due while an input is being handed over (:meth:`input_begins` ..
+:meth:`input_done`, the fusion under the loop's lock) waits for it asleep, at most half a
+period, and starts when it is in, re-anchored there.
 """
 
 from __future__ import annotations
 
 import gc
+import math
 import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
 GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
@@ -28,24 +41,47 @@ GC_OLDER_EVERY_S = 10.0  # and generation 1 this often
 GC_MIN_SLACK_S = 0.002  # only when this much time is left before the next deadline
 MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than this
 SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
+MIN_GAP_FRACTION = 0.2  # an early tick starts no sooner than this many periods after the last
+MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for an input
 
 
 class PeriodicScheduler:
     """Call :meth:`start` once on the control thread, then per tick :meth:`wait` (returns the
-    tick's start time, perf_counter seconds), run the tick, :meth:`after_tick`; :meth:`stop`
-    at the end restores the interpreter's defaults."""
+    tick's start time, perf_counter seconds; :attr:`early` says whether a request brought it
+    forward), run the tick, :meth:`after_tick`; :meth:`stop` at the end restores the
+    interpreter's defaults. ``clock`` and ``block`` (sleep up to the given seconds, returning
+    sooner if :meth:`request_tick` is called) are for tests with a fake clock."""
 
     def __init__(
-        self, period_s: float, spin_s: float = SPIN_S, realtime_priority: int | None = None
+        self,
+        period_s: float,
+        spin_s: float = SPIN_S,
+        realtime_priority: int | None = None,
+        min_gap_s: float | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+        block: Callable[[float], None] | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
         self.period_s = period_s
         self.spin_s = min(max(spin_s, 0.0), period_s)
+        gap = MIN_GAP_FRACTION * period_s if min_gap_s is None else min_gap_s
+        self.min_gap_s = min(max(gap, 0.0), period_s)
         self.realtime_priority = realtime_priority
         self.stalls = 0  # times the loop fell a whole period behind and re-anchored
+        self.early_ticks = 0  # ticks brought forward by request_tick
+        self.early = False  # the tick wait() last returned was brought forward
         self.gc_runs = 0
+        self._clock = clock
+        self._block = block or self._block_until_request
         self._next_s = 0.0
+        self._last_start_s = -math.inf
+        self._requested = False  # request_tick() since the last served()
+        self._inputting = False  # input_begins() without input_done(): a fusion running
+        self._awaiting_input = False  # wait() is blocked until it is done
+        self.input_waits = 0  # due ticks that waited for a running fusion to end
+        self.input_wait_max_s = 0.0
+        self._wake = threading.Condition(threading.Lock())
         self._next_young_s = self._next_older_s = 0.0
         self._switch_interval = sys.getswitchinterval()
         self._gc_was_enabled = gc.isenabled()
@@ -68,36 +104,115 @@ class PeriodicScheduler:
         gc.collect()
         gc.freeze()
         gc.disable()
-        now = time.perf_counter()
+        now = self._clock()
         self._next_s = now
         self._next_young_s = now + GC_YOUNG_EVERY_S
         self._next_older_s = now + GC_OLDER_EVERY_S
         self._running = True
         return note
 
+    # ------------------------------------------------------------------ early ticks
+    def request_tick(self) -> None:
+        """From another thread: an input for the tick is ready (a detection fused), tick now
+        rather than at the next deadline. Wakes the control thread if it sleeps."""
+        with self._wake:
+            self._requested = True
+            self._wake.notify()
+
+    def input_begins(self) -> None:
+        """From the requesting thread, before it takes the lock to hand an input over (a
+        fusion, some 0.3-1 ms): a tick falling due meanwhile waits for it, asleep, instead of
+        spinning against it for the GIL and then waiting for the lock as tick work."""
+        self._inputting = True
+
+    def input_done(self, request: bool) -> None:
+        """The input is in (then ``request``: tick now, see :meth:`request_tick`) or came to
+        nothing: a tick waiting for it goes on either way."""
+        with self._wake:
+            self._inputting = False
+            if request:
+                self._requested = True
+            self._wake.notify()
+
+    def served(self) -> None:
+        """On the control thread, as the tick takes its inputs (under the lock the requester
+        holds while handing one over): the requests made so far are in this tick."""
+        self._requested = False
+
+    def _block_until_request(self, timeout_s: float) -> None:
+        """Sleep ``timeout_s``, or less if a request comes (none pending: one that is already
+        pending is waiting for the minimum gap, a plain sleep)."""
+        with self._wake:
+            if self._awaiting_input and not self._inputting:
+                return  # the input came in before this lock was taken
+            if not self._requested:
+                self._wake.wait(timeout_s)
+                return
+        time.sleep(timeout_s)
+
+    # ------------------------------------------------------------------ the grid
     def wait(self) -> float:
-        """Return at the next deadline (sleeping, then spinning); when a stall left the loop
-        more than a period behind, start afresh from now rather than run a burst of ticks."""
+        """Return at the next deadline (sleeping, then spinning), or earlier when a tick was
+        requested (not before ``min_gap_s`` after the last start: the grid then re-anchors
+        there); when a stall left the loop more than a period behind, start afresh from now
+        rather than run a burst of ticks."""
+        clock = self._clock
+        period = self.period_s
         deadline = self._next_s
-        now = time.perf_counter()
-        if now > deadline + self.period_s:
+        now = clock()
+        early = False
+        if now > deadline + period:
             self.stalls += 1
-            deadline = now
             self._busy = True
+            start = now
         else:
-            if deadline - now > self.spin_s:
-                time.sleep(deadline - now - self.spin_s)
+            earliest = self._last_start_s + self.min_gap_s  # of an early tick
+            give_up = deadline + MAX_INPUT_WAIT_FRACTION * period
+            waited_from = None
+            while True:
+                target = deadline
+                if self._requested and earliest < deadline:
+                    target = earliest if earliest > now else now
+                if target - now <= self.spin_s:
+                    break
+                self._block(target - now - self.spin_s)
+                now = clock()
             self._busy = True
-            while time.perf_counter() < deadline:
-                pass
-        self._next_s = deadline + self.period_s
-        return time.perf_counter()
+            while True:
+                now = clock()
+                if self._inputting and not self._requested and now < give_up:
+                    # a fusion is running: asleep until it is in (it asks for this tick)
+                    # rather than spinning against it for the GIL, then waiting for the lock
+                    if waited_from is None:
+                        waited_from = now
+                    self._awaiting_input = True
+                    self._block(give_up - now)
+                    self._awaiting_input = False
+                    continue
+                if now >= deadline:
+                    break
+                if self._requested and now >= earliest:
+                    early = True
+                    break
+            start = deadline
+            if early:
+                start = now
+            elif waited_from is not None and now > deadline:  # late: re-anchored there
+                start = now
+                self.input_waits += 1
+                self.input_wait_max_s = max(self.input_wait_max_s, now - deadline)
+        self.early = early
+        if early:
+            self.early_ticks += 1
+        self._next_s = start + period
+        self._last_start_s = start
+        return clock()
 
     def after_tick(self) -> None:
         """Let the threads waiting for slack go; collect garbage if due and there is slack
         before the next deadline."""
         self._tick_over()
-        now = time.perf_counter()
+        now = self._clock()
         if now < self._next_young_s or self._next_s - now < GC_MIN_SLACK_S:
             return
         self._next_young_s = now + GC_YOUNG_EVERY_S
@@ -117,12 +232,17 @@ class PeriodicScheduler:
     def wait_for_slack(self) -> None:
         """For the other threads, before a piece of work: return at once while the control
         thread sleeps with more than ``SLACK_LEAD_S`` to go before it wakes (``spin_s`` before
-        its deadline); otherwise when its tick is over. Their work then falls in the tick's
-        slack, not at its start: under SCHED_FIFO a thread of the same priority is not
-        preempted, so work begun just before the wake-up would delay the tick by its length."""
+        its deadline) and no early tick is pending; otherwise when its tick is over. Their work
+        then falls in the tick's slack, not at its start: under SCHED_FIFO a thread of the same
+        priority is not preempted, so work begun just before the wake-up would delay the tick
+        by its length."""
         if not self._running:
             return
-        if not self._busy and self._next_s - self.spin_s - time.perf_counter() >= SLACK_LEAD_S:
+        if (
+            not self._busy
+            and not self._requested
+            and self._next_s - self.spin_s - self._clock() >= SLACK_LEAD_S
+        ):
             return
         with self._done:
             n = self._ticks_done
@@ -135,6 +255,8 @@ class PeriodicScheduler:
         """Hand collection back to the interpreter (and let any waiting thread go)."""
         self._running = False
         self._tick_over()
+        with self._wake:
+            self._wake.notify_all()
         gc.unfreeze()
         if self._gc_was_enabled:
             gc.enable()

@@ -33,37 +33,47 @@ class Sender(threading.Thread):
         self._gate = gate
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._running = False
+        self._held: list[tuple[Callable[..., object], tuple]] = []
 
     def start(self) -> None:
         self._running = True
         super().start()
 
     def submit(self, fn: Callable[..., object], *args: object) -> None:
-        """Run ``fn(*args)`` on the thread (at once, here, when it is not running)."""
+        """Run ``fn(*args)`` on the thread (at once, here, when it is not running). Held until
+        :meth:`flush`: the thread is not woken in the middle of a tick (a woken thread asks
+        for the GIL, and the tick may have to hand it over)."""
         if self._running:
-            self._queue.put((fn, args))
+            self._held.append((fn, args))
         else:
             fn(*args)
 
+    def flush(self) -> None:
+        """Hand what was submitted since the last flush to the thread (after the tick)."""
+        if self._held:
+            held, self._held = self._held, []
+            self._queue.put(held)
+
     def run(self) -> None:
         while True:
-            item = self._queue.get()
-            if item is _STOP:
+            batch = self._queue.get()
+            if batch is _STOP:
                 return
-            fn, args = item
-            if self._gate is not None:
-                self._gate()
-            try:
-                fn(*args)
-            except Exception as exc:
-                self.errors += 1
-                if self._on_error is not None:
-                    self._on_error(f"sender: {type(exc).__name__}: {exc}")
+            for fn, args in batch:
+                if self._gate is not None:
+                    self._gate()
+                try:
+                    fn(*args)
+                except Exception as exc:
+                    self.errors += 1
+                    if self._on_error is not None:
+                        self._on_error(f"sender: {type(exc).__name__}: {exc}")
 
     def stop(self, timeout_s: float = 2.0) -> None:
         """Run what is queued, then stop; later submissions run on the caller's thread."""
         if not self._running:
             return
+        self.flush()
         self._queue.put(_STOP)
         self.join(timeout=timeout_s)
         self._running = False

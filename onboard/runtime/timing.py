@@ -20,10 +20,11 @@ def _ms(x: float | None) -> float | None:
 
 
 def rate_hz(recent: list[tuple[float, float]]) -> float:
-    """The achieved rate over (tick start s, period s) pairs, oldest first."""
+    """The achieved rate of the grid over (tick start s, period s) pairs, oldest first (early
+    ticks are not in them: the rate the grid kept between them)."""
     if len(recent) < 2:
         return 0.0
-    span = recent[-1][0] - recent[0][0]
+    span = sum(per for _, per in recent) - recent[0][1]
     return (len(recent) - 1) / span if span > 0 else 0.0
 
 
@@ -47,15 +48,29 @@ class LoopTiming:
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
         self._last_start: float | None = None
+        self.early_ticks = 0
+        self.lock_waits_s: deque[float] = deque(maxlen=keep)  # tick start -> the loop's lock
+        self.early_gaps_s: deque[float] = deque(maxlen=keep)  # previous tick -> early tick
 
-    def tick_started(self, start_s: float) -> None:
+    def tick_started(self, start_s: float, early: bool = False) -> None:
+        """A tick started at ``start_s``; ``early``: brought forward by a detection (its
+        interval from the previous tick is short by design: counted apart, not as jitter)."""
         if self._last_start is not None:
             per = start_s - self._last_start
-            self.periods_all.append(per)
-            self._recent.append((start_s, per))
-            while self._recent and self._recent[0][0] < start_s - 1.0:
-                self._recent.popleft()
+            if early:
+                self.early_ticks += 1
+                self.early_gaps_s.append(per)
+            else:
+                self.periods_all.append(per)
+                self._recent.append((start_s, per))
+                while self._recent and self._recent[0][0] < start_s - 1.0:
+                    self._recent.popleft()
         self._last_start = start_s
+
+    def lock_waited(self, s: float) -> None:
+        """How long the tick waited for the loop's lock (a fusion, a receiver batch or the
+        sender's DKF state holding it); part of its work."""
+        self.lock_waits_s.append(s)
 
     def tick_done(self, work_s: float, cpu_s: float | None = None) -> bool:
         """Record a tick's work (wall time, and the control thread's CPU time in it: the
@@ -105,6 +120,10 @@ class LoopTiming:
             "tick_cpu_median_ms": _ms(_pct(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": _ms(_pct(self.tick_cpu_s, 0.99)),
             "overruns": self.overruns,
+            "early_ticks": self.early_ticks,
+            "lock_wait_p99_ms": _ms(_pct(self.lock_waits_s, 0.99)),
+            "lock_wait_max_ms": _ms(max(self.lock_waits_s, default=None)),
+            "early_gap_median_ms": _ms(_pct(self.early_gaps_s, 0.5)),
             "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
             "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
             "latency_beyond_camera_p99_ms": _ms(_pct(self.latency_beyond_camera_s, 0.99)),

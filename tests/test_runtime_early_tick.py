@@ -1,0 +1,327 @@
+"""The early tick (#16 item 5): a fused detection brings the control tick forward and the grid
+re-anchors one period after it (onboard/runtime/scheduler.py), the loop flies that command for
+its hold, not the time since the last tick (onboard/loop.py), and the runtime's accounting
+keeps early ticks apart (onboard/runtime/timing.py). Driven by a fake clock: no timing is
+asserted, only the order and the instants the scheduler chose on that clock."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from onboard.camera_model import CameraModel
+from onboard.datatypes import Detection, VehicleParams, VehicleState
+from onboard.gains import Gains
+from onboard.geometry import attitude_from_yaw_pitch_roll, rotmat_to_quat
+from onboard.loop import InterceptionLoop
+from onboard.runtime.scheduler import PeriodicScheduler
+from onboard.runtime.timing import LoopTiming
+
+P = 0.005  # 200 Hz
+STEP = 1e-6  # the fake clock moves this much per reading (a spin ends)
+
+
+class FakeClock:
+    """Time that moves only when read (a microsecond), slept or worked; requests scheduled
+    with :meth:`at` fire when the time passes them, waking a blocked sleep as a notify would."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+        self._events: list[tuple[float, object]] = []
+
+    def at(self, t: float, fn) -> None:
+        self._events.append((t, fn))
+        self._events.sort(key=lambda e: e[0])
+
+    def _fire(self) -> bool:
+        fired = False
+        while self._events and self._events[0][0] <= self.t:
+            self._events.pop(0)[1]()
+            fired = True
+        return fired
+
+    def now(self) -> float:
+        self.t += STEP
+        self._fire()
+        return self.t
+
+    def block(self, timeout_s: float) -> None:
+        end = self.t + timeout_s
+        if self._events and self._events[0][0] < end:
+            self.t = max(self.t, self._events[0][0])  # woken by the request
+        else:
+            self.t = end
+        self._fire()
+
+    def work(self, s: float) -> None:
+        self.t += s
+        self._fire()
+
+
+def _scheduler(clock: FakeClock, **kw) -> PeriodicScheduler:
+    return PeriodicScheduler(P, clock=clock.now, block=clock.block, **kw)
+
+
+def _run(clock: FakeClock, sched: PeriodicScheduler, n: int, work_s: float = 0.0003):
+    """n ticks; each takes its requests in at its start (served), then works."""
+    starts = []
+    sched.start()
+    try:
+        for _ in range(n):
+            start = sched.wait()
+            sched.served()
+            starts.append((round(start - 100.0, 6), sched.early))
+            clock.work(work_s)
+            sched.after_tick()
+    finally:
+        sched.stop()
+    return starts
+
+
+def test_a_request_ticks_at_once_and_re_anchors_the_grid():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    clock.at(100.0122, sched.request_tick)  # between the grid's 10 and 15 ms
+    starts = _run(clock, sched, 6)
+    t = [s for s, _ in starts]
+    assert [e for _, e in starts] == [False, False, False, True, False, False]
+    assert t[:3] == pytest.approx([0.0, 0.005, 0.010], abs=1e-5)
+    assert t[3] == pytest.approx(0.0122, abs=1e-5)  # at once, not at 15 ms
+    assert t[4] - t[3] == pytest.approx(P, abs=1e-5)  # one period after the early tick
+    assert t[5] - t[4] == pytest.approx(P, abs=1e-5)
+    assert sched.early_ticks == 1 and sched.stalls == 0
+
+
+def test_a_request_just_before_a_deadline_replaces_that_tick_no_double_tick():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    clock.at(100.0099, sched.request_tick)  # 0.1 ms before the 10 ms deadline (in the spin)
+    t = [s for s, _ in _run(clock, sched, 5)]
+    assert t[2] == pytest.approx(0.0099, abs=1e-5)
+    assert t[3] == pytest.approx(0.0149, abs=1e-5)  # no tick at 10 ms nor at 15 ms
+    assert all(b - a > 0.8 * P for a, b in itertools.pairwise(t[2:]))
+
+
+def test_a_request_the_tick_already_took_in_is_not_served_twice():
+    """The camera thread fuses and requests under the loop's lock; a tick that takes the lock
+    afterwards has the fusion in it (served): no early tick follows it."""
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    starts = []
+    sched.start()
+    try:
+        for k in range(4):
+            start = sched.wait()
+            if k == 1:
+                sched.request_tick()  # fused while the tick waited for the lock
+            sched.served()
+            starts.append(round(start - 100.0, 6))
+            clock.work(0.0003)
+            sched.after_tick()
+    finally:
+        sched.stop()
+    assert starts == pytest.approx([0.0, 0.005, 0.010, 0.015], abs=1e-5)
+    assert sched.early_ticks == 0
+
+
+def test_a_request_during_a_tick_gets_one_early_tick_after_the_minimum_gap():
+    clock = FakeClock()
+    sched = _scheduler(clock)  # minimum gap: a fifth of the period, 1 ms
+    clock.at(100.0051, sched.request_tick)  # 0.1 ms into the 5 ms tick (after its served())
+    clock.at(100.00511, sched.request_tick)  # a second detection before the early tick
+    starts = _run(clock, sched, 4)
+    t = [s for s, _ in starts]
+    assert [e for _, e in starts] == [False, False, True, False]
+    assert t[2] == pytest.approx(0.005 + sched.min_gap_s, abs=1e-5)
+    assert t[3] == pytest.approx(t[2] + P, abs=1e-5)
+    assert sched.early_ticks == 1
+
+
+def test_a_stream_of_requests_never_ticks_faster_than_the_gap_nor_slower_than_the_grid():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    for k in range(200):  # a request every 0.3 ms for 60 ms
+        clock.at(100.0 + 0.0003 * k, sched.request_tick)
+    starts = _run(clock, sched, 80)
+    t = [s for s, _ in starts]
+    gaps = np.diff(t)
+    assert gaps.min() >= sched.min_gap_s - 1e-5  # the control thread is never flooded
+    assert gaps.max() <= P + 1e-5  # nor ever held past its deadline
+    after = [s for s, _ in starts if s > 0.061]
+    assert not any(e for s, e in starts if s > 0.061)  # back on a grid once they stop
+    assert np.diff(after) == pytest.approx(P, abs=1e-5)
+
+
+def test_a_stall_is_still_a_stall_and_re_anchors():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    sched.start()
+    try:
+        sched.wait()
+        sched.served()
+        clock.work(0.012)  # a tick that ran 2.4 periods
+        sched.request_tick()  # and a detection meanwhile
+        after_stall = sched.wait()
+        early_flag = sched.early
+        sched.served()
+        clock.work(0.0003)
+        nxt = sched.wait()
+    finally:
+        sched.stop()
+    assert sched.stalls == 1 and not early_flag
+    assert nxt - after_stall == pytest.approx(P, abs=1e-5)
+
+
+def test_other_threads_wait_while_an_early_tick_is_pending():
+    """wait_for_slack holds another thread off while a request is pending (the control thread
+    is about to wake), and lets it go when that tick is over."""
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    log: list[str] = []
+    sched.start()
+    try:
+        sched.wait()
+        sched.served()
+        clock.work(0.0003)
+        sched.after_tick()
+        sched.wait_for_slack()  # asleep with 4.7 ms to go: at once
+        log.append("slack")
+        sched.request_tick()
+        asked = threading.Event()
+
+        def helper() -> None:
+            asked.set()
+            sched.wait_for_slack()
+            log.append("helper")
+
+        th = threading.Thread(target=helper)
+        th.start()
+        asked.wait(2.0)
+        th.join(0.05)  # still held: the early tick has not run
+        log.append("early tick")
+        sched.wait()
+        sched.served()
+        sched.after_tick()
+        th.join(2.0)
+    finally:
+        sched.stop()
+    assert log == ["slack", "early tick", "helper"]
+
+
+def test_timing_keeps_early_ticks_out_of_the_jitter_and_counts_overruns():
+    timing = LoopTiming(P, keep=100)
+    for start, early, work in [
+        (0.0, False, 0.0003),
+        (0.005, False, 0.0003),
+        (0.0072, True, 0.0061),  # an early tick that overran
+        (0.0122, False, 0.0003),
+        (0.0172, False, 0.0003),
+    ]:
+        timing.tick_started(start, early)
+        timing.tick_done(work)
+    fig = timing.figures()
+    assert fig["early_ticks"] == 1 and fig["overruns"] == 1
+    assert fig["early_gap_median_ms"] == pytest.approx(2.2)
+    assert fig["rate_hz"] == pytest.approx(200.0)
+    assert fig["jitter_max_ms"] == pytest.approx(0.0, abs=1e-9)
+    assert timing.loop_rate_hz() == pytest.approx(200.0)
+
+
+# ---------------------------------------------------------------------- the loop's hold
+Q_NORTH = rotmat_to_quat(attitude_from_yaw_pitch_roll(math.pi / 2))
+Q_NORTH_OFF = rotmat_to_quat(attitude_from_yaw_pitch_roll(math.pi / 2 + math.radians(0.05)))
+
+
+def _tracking_loop() -> InterceptionLoop:
+    # no velocity-latency prediction: v is the state's, whatever was commanded before
+    loop = InterceptionLoop(CameraModel(), VehicleParams(), Gains(t_vel_lag=0.0), law="png")
+    loop.tick(_state(0.0))
+    loop.on_detection(Detection(0.0, (420.0, 300.0), (410, 290, 20, 20), 314.0))
+    return loop
+
+
+def _state(t: float, q=Q_NORTH) -> VehicleState:
+    return VehicleState(t, np.array([0.0, 0.0, 10.0]), np.array([0.5, 3.0, 0.2]), q, np.zeros(3))
+
+
+def _flown(ticks: list[tuple[float, float | None]], end_s: float, from_s: float, q_at=None):
+    """Velocity change (m/s, ENU) the commands of ``ticks`` (time, hold) ask for between
+    ``from_s`` and ``end_s``, each held until the next tick: sum of a_d x time held."""
+    loop = _tracking_loop()
+    dv = np.zeros(3)
+    a_d = {}
+    for t, hold in ticks:
+        q = Q_NORTH_OFF if q_at is not None and abs(t - q_at) < 1e-9 else Q_NORTH
+        a_d[t] = loop.tick(_state(t, q), hold_s=hold).accel_desired_enu_m_s2
+    times = [t for t, _ in ticks] + [end_s]
+    for (t, _), t_next in zip(ticks, times[1:], strict=False):
+        if t >= from_s:
+            dv += a_d[t] * (t_next - t)
+    return dv, a_d
+
+
+def test_an_early_tick_flies_the_grid_s_turn():
+    """Commands on the grid (5 ms, the simulator's way) and with an early tick at 6 ms (the
+    grid re-anchored to 11 ms, each command for a period) ask for the same velocity change
+    over the same time: the early tick's LOS change carries what the cut-short 5 ms command
+    did not fly."""
+    grid = [(0.005 * k, None) for k in range(1, 5)]  # 5, 10, 15, 20 ms
+    early = [(0.005, P), (0.006, P), (0.011, P), (0.016, P)]
+    dv_grid, _ = _flown(grid, 0.021, 0.005)
+    dv_early, _ = _flown(early, 0.021, 0.005)
+    assert np.linalg.norm(dv_grid) > 0.01
+    assert dv_early == pytest.approx(dv_grid, rel=0.03, abs=2e-4)
+
+
+def test_an_early_tick_is_no_more_sensitive_to_one_sample_than_a_grid_tick():
+    """An attitude sample off by 0.05 deg moves an early tick's command (held a period) as much
+    as a grid tick's, not period / elapsed times as much, which is what dividing eq. 17 by the
+    time since the last tick did (the withdrawn first version: a target lost one run in
+    three)."""
+    grid = [(0.005, None), (0.010, None)]
+    _, a_clean = _flown(grid, 0.015, 0.0)
+    _, a_off = _flown(grid, 0.015, 0.0, q_at=0.010)
+    d_grid = np.linalg.norm(a_off[0.010] - a_clean[0.010])
+    early = [(0.005, P), (0.006, P)]
+    _, e_clean = _flown(early, 0.011, 0.0)
+    _, e_off = _flown(early, 0.011, 0.0, q_at=0.006)
+    d_early = np.linalg.norm(e_off[0.006] - e_clean[0.006])
+    elapsed = [(0.005, None), (0.006, None)]  # eq. 17 over the 1 ms since the last tick
+    _, x_clean = _flown(elapsed, 0.011, 0.0)
+    _, x_off = _flown(elapsed, 0.011, 0.0, q_at=0.006)
+    d_elapsed = np.linalg.norm(x_off[0.006] - x_clean[0.006])
+    assert d_grid > 0.05  # the perturbation matters
+    assert d_early == pytest.approx(d_grid, rel=0.25)
+    assert d_elapsed > 3.0 * d_grid
+
+
+@pytest.mark.parametrize("fused", [True, False])
+def test_a_tick_falling_due_during_a_fusion_waits_for_it_asleep(fused):
+    """A fusion running at the deadline: the tick starts when it is in (re-anchored there,
+    counted as a grid tick, its lateness in the jitter), not on the lock as tick work."""
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    blocks: list[float] = []
+    fake_block = clock.block
+
+    def block(timeout_s: float) -> None:
+        blocks.append(clock.t - 100.0)
+        fake_block(timeout_s)
+
+    sched._block = block
+    clock.at(100.0098, sched.input_begins)  # in the spin before the 10 ms deadline
+    if fused:
+        clock.at(100.0104, lambda: (sched.request_tick(), sched.input_done(False)))
+    else:
+        clock.at(100.0104, lambda: sched.input_done(False))  # screened out: nothing fused
+    starts = _run(clock, sched, 4)
+    t = [s for s, _ in starts]
+    assert [e for _, e in starts] == [False, False, False, False]
+    assert t[2] == pytest.approx(0.0104, abs=1e-5)
+    assert t[3] == pytest.approx(0.0154, abs=1e-5)
+    assert sched.input_waits == 1 and sched.input_wait_max_s == pytest.approx(0.0004, abs=1e-5)
+    assert sched.early_ticks == 0
