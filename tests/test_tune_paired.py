@@ -82,11 +82,11 @@ def test_paired_comparison_refuses_unpaired_or_bad_misses(a, b):
         paired_comparison(a, b)
 
 
-def _campaign(path, misses, law="png"):
+def _campaign(path, misses, law="png", seed=2):
     sorties = [
         {
             "labels": {"scenario": sc, "law": law, "try": k},
-            "seed": 2000 + k,
+            "seed": seed * 1000 + k,
             "law": law,
             "outcome": "HIT" if m < 0.15 else "MISS",
             "miss_m": m,
@@ -116,5 +116,14 @@ def test_two_campaign_runs_are_paired_per_cell_and_overall(tmp_path, capsys):
     other = _campaign(tmp_path / "c", {"ca": [0.05] * 4, "cv": [0.01] * 2}, law="pg")
     with pytest.raises(TuneError, match="did not fly the same sorties"):
         paired_campaigns(base, other)
+    # two seeds each side pool into one comparison
+    base3 = _campaign(tmp_path / "a3", {"ca": [0.05] * 4, "cv": [0.01] * 2}, seed=3)
+    new3 = _campaign(tmp_path / "b3", {"ca": [0.04] * 4, "cv": [0.01] * 2}, seed=3)
+    pooled = paired_campaigns([base, base3], [new, new3])
+    assert pooled["ca"]["n"] == 8 and pooled["ca"]["improved"] == 7
+    assert main_paired([f"{base},{base3}", f"{new},{new3}"]) == 0
+    assert "| all | 12 |" in capsys.readouterr().out
+    with pytest.raises(TuneError, match="given twice"):
+        paired_campaigns([base, base], [new, new])
     assert main_paired([str(base), str(tmp_path / "nothing")]) == 2
     assert "not a campaign's results.json" in capsys.readouterr().err

@@ -689,20 +689,34 @@ def _cell_of(labels: dict[str, Any]) -> str:
     return ", ".join(f"{labels[k]}" for k in keys) or "all"
 
 
-def paired_campaigns(base_results: Path, new_results: Path) -> dict[str, dict[str, float]]:
-    """Pair two ``campaign`` runs' ``results.json`` sortie by sortie (same labels, seed and
-    law; refused if the sorties differ) and compare them per cell and over all sorties."""
-    runs = []
-    for path in (base_results, new_results):
+def _campaign_sorties(paths: Sequence[Path]) -> dict[tuple[str, int, str], dict[str, Any]]:
+    """Sorties of one or more campaign runs keyed by (labels, seed, law)."""
+    out: dict[tuple[str, int, str], dict[str, Any]] = {}
+    for path in paths:
         path = Path(path)
         path = path / "results.json" if path.is_dir() else path
         try:
             sorties = json.loads(path.read_text(encoding="utf-8"))["sorties"]
-        except (OSError, ValueError, KeyError) as exc:
+            for s in sorties:
+                key = (json.dumps(s["labels"], sort_keys=True), int(s["seed"]), str(s["law"]))
+                if key in out:
+                    raise TuneError(f"{path}: sortie {key} given twice")
+                out[key] = s
+        except (OSError, ValueError, KeyError, TypeError) as exc:
             raise TuneError(f"{path}: not a campaign's results.json ({exc})") from None
-        runs.append(
-            {(json.dumps(s["labels"], sort_keys=True), s["seed"], s["law"]): s for s in sorties}
-        )
+    return out
+
+
+def paired_campaigns(
+    base_results: Path | Sequence[Path], new_results: Path | Sequence[Path]
+) -> dict[str, dict[str, float]]:
+    """Pair campaign runs' ``results.json`` (one run or several, e.g. two seeds, each side)
+    sortie by sortie (same labels, seed and law; refused if the sorties differ) and compare
+    them per cell and over all sorties."""
+    runs = [
+        _campaign_sorties([r] if isinstance(r, (str, Path)) else list(r))
+        for r in (base_results, new_results)
+    ]
     if set(runs[0]) != set(runs[1]):
         raise TuneError("the two campaigns did not fly the same sorties (labels, seeds, laws)")
     keys = sorted(runs[0], key=lambda k: (_cell_of(json.loads(k[0])), k[1], k[2]))
@@ -747,12 +761,15 @@ def main_paired(argv: Sequence[str] | None = None) -> int:
         description="Pair two campaign runs of the same sorties (results.json or their "
         "folders): per-sortie miss differences NEW - BASE, bootstrap CI, sign test.",
     )
-    ap.add_argument("base")
-    ap.add_argument("new")
+    ap.add_argument("base", help="the reference run(s): results.json or folders, a,b,...")
+    ap.add_argument("new", help="the same sorties with the other gains: a,b,...")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     try:
-        cmp = paired_campaigns(Path(args.base), Path(args.new))
+        cmp = paired_campaigns(
+            [Path(x) for x in args.base.split(",") if x],
+            [Path(x) for x in args.new.split(",") if x],
+        )
     except TuneError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
