@@ -7,6 +7,8 @@ the study lives in an Optuna storage (SQLite under the data folder by default), 
 same command again resumes it and several processes or machines can work on it at once. At
 the end the best gains and the defaults fly held-out seeds, a report with Optuna's plots is
 written, and the best gains are saved as a named gain set the dashboard can load.
+``python -m groundstation.campaigns.tune BASE NEW`` pairs two campaign runs of the same
+sorties (defaults and tuned gains) the way the held-out check pairs its two runs.
 """
 
 from __future__ import annotations
@@ -188,8 +190,8 @@ def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty:
     tie-break c/(c + 1 m)/(2 N), c = CEP + penalty x saturated share, stays below half of one
     sortie's share of the HIT rate whatever the penalty, so no CEP gain buys back a lost hit,
     and when every sortie hits the CEP is not drowned by a penalty outside the tie-break.
-    ``success-mean`` is the same with the mean miss in place of the CEP: every sortie counts,
-    so when all hit it ranks gain sets on a less noisy figure than a median of N."""
+    ``success-mean`` is the same with the mean miss in place of the CEP: every sortie's miss
+    counts, where a median of N moves with whichever sortie sits in the middle."""
     n = len(outcomes)
     if n == 0:
         raise ValueError("no sorties to score")
