@@ -187,6 +187,13 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, c
         for split in ("train", "held_out"):
             f = figs[which][split]
             assert f["n"] == 2 and 0 <= f["success_rate"] <= 1 and f["cep_m"] >= 0
+    # the held-out check pairs the two gain sets sortie by sortie (same seeds)
+    paired = figs["paired_held_out"]
+    assert paired["n"] == 2 and paired["improved"] + paired["worsened"] <= 2
+    assert paired["mean_diff_m"] == pytest.approx(
+        figs["best"]["held_out"]["mean_miss_m"] - figs["defaults"]["held_out"]["mean_miss_m"]
+    )
+    assert "Paired, held-out (2 sorties, same seeds)" in report
     # the gain set: the best trial's gains over the defaults, loads back as valid Gains
     loaded = GainSetStore(tmp_path / "data" / "gainsets").load(meta["gainset"])
     assert (

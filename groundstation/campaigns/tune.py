@@ -7,6 +7,8 @@ the study lives in an Optuna storage (SQLite under the data folder by default), 
 same command again resumes it and several processes or machines can work on it at once. At
 the end the best gains and the defaults fly held-out seeds, a report with Optuna's plots is
 written, and the best gains are saved as a named gain set the dashboard can load.
+``python -m groundstation.campaigns.tune BASE NEW`` pairs two campaign runs of the same
+sorties (defaults and tuned gains) the way the held-out check pairs its two runs.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ DEFAULT_OUT_ROOT = Path("logs") / "tune"
 HEARTBEAT_S = 20  # a trial whose process stopped beating for GRACE_S is failed and retried
 GRACE_S = 90
 # 2: success-cep's saturation penalty inside the CEP tie-break; a study scored with another
-# version is refused rather than mixed (its losses are on another scale)
+# version is refused rather than mixed (its losses are on another scale). success-mean was
+# added at version 2 without changing how the other objectives score.
 OBJECTIVE_VERSION = 2
 
 
@@ -183,10 +186,12 @@ class Figures:
 
 def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty: float) -> Figures:
     """The objective (minimised). The saturation penalty adds ``penalty x`` the mean share of
-    saturated ticks (in metres for the CEP objectives). ``success-cep`` is lexicographic: its
+    saturated ticks (in metres for the miss objectives). ``success-cep`` is lexicographic: its
     tie-break c/(c + 1 m)/(2 N), c = CEP + penalty x saturated share, stays below half of one
     sortie's share of the HIT rate whatever the penalty, so no CEP gain buys back a lost hit,
-    and when every sortie hits the CEP is not drowned by a penalty outside the tie-break."""
+    and when every sortie hits the CEP is not drowned by a penalty outside the tie-break.
+    ``success-mean`` is the same with the mean miss in place of the CEP: every sortie's miss
+    counts, where a median of N moves with whichever sortie sits in the middle."""
     n = len(outcomes)
     if n == 0:
         raise ValueError("no sorties to score")
@@ -195,8 +200,9 @@ def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty:
     cep = float(misses[n // 2] if n % 2 else 0.5 * (misses[n // 2 - 1] + misses[n // 2]))
     sat = sum(float((o.trace or {}).get("saturated_fraction", 0.0)) for o in outcomes) / n
     cost = saturation_penalty * sat
-    if objective == "success-cep":
-        c = cep + cost
+    mean = sum(misses) / n
+    if objective in ("success-cep", "success-mean"):
+        c = (cep if objective == "success-cep" else mean) + cost
         loss = (1.0 - success) + c / (c + 1.0) / (2 * n)
     elif objective == "cep":
         loss = cep + cost
@@ -204,7 +210,93 @@ def score(outcomes: Sequence[SortieOutcome], objective: str, saturation_penalty:
         loss = (1.0 - success) + cost
     else:
         raise TuneError(f"unknown objective {objective!r}")
-    return Figures(n, success, cep, sum(misses) / n, sat, loss)
+    return Figures(n, success, cep, mean, sat, loss)
+
+
+BOOTSTRAP_RESAMPLES = 10_000
+
+
+def sign_test_p(better: int, worse: int) -> float:
+    """Two-sided exact sign test: the chance of a split at least this uneven between
+    ``better`` and ``worse`` sorties (ties dropped) if either gain set were as likely to win."""
+    m = better + worse
+    if m == 0:
+        return 1.0
+    k = min(better, worse)
+    tail = sum(math.comb(m, i) for i in range(k + 1)) / 2**m
+    return min(1.0, 2.0 * tail)
+
+
+def paired_comparison(
+    base_miss_m: Sequence[float],
+    new_miss_m: Sequence[float],
+    base_hit: Sequence[bool] | None = None,
+    new_hit: Sequence[bool] | None = None,
+    seed: int = 0,
+) -> dict[str, float]:
+    """Two gain sets flown on the same sorties (same scenario and seed, pair by pair):
+    the per-sortie miss difference d = new - base (m; negative: the new set missed by less),
+    its mean with a seeded percentile-bootstrap 95 % CI, how many sorties improved or
+    worsened (by more than 1e-9 m), the two-sided sign-test p, and the hits each set won
+    that the other lost."""
+    import numpy as np
+
+    a = np.asarray(base_miss_m, dtype=float)
+    b = np.asarray(new_miss_m, dtype=float)
+    if a.shape != b.shape or a.ndim != 1 or a.size == 0:
+        raise ValueError("paired_comparison needs two equal, non-empty lists of misses")
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError("miss distances must be finite")
+    d = b - a
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, d.size, size=(BOOTSTRAP_RESAMPLES, d.size))
+    boot = d[idx].mean(axis=1)
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    better, worse = int(np.sum(d < -1e-9)), int(np.sum(d > 1e-9))
+    out = {
+        "n": int(d.size),
+        "base_mean_m": float(a.mean()),
+        "new_mean_m": float(b.mean()),
+        "mean_diff_m": float(d.mean()),
+        "ci95_low_m": float(lo),
+        "ci95_high_m": float(hi),
+        "median_diff_m": float(np.median(d)),
+        "improved": better,
+        "worsened": worse,
+        "sign_test_p": sign_test_p(better, worse),
+    }
+    if base_hit is not None and new_hit is not None:
+        if len(base_hit) != d.size or len(new_hit) != d.size:
+            raise ValueError("hit flags must pair with the misses")
+        out["hits_won"] = sum(1 for x, y in zip(base_hit, new_hit, strict=True) if y and not x)
+        out["hits_lost"] = sum(1 for x, y in zip(base_hit, new_hit, strict=True) if x and not y)
+    return out
+
+
+def paired_outcomes(
+    base: Sequence[SortieOutcome], new: Sequence[SortieOutcome]
+) -> dict[str, float]:
+    """:func:`paired_comparison` of two runs of the same sorties (in the same order)."""
+    return paired_comparison(
+        [float(o.result["miss_m"]) for o in base],
+        [float(o.result["miss_m"]) for o in new],
+        [o.result["outcome"] == "HIT" for o in base],
+        [o.result["outcome"] == "HIT" for o in new],
+    )
+
+
+def paired_markdown(p: dict[str, float], label: str = "held-out") -> str:
+    """One line: mean miss difference with its CI, sorties improved/worsened, sign test."""
+    text = (
+        f"Paired, {label} ({p['n']} sorties, same seeds): mean miss {p['base_mean_m']:.4f} -> "
+        f"{p['new_mean_m']:.4f} m, difference {1000 * p['mean_diff_m']:+.1f} mm "
+        f"(bootstrap 95 % CI {1000 * p['ci95_low_m']:+.1f} to {1000 * p['ci95_high_m']:+.1f} mm),"
+        f" {p['improved']} sorties closer, {p['worsened']} wider, sign test p = "
+        f"{p['sign_test_p']:.2g}"
+    )
+    if "hits_won" in p:
+        text += f"; hits won {p['hits_won']}, lost {p['hits_lost']}"
+    return text + "."
 
 
 def objective_formula(objective: str, saturation_penalty: float) -> str:
@@ -212,9 +304,10 @@ def objective_formula(objective: str, saturation_penalty: float) -> str:
     text = OBJECTIVE_HELP[objective]
     if not saturation_penalty:
         return text
-    if objective == "success-cep":
-        return text.replace("CEP/(CEP + 1 m)", "c/(c + 1 m)") + (
-            f", c = CEP + {saturation_penalty:g} m x saturated share"
+    if objective in ("success-cep", "success-mean"):
+        stat = "CEP" if objective == "success-cep" else "mean"
+        return text.replace(f"{stat}/({stat} + 1 m)", "c/(c + 1 m)") + (
+            f", c = {stat} + {saturation_penalty:g} m x saturated share"
         )
     return text + f" + {saturation_penalty:g}{' m' if objective == 'cep' else ''} x saturated share"
 
@@ -231,6 +324,10 @@ def evaluate(
         defn.objective,
         defn.saturation_penalty,
     )
+
+
+def _score(outcomes: Sequence[SortieOutcome], defn: TuneDefinition) -> Figures:
+    return score(outcomes, defn.objective, defn.saturation_penalty)
 
 
 def default_storage_url(data_dir: Path) -> str:
@@ -372,17 +469,20 @@ def run_tune(
         for t in study.get_trials(deepcopy=False, states=done_states)
         if t.user_attrs.get("defaults")
     ]  # trial 0 flew the defaults on the training sorties already
+    held_base = runner.run(with_gains(held_out, {}))
+    held_best = runner.run(with_gains(held_out, best_gains))
     figures = {
         "defaults": {
             "train": {k: baseline[0].user_attrs[k] for k in fields}
             if baseline
             else evaluate(train, {}, runner, defn).to_json_dict(),
-            "held_out": evaluate(held_out, {}, runner, defn).to_json_dict(),
+            "held_out": _score(held_base, defn).to_json_dict(),
         },
         "best": {
             "train": {k: best.user_attrs[k] for k in fields},
-            "held_out": evaluate(held_out, best_gains, runner, defn).to_json_dict(),
+            "held_out": _score(held_best, defn).to_json_dict(),
         },
+        "paired_held_out": paired_outcomes(held_base, held_best),
     }
     check_wall_s = time.perf_counter() - t1
     tuned = Gains.from_mapping({**base.to_dict(), **best_gains}, source="tuned gains")
@@ -440,6 +540,8 @@ def figures_markdown(meta: dict[str, Any], figures: dict[str, Any]) -> str:
         _fig_row(f"best (trial {meta['best_trial']}), train", figures["best"]["train"]),
         _fig_row("defaults, held-out", figures["defaults"]["held_out"]),
         _fig_row(f"best (trial {meta['best_trial']}), held-out", figures["best"]["held_out"]),
+        "",
+        paired_markdown(figures["paired_held_out"]) if "paired_held_out" in figures else "",
         "",
         "| gain | default | best | searched |",
         "|---|---|---|---|",
@@ -581,3 +683,101 @@ def main_tune(args) -> int:
         print(figures_markdown(res["meta"], res["figures"]))
         print(f"\nreport: {res['out']}/report.md")
     return 0
+
+
+def _cell_of(labels: dict[str, Any]) -> str:
+    """A campaign cell's name from a sortie's labels (the try and the target are not cells)."""
+    keys = [k for k in labels if k not in ("try", "target", "law")]
+    return ", ".join(f"{labels[k]}" for k in keys) or "all"
+
+
+def _campaign_sorties(paths: Sequence[Path]) -> dict[tuple[str, int, str], dict[str, Any]]:
+    """Sorties of one or more campaign runs keyed by (labels, seed, law)."""
+    out: dict[tuple[str, int, str], dict[str, Any]] = {}
+    for path in paths:
+        path = Path(path)
+        path = path / "results.json" if path.is_dir() else path
+        try:
+            sorties = json.loads(path.read_text(encoding="utf-8"))["sorties"]
+            for s in sorties:
+                key = (json.dumps(s["labels"], sort_keys=True), int(s["seed"]), str(s["law"]))
+                if key in out:
+                    raise TuneError(f"{path}: sortie {key} given twice")
+                out[key] = s
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise TuneError(f"{path}: not a campaign's results.json ({exc})") from None
+    return out
+
+
+def paired_campaigns(
+    base_results: Path | Sequence[Path], new_results: Path | Sequence[Path]
+) -> dict[str, dict[str, float]]:
+    """Pair campaign runs' ``results.json`` (one run or several, e.g. two seeds, each side)
+    sortie by sortie (same labels, seed and law; refused if the sorties differ) and compare
+    them per cell and over all sorties."""
+    runs = [
+        _campaign_sorties([r] if isinstance(r, (str, Path)) else list(r))
+        for r in (base_results, new_results)
+    ]
+    if set(runs[0]) != set(runs[1]):
+        raise TuneError("the two campaigns did not fly the same sorties (labels, seeds, laws)")
+    keys = sorted(runs[0], key=lambda k: (_cell_of(json.loads(k[0])), k[1], k[2]))
+    cells: dict[str, list[tuple[dict, dict]]] = {}
+    for k in keys:
+        cells.setdefault(_cell_of(json.loads(k[0])), []).append((runs[0][k], runs[1][k]))
+    cells["all"] = [(runs[0][k], runs[1][k]) for k in keys]
+    return {
+        cell: paired_comparison(
+            [a["miss_m"] for a, _ in pairs],
+            [b["miss_m"] for _, b in pairs],
+            [a["outcome"] == "HIT" for a, _ in pairs],
+            [b["outcome"] == "HIT" for _, b in pairs],
+        )
+        for cell, pairs in cells.items()
+    }
+
+
+def paired_table(cmp: dict[str, dict[str, float]]) -> str:
+    """Markdown table of :func:`paired_campaigns` (differences in mm, new - base)."""
+    lines = [
+        "| cell | n | mean miss base -> new | diff (95 % CI) | closer / wider | sign p | "
+        "hits won / lost |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for cell, p in cmp.items():
+        lines.append(
+            f"| {cell} | {p['n']} | {p['base_mean_m']:.4f} -> {p['new_mean_m']:.4f} m | "
+            f"{1000 * p['mean_diff_m']:+.1f} mm ({1000 * p['ci95_low_m']:+.1f} to "
+            f"{1000 * p['ci95_high_m']:+.1f}) | {p['improved']} / {p['worsened']} | "
+            f"{p['sign_test_p']:.2g} | {p['hits_won']} / {p['hits_lost']} |"
+        )
+    return "\n".join(lines)
+
+
+def main_paired(argv: Sequence[str] | None = None) -> int:
+    """``python -m groundstation.campaigns.tune BASE NEW``: pair two campaign runs."""
+    import argparse
+
+    ap = argparse.ArgumentParser(
+        prog="python -m groundstation.campaigns.tune",
+        description="Pair two campaign runs of the same sorties (results.json or their "
+        "folders): per-sortie miss differences NEW - BASE, bootstrap CI, sign test.",
+    )
+    ap.add_argument("base", help="the reference run(s): results.json or folders, a,b,...")
+    ap.add_argument("new", help="the same sorties with the other gains: a,b,...")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        cmp = paired_campaigns(
+            [Path(x) for x in args.base.split(",") if x],
+            [Path(x) for x in args.new.split(",") if x],
+        )
+    except TuneError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(cmp, indent=1) if args.json else paired_table(cmp))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main_paired())

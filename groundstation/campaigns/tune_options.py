@@ -10,9 +10,10 @@ from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import CAMERA_MODES
 
-OBJECTIVES = ("success-cep", "cep", "success")
+OBJECTIVES = ("success-cep", "success-mean", "cep", "success")
 OBJECTIVE_HELP = {
     "success-cep": "HIT rate first, then CEP: (1 - HIT rate) + CEP/(CEP + 1 m)/(2 N)",
+    "success-mean": ("HIT rate first, then mean miss: (1 - HIT rate) + mean/(mean + 1 m)/(2 N)"),
     "cep": "CEP (median miss, m)",
     "success": "1 - HIT rate",
 }
