@@ -36,15 +36,16 @@ from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_histo
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
-BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator lags the clock
-# how far (wall seconds) the simulator may trail the clock before publishing slows down: one
-# slow step (a rendered frame, the garbage collector, a browser taking the CPU for a few ms) is
-# caught up at the next iteration and must not cost the viewers a 100 ms gap; a simulator that
-# stays behind (too little CPU) is more than 10 control ticks behind within a tenth of a second
+BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved (below)
+# how far (wall seconds) the simulator may trail the clock and still publish every point of its
+# grid: one slow step (a rendered frame, the garbage collector, a browser taking the CPU for a
+# few ms) is caught up at the next iteration and must not cost the viewers a gap; further
+# behind, snapshots are at least a publish period apart (catching up) or, starved, a tenth of a
+# second
 BEHIND_TOLERANCE_S = 0.1
-# ... and slows down only if it is not catching up: it ran under this share of the control
-# ticks due in the last second
-BEHIND_MIN_SHARE = 0.9
+# starved: behind by more than BEHIND_TOLERANCE_S and it ran under this share of the control
+# ticks due in the last second (not catching up)
+BEHIND_MIN_SHARE = 0.95
 MAX_EVENTS = 200
 
 
@@ -113,7 +114,7 @@ class SimSession(SessionView, SessionReplay):
         self.run_sim_s = 0.0
         self.published_behind = 0  # snapshots published at the slower rate (the sim starved)
         self._next_publish_sim = 0.0  # the simulated time of the next snapshot (paced)
-        self._next_publish_slow = 0.0  # the earliest wall time of the next one when starved
+        self._last_publish_wall = 0.0  # when the last snapshot of a paced sortie went out
         self.scene_errors = 0
         self.last_scene_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
@@ -196,7 +197,7 @@ class SimSession(SessionView, SessionReplay):
         self._anchor_wall = time.perf_counter()
         self._anchor_sim = self.sim.time_s if self.sim else 0.0
         self._next_publish_sim = self._anchor_sim  # the first tick publishes
-        self._next_publish_slow = 0.0
+        self._last_publish_wall = 0.0
 
     def pause(self) -> None:
         def go():
@@ -347,26 +348,30 @@ class SimSession(SessionView, SessionReplay):
             self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
             self._trail_target.append([round(c, 3) for c in sim.target.p])
 
-    def _lagging(self, target_s: float) -> bool:
-        """Is the simulator starved: more than BEHIND_TOLERANCE_S behind the clock and not
-        catching up (it ran under BEHIND_MIN_SHARE of the control ticks due in the last
-        second)? A simulator that trails after one slow step or a burst of other work on the
-        machine, then catches up, is not: its snapshots still go out on the simulated-time grid."""
+    def _publish_gap_s(self, clock_sim_s: float) -> float:
+        """The least wall time between two snapshots of a paced sortie (``clock_sim_s``: where
+        the clock says the sortie should be). Zero while the simulator keeps up or trails by at
+        most BEHIND_TOLERANCE_S: every point of the grid goes out. Catching up (further behind,
+        but it ran at least BEHIND_MIN_SHARE of the control ticks due in the last second): one
+        publish period, so that the viewers get the usual rate, not a burst, and the catch-up
+        pays for no more snapshots than usual. Starved (behind and not catching up): a tenth of
+        a second (BEHIND_PUBLISH_HZ), keeping its CPU for the simulation."""
         sim = self.sim
-        if target_s - sim.time_s <= BEHIND_TOLERANCE_S * self.speed:
-            return False
-        return (
-            self.loop_rate_hz() < BEHIND_MIN_SHARE * sim.scenario.sim.control_rate_hz * self.speed
-        )
+        if clock_sim_s - sim.time_s <= BEHIND_TOLERANCE_S * self.speed:
+            return 0.0
+        due_hz = sim.scenario.sim.control_rate_hz * self.speed
+        if self.loop_rate_hz() < BEHIND_MIN_SHARE * due_hz:
+            return 1.0 / BEHIND_PUBLISH_HZ
+        return self.publish_period_s
 
     def _step_paced(self, now: float) -> bool:
         """Step a paced sortie (1x, 2x, 5x) up to where the clock says, publishing a snapshot
         each time the simulated time crosses the next point of its grid (the publish period
         times the speed: 40 a wall second when the simulator keeps real time). The snapshots
         are driven by the simulator's own steps, so every one carries a new state and none is
-        lost to a late wake-up or a long step; a simulator that falls behind catches up with
-        its snapshots. Only a starved one (:meth:`_lagging`) publishes at BEHIND_PUBLISH_HZ of
-        wall time, keeping its CPU for catching up. Returns whether the sortie is behind."""
+        lost to a late wake-up or a long step, which the simulator catches up with its
+        snapshots. Behind the clock, :meth:`_publish_gap_s` spaces them out. Returns whether
+        the sortie is behind."""
         sim = self.sim
         period_sim = self.publish_period_s * self.speed
         target = self._anchor_sim + (now - self._anchor_wall) * self.speed
@@ -375,14 +380,15 @@ class SimSession(SessionView, SessionReplay):
             if sim.time_s < self._next_publish_sim - 1e-9 and not sim.done:
                 continue
             self._next_publish_sim = (math.floor(sim.time_s / period_sim + 1e-9) + 1) * period_sim
-            wall = time.perf_counter()
             if sim.done:
                 break  # the finished sortie is published by the caller
-            if self._lagging(self._anchor_sim + (wall - self._anchor_wall) * self.speed):
-                if wall < self._next_publish_slow:
-                    continue
-                self._next_publish_slow = wall + 1.0 / BEHIND_PUBLISH_HZ
+            wall = time.perf_counter()
+            gap_s = self._publish_gap_s(self._anchor_sim + (wall - self._anchor_wall) * self.speed)
+            if wall < self._last_publish_wall + gap_s:
+                continue
+            if gap_s > self.publish_period_s:
                 self.published_behind += 1
+            self._last_publish_wall = wall
             self._publish()
         return sim.time_s < target
 
