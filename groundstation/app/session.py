@@ -91,6 +91,7 @@ class SimSession(SessionView, SessionReplay):
         self.gains_base = self.gains  # the set the operator's edits are made against
         self.gains_source = "defaults"
         self.gains_note: str | None = None
+        self._gains_edited: tuple[Gains, Gains, dict[str, list[float]]] | None = None
         self.epoch = 0  # counts sorties shown (start, replay, reset): a page reloads its data
         self.events: list[list] = []  # [t_s, kind, text] of the sortie on screen
         self.history: dict[str, list] = _empty_history()
@@ -280,9 +281,16 @@ class SimSession(SessionView, SessionReplay):
         return self.gains_base
 
     def gains_edited(self) -> dict[str, list[float]]:
-        """The operator's edits: name -> [base value, value in force]."""
-        base, now = self.gains_base.to_dict(), self.gains.to_dict()
-        return {k: [base[k], v] for k, v in now.items() if v != base[k]}
+        """The operator's edits: name -> [base value, value in force]. Worked out again only
+        when either set changes (they are frozen): every snapshot's status carries it, and
+        two ``to_dict`` calls cost the simulation thread more than the rest of the snapshot."""
+        base_gains, gains = self.gains_base, self.gains
+        cached = self._gains_edited
+        if cached is None or cached[0] is not base_gains or cached[1] is not gains:
+            base, now = base_gains.to_dict(), gains.to_dict()
+            edited = {k: [base[k], v] for k, v in now.items() if v != base[k]}
+            cached = self._gains_edited = (base_gains, gains, edited)
+        return {k: list(v) for k, v in cached[2].items()}
 
     def request_frame(self) -> None:
         """Send a camera frame with the next snapshot (a page has just (re)connected)."""
