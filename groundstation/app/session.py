@@ -43,9 +43,9 @@ BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved 
 # behind, snapshots are at least a publish period apart (catching up) or, starved, a tenth of a
 # second
 BEHIND_TOLERANCE_S = 0.1
-# starved: behind by more than BEHIND_TOLERANCE_S and it ran under this share of the control
-# ticks due in the last second (not catching up)
-BEHIND_MIN_SHARE = 0.95
+# starved: behind by more than BEHIND_TOLERANCE_S and it ran no more than this share of the
+# control ticks due in the last second (its lag is not shrinking)
+BEHIND_MIN_SHARE = 1.0
 MAX_EVENTS = 200
 
 
@@ -360,15 +360,15 @@ class SimSession(SessionView, SessionReplay):
         """The least wall time between two snapshots of a paced sortie (``clock_sim_s``: where
         the clock says the sortie should be). Zero while the simulator keeps up or trails by at
         most BEHIND_TOLERANCE_S: every point of the grid goes out. Catching up (further behind,
-        but it ran at least BEHIND_MIN_SHARE of the control ticks due in the last second): one
+        but it ran more than BEHIND_MIN_SHARE of the control ticks due in the last second): one
         publish period, so that the viewers get the usual rate, not a burst, and the catch-up
-        pays for no more snapshots than usual. Starved (behind and not catching up): a tenth of
-        a second (BEHIND_PUBLISH_HZ), keeping its CPU for the simulation."""
+        pays for no more snapshots than usual. Starved (behind and its lag not shrinking): a
+        tenth of a second (BEHIND_PUBLISH_HZ), keeping its CPU for catching up."""
         sim = self.sim
         if clock_sim_s - sim.time_s <= BEHIND_TOLERANCE_S * self.speed:
             return 0.0
         due_hz = sim.scenario.sim.control_rate_hz * self.speed
-        if self.loop_rate_hz() < BEHIND_MIN_SHARE * due_hz:
+        if self.loop_rate_hz() <= BEHIND_MIN_SHARE * due_hz:
             return 1.0 / BEHIND_PUBLISH_HZ
         return self.publish_period_s
 
