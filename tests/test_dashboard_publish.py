@@ -68,21 +68,21 @@ def test_paced_sortie_publishes_every_point_of_the_simulated_time_grid(
     assert sess.published_behind == 0
 
 
-def test_behind_the_clock_snapshots_are_spaced_catching_up_and_starved(monkeypatch):
-    """Within BEHIND_TOLERANCE_S every grid point goes out; further behind, a simulator that
-    ran more ticks than were due over the last second (catching up) publishes at most one
-    snapshot per publish period, one that did not (its lag not shrinking: starved) one per
-    1/BEHIND_PUBLISH_HZ."""
+def test_behind_the_clock_only_a_starved_simulator_publishes_less(monkeypatch):
+    """Within BEHIND_TOLERANCE_S, and further behind while the simulator runs at least
+    BEHIND_MIN_SHARE of the ticks due (catching up after a stall), every grid point goes out;
+    one that ran fewer (starved) publishes one snapshot per 1/BEHIND_PUBLISH_HZ."""
     sess = SimSession()
     try:
         sess.start(SortieConfig(load_scenario("cv-top-to-bottom"), speed="2"))
         sess.pause()
         t = sess.sim.time_s
         tol_sim = session_mod.BEHIND_TOLERANCE_S * 2.0
-        monkeypatch.setattr(sess, "loop_rate_hz", lambda: 1.05 * 2.0 * 100)  # gaining
+        due_hz = 2.0 * 100
+        monkeypatch.setattr(sess, "loop_rate_hz", lambda: 1.0 * due_hz)
         assert sess._publish_gap_s(t + 0.9 * tol_sim) == 0.0
-        assert sess._publish_gap_s(t + 1.5 * tol_sim) == sess.publish_period_s
-        monkeypatch.setattr(sess, "loop_rate_hz", lambda: 1.0 * 2.0 * 100)  # not gaining
+        assert sess._publish_gap_s(t + 1.5 * tol_sim) == 0.0
+        monkeypatch.setattr(sess, "loop_rate_hz", lambda: 0.8 * due_hz)  # starved
         assert sess._publish_gap_s(t + 0.9 * tol_sim) == 0.0
         assert sess._publish_gap_s(t + 1.5 * tol_sim) == 1.0 / session_mod.BEHIND_PUBLISH_HZ
     finally:

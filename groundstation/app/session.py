@@ -40,12 +40,11 @@ BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved 
 # how far (wall seconds) the simulator may trail the clock and still publish every point of its
 # grid: one slow step (a rendered frame, the garbage collector, a browser taking the CPU for a
 # few ms) is caught up at the next iteration and must not cost the viewers a gap; further
-# behind, snapshots are at least a publish period apart (catching up) or, starved, a tenth of a
-# second
+# behind, a starved simulator (below) publishes a tenth of a second apart
 BEHIND_TOLERANCE_S = 0.1
-# starved: behind by more than BEHIND_TOLERANCE_S and it ran no more than this share of the
-# control ticks due in the last second (its lag is not shrinking)
-BEHIND_MIN_SHARE = 1.0
+# starved: behind by more than BEHIND_TOLERANCE_S and it ran under this share of the control
+# ticks due in the last second (a stall it is catching up from is not starving)
+BEHIND_MIN_SHARE = 0.9
 MAX_EVENTS = 200
 
 
@@ -358,19 +357,19 @@ class SimSession(SessionView, SessionReplay):
 
     def _publish_gap_s(self, clock_sim_s: float) -> float:
         """The least wall time between two snapshots of a paced sortie (``clock_sim_s``: where
-        the clock says the sortie should be). Zero while the simulator keeps up or trails by at
-        most BEHIND_TOLERANCE_S: every point of the grid goes out. Catching up (further behind,
-        but it ran more than BEHIND_MIN_SHARE of the control ticks due in the last second): one
-        publish period, so that the viewers get the usual rate, not a burst, and the catch-up
-        pays for no more snapshots than usual. Starved (behind and its lag not shrinking): a
-        tenth of a second (BEHIND_PUBLISH_HZ), keeping its CPU for catching up."""
+        the clock says the sortie should be). Zero while the simulator keeps up, trails by at
+        most BEHIND_TOLERANCE_S or catches up (it ran at least BEHIND_MIN_SHARE of the control
+        ticks due in the last second): every point of the grid goes out, those it passes while
+        catching up after a stall too, each a state the plots take. Starved (further behind
+        and running slower than that): a tenth of a second (BEHIND_PUBLISH_HZ), keeping its CPU
+        for the simulation."""
         sim = self.sim
         if clock_sim_s - sim.time_s <= BEHIND_TOLERANCE_S * self.speed:
             return 0.0
         due_hz = sim.scenario.sim.control_rate_hz * self.speed
-        if self.loop_rate_hz() <= BEHIND_MIN_SHARE * due_hz:
+        if self.loop_rate_hz() < BEHIND_MIN_SHARE * due_hz:
             return 1.0 / BEHIND_PUBLISH_HZ
-        return self.publish_period_s
+        return 0.0
 
     def _step_paced(self, now: float) -> bool:
         """Step a paced sortie (1x, 2x, 5x) up to where the clock says, publishing a snapshot
@@ -378,8 +377,8 @@ class SimSession(SessionView, SessionReplay):
         times the speed: 40 a wall second when the simulator keeps real time). The snapshots
         are driven by the simulator's own steps, so every one carries a new state and none is
         lost to a late wake-up or a long step, which the simulator catches up with its
-        snapshots. Behind the clock, :meth:`_publish_gap_s` spaces them out. Returns whether
-        the sortie is behind."""
+        snapshots. Starved, :meth:`_publish_gap_s` spaces them out. Returns whether the sortie
+        is behind."""
         sim = self.sim
         period_sim = self.publish_period_s * self.speed
         target = self._anchor_sim + (now - self._anchor_wall) * self.speed
@@ -394,7 +393,7 @@ class SimSession(SessionView, SessionReplay):
             gap_s = self._publish_gap_s(self._anchor_sim + (wall - self._anchor_wall) * self.speed)
             if wall < self._last_publish_wall + gap_s:
                 continue
-            if gap_s > self.publish_period_s:
+            if gap_s > 0.0:
                 self.published_behind += 1
             self._last_publish_wall = wall
             self._publish()
