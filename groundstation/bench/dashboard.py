@@ -64,7 +64,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     the share of real time the simulator keeps and, per viewer, the telemetry messages per
     second the server sent it (delivered), its page received, applied to the plots' series and
     readouts (applied) and showed in a redrawn frame (painted); how many snapshots the session
-    published at its slower rate (the simulator behind the clock); the CPU the station, its
+    published at its slower rate (the simulator starved); the CPU the station, its
     simulator thread, the browser and other processes used in the window; and the load
     average, which other work on the machine raises."""
     import shutil
