@@ -36,12 +36,15 @@ from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_histo
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
-BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator lags the clock
-# how far (wall seconds) the simulator may trail the clock before publishing slows down: one
-# slow step (a rendered frame, the garbage collector, a browser taking the CPU for a few ms) is
-# caught up at the next iteration and must not cost the viewers a 100 ms gap; a simulator that
-# stays behind (too little CPU) is more than 10 control ticks behind within a tenth of a second
+BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved (below)
+# how far (wall seconds) the simulator may trail the clock and still publish every point of its
+# grid: one slow step (a rendered frame, the garbage collector, a browser taking the CPU for a
+# few ms) is caught up at the next iteration and must not cost the viewers a gap; further
+# behind, a starved simulator (below) publishes a tenth of a second apart
 BEHIND_TOLERANCE_S = 0.1
+# starved: behind by more than BEHIND_TOLERANCE_S and it ran under this share of the control
+# ticks due in the last second (a stall it is catching up from is not starving)
+BEHIND_MIN_SHARE = 0.9
 MAX_EVENTS = 200
 
 
@@ -87,6 +90,7 @@ class SimSession(SessionView, SessionReplay):
         self.gains_base = self.gains  # the set the operator's edits are made against
         self.gains_source = "defaults"
         self.gains_note: str | None = None
+        self._gains_edited: tuple[Gains, Gains, dict[str, list[float]]] | None = None
         self.epoch = 0  # counts sorties shown (start, replay, reset): a page reloads its data
         self.events: list[list] = []  # [t_s, kind, text] of the sortie on screen
         self.history: dict[str, list] = _empty_history()
@@ -108,7 +112,9 @@ class SimSession(SessionView, SessionReplay):
         self._gains_pending: Gains | None = None
         self.run_wall_s = 0.0  # wall time spent running (for the real-time ratio)
         self.run_sim_s = 0.0
-        self.published_behind = 0  # snapshots after which publishing slowed (the sim lagged)
+        self.published_behind = 0  # snapshots published at the slower rate (the sim starved)
+        self._next_publish_sim = 0.0  # the simulated time of the next snapshot (paced)
+        self._last_publish_wall = 0.0  # when the last snapshot of a paced sortie went out
         self.scene_errors = 0
         self.last_scene_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
@@ -190,6 +196,8 @@ class SimSession(SessionView, SessionReplay):
         self.state = "running"
         self._anchor_wall = time.perf_counter()
         self._anchor_sim = self.sim.time_s if self.sim else 0.0
+        self._next_publish_sim = self._anchor_sim  # the first tick publishes
+        self._last_publish_wall = 0.0
 
     def pause(self) -> None:
         def go():
@@ -272,9 +280,16 @@ class SimSession(SessionView, SessionReplay):
         return self.gains_base
 
     def gains_edited(self) -> dict[str, list[float]]:
-        """The operator's edits: name -> [base value, value in force]."""
-        base, now = self.gains_base.to_dict(), self.gains.to_dict()
-        return {k: [base[k], v] for k, v in now.items() if v != base[k]}
+        """The operator's edits: name -> [base value, value in force]. Worked out again only
+        when either set changes (they are frozen): every snapshot's status carries it, and
+        two ``to_dict`` calls cost the simulation thread more than the rest of the snapshot."""
+        base_gains, gains = self.gains_base, self.gains
+        cached = self._gains_edited
+        if cached is None or cached[0] is not base_gains or cached[1] is not gains:
+            base, now = base_gains.to_dict(), gains.to_dict()
+            edited = {k: [base[k], v] for k, v in now.items() if v != base[k]}
+            cached = self._gains_edited = (base_gains, gains, edited)
+        return {k: list(v) for k, v in cached[2].items()}
 
     def request_frame(self) -> None:
         """Send a camera frame with the next snapshot (a page has just (re)connected)."""
@@ -340,11 +355,56 @@ class SimSession(SessionView, SessionReplay):
             self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
             self._trail_target.append([round(c, 3) for c in sim.target.p])
 
+    def _publish_gap_s(self, clock_sim_s: float) -> float:
+        """The least wall time between two snapshots of a paced sortie (``clock_sim_s``: where
+        the clock says the sortie should be). Zero while the simulator keeps up, trails by at
+        most BEHIND_TOLERANCE_S or catches up (it ran at least BEHIND_MIN_SHARE of the control
+        ticks due in the last second): every point of the grid goes out, those it passes while
+        catching up after a stall too, each a state the plots take. Starved (further behind
+        and running slower than that): a tenth of a second (BEHIND_PUBLISH_HZ), keeping its CPU
+        for the simulation."""
+        sim = self.sim
+        if clock_sim_s - sim.time_s <= BEHIND_TOLERANCE_S * self.speed:
+            return 0.0
+        due_hz = sim.scenario.sim.control_rate_hz * self.speed
+        if self.loop_rate_hz() < BEHIND_MIN_SHARE * due_hz:
+            return 1.0 / BEHIND_PUBLISH_HZ
+        return 0.0
+
+    def _step_paced(self, now: float) -> bool:
+        """Step a paced sortie (1x, 2x, 5x) up to where the clock says, publishing a snapshot
+        each time the simulated time crosses the next point of its grid (the publish period
+        times the speed: 40 a wall second when the simulator keeps real time). The snapshots
+        are driven by the simulator's own steps, so every one carries a new state and none is
+        lost to a late wake-up or a long step, which the simulator catches up with its
+        snapshots. Starved, :meth:`_publish_gap_s` spaces them out. Returns whether the sortie
+        is behind."""
+        sim = self.sim
+        period_sim = self.publish_period_s * self.speed
+        target = self._anchor_sim + (now - self._anchor_wall) * self.speed
+        while not sim.done and sim.time_s < target:
+            self._advance_one()
+            if sim.time_s < self._next_publish_sim - 1e-9 and not sim.done:
+                continue
+            self._next_publish_sim = (math.floor(sim.time_s / period_sim + 1e-9) + 1) * period_sim
+            if sim.done:
+                break  # the finished sortie is published by the caller
+            wall = time.perf_counter()
+            gap_s = self._publish_gap_s(self._anchor_sim + (wall - self._anchor_wall) * self.speed)
+            if wall < self._last_publish_wall + gap_s:
+                continue
+            if gap_s > 0.0:
+                self.published_behind += 1
+            self._last_publish_wall = wall
+            self._publish()
+        return sim.time_s < target
+
     def _run(self) -> None:
         next_publish = 0.0
         last_wall = time.perf_counter()
         last_wall_replay = last_wall
-        was_running = behind = lagging = False
+        was_running = behind = False
+        nap_s = 0.01
         while not self._stop.is_set():
             now = time.perf_counter()
             if was_running:  # charge the whole last iteration (stepping, publishing, sleeping)
@@ -356,28 +416,24 @@ class SimSession(SessionView, SessionReplay):
             except queue.Empty:
                 pass
             now = time.perf_counter()
+            paced = False
             if self.state == "running" and self.sim is not None:
                 sim = self.sim
                 t_before = sim.time_s
-                # step until the sortie is where the clock says or the next snapshot is due,
-                # whichever comes first: a simulator that falls behind (a loaded machine, the
-                # rendered camera) still publishes, at BEHIND_PUBLISH_HZ (it published once
-                # per 100 ticks, about 1 Hz), and keeps most of its time for catching up
-                deadline = max(next_publish, now + 0.002)
                 if math.isinf(self.speed):
-                    behind = lagging = False
+                    # as fast as possible: step until the next snapshot is due on the wall grid
+                    behind = False
+                    deadline = max(next_publish, now + 0.002)
                     while not sim.done and time.perf_counter() < deadline:
                         self._advance_one()
                 else:
-                    target = self._anchor_sim + (now - self._anchor_wall) * self.speed
-                    while not sim.done and sim.time_s < target and time.perf_counter() < deadline:
-                        self._advance_one()
-                    behind = sim.time_s < target
-                    lagging = target - sim.time_s > BEHIND_TOLERANCE_S * self.speed
+                    paced = True
+                    behind = self._step_paced(now)
                 self.run_sim_s += sim.time_s - t_before
                 if sim.done:
                     self.state = "finished"
                     next_publish = 0.0
+                    paced = False
             if self.state == "replay" and self.replay is not None and self.replay_playing:
                 speed = self.replay_speed()
                 self.replay_t = min(
@@ -388,19 +444,22 @@ class SimSession(SessionView, SessionReplay):
             last_wall_replay = now
             was_running = self.state == "running"
             now2 = time.perf_counter()
-            if now2 >= next_publish:
+            if not paced and now2 >= next_publish:
+                # not paced by the simulator (idle, paused, finished, replay, max speed): on a
+                # fixed wall-clock grid; one more than half a period late starts it again
                 self._publish()
                 period = self.publish_period_s
-                if was_running and lagging:
-                    period = 1.0 / BEHIND_PUBLISH_HZ
-                    self.published_behind += 1
-                # on a fixed grid: a snapshot published late (a long step, a thread that waited
-                # for a CPU) does not push the later ones back; one more than half a period late
-                # starts the grid again half a period on
                 next_publish = max(next_publish + period, now2 + 0.5 * period)
-            # behind the clock: no nap (the 2 ms nap otherwise lets the web server's thread,
-            # which needs the GIL for every send, fan the snapshots out)
-            self._stop.wait(0.0 if was_running and behind else 0.002 if was_running else 0.01)
+            if paced:
+                # nap until the next control tick is due (behind the clock: no nap), at most
+                # 10 ms so that commands are taken promptly
+                ahead_s = (self.sim.time_s - self._anchor_sim) / self.speed - (
+                    now2 - self._anchor_wall
+                )
+                nap_s = 0.0 if behind else min(max(ahead_s, 0.0), 0.01)
+            else:
+                nap_s = 0.002 if was_running else 0.01
+            self._stop.wait(nap_s)
 
 
 def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import base64
 import math
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import cv2
@@ -21,10 +22,42 @@ SCENE_EVERY = 8  # update the 3D scene with every 8th snapshot (5 Hz): every sce
 FRAME_EVERY = 5  # publish a camera frame with every 5th snapshot (8 Hz, rendered mode)
 HISTORY_EVERY_S = 0.02  # the sortie's plot series kept for a page that (re)loads mid-sortie
 REPLAY_MAX_X = 50.0
+JPEG_QUALITY = 70
+
+_jpeg_pool: ThreadPoolExecutor | None = None
+
+
+def _jpeg_b64(frame: Any) -> str | None:
+    """A camera frame (BGR) as base64 JPEG, None if OpenCV cannot encode it."""
+    ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    return base64.b64encode(jpg.tobytes()).decode("ascii") if ok else None
 
 
 class SessionView:
     """Status, snapshots, plot history and scene updates of a :class:`~.session.SimSession`."""
+
+    _jpeg: tuple[int, Future] | None = None  # (epoch, the camera frame being encoded)
+
+    def _encode_frame(self, frame: Any) -> None:
+        """Encode a copy of the camera frame to JPEG on a worker thread: OpenCV releases the
+        interpreter lock while it encodes (about 3 ms a frame, 8 times a second), so the
+        simulation thread steps on meanwhile, on the other core when there is one. The
+        snapshot after it is done carries it (:meth:`_take_frame`); one frame at a time."""
+        global _jpeg_pool
+        if self._jpeg is not None and not self._jpeg[1].done():
+            return
+        if _jpeg_pool is None:
+            _jpeg_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jpeg")
+        self._jpeg = (self.epoch, _jpeg_pool.submit(_jpeg_b64, frame.copy()))
+
+    def _take_frame(self) -> str | None:
+        """The encoded camera frame once it is ready (None before, or if it belongs to a
+        sortie no longer on screen)."""
+        job = self._jpeg
+        if job is None or not job[1].done():
+            return None
+        self._jpeg = None
+        return job[1].result() if job[0] == self.epoch else None
 
     def _record_history(self) -> None:
         """One row of the plots' series, from the frame through the one snapshot builder."""
@@ -194,9 +227,10 @@ class SessionView:
         frame = sim.camera.last_frame
         if frame is not None and (self._force_frame or self._publish_count % FRAME_EVERY == 0):
             self._force_frame = False
-            ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 70])
-            if ok:
-                snap["frame_jpeg_b64"] = base64.b64encode(jpg.tobytes()).decode("ascii")
+            self._encode_frame(frame)
+        jpeg = self._take_frame()
+        if jpeg is not None:
+            snap["frame_jpeg_b64"] = jpeg
         return snap
 
 

@@ -64,7 +64,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     the share of real time the simulator keeps and, per viewer, the telemetry messages per
     second the server sent it (delivered), its page received, applied to the plots' series and
     readouts (applied) and showed in a redrawn frame (painted); how many snapshots the session
-    published at its slower rate (the simulator behind the clock); the CPU the station, its
+    published at its slower rate (the simulator starved); the CPU the station, its
     simulator thread, the browser and other processes used in the window; and the load
     average, which other work on the machine raises."""
     import shutil
@@ -149,8 +149,8 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
         "seconds": seconds,
         "sim_real_time_share": share,
         "snapshots_published_hz": round((pub1 - pub0) / elapsed, 1),
-        # snapshots after which the session slowed publishing (the simulator more than
-        # BEHIND_TOLERANCE_S behind the clock)
+        # snapshots the session published at its slower rate (the simulator starved: more
+        # than BEHIND_TOLERANCE_S behind the clock and not catching up)
         "snapshots_published_behind": behind1 - behind0,
         "telemetry_delivered_hz": delivered,
         "received_hz": received,
@@ -192,8 +192,8 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
 
     line("published by the session (one for all):", [figures["snapshots_published_hz"]])
     print(
-        f"  {'':<44s}{figures['snapshots_published_behind']} of {pub1 - pub0} followed by the"
-        " slower rate (the simulator > 0.1 s behind the clock)"
+        f"  {'':<44s}{figures['snapshots_published_behind']} of {pub1 - pub0} at the slower"
+        " rate (the simulator starved: > 0.1 s behind the clock, not catching up)"
     )
     line("delivered by the server to each viewer:", list(delivered))
     line("received by each page:", received)
