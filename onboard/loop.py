@@ -136,7 +136,8 @@ class InterceptionLoop:
 
     def on_gyro(self, sample: GyroSample) -> None:
         s0, s1, s2 = self._gyro_sum
-        r0, r1, r2 = (float(c) for c in sample.rates_flu_rad_s)
+        r = sample.rates_flu_rad_s
+        r0, r1, r2 = r.tolist() if type(r) is np.ndarray else (float(c) for c in r)
         self._gyro_sum = (s0 + r0, s1 + r1, s2 + r2)
         self._gyro_n += 1
 
