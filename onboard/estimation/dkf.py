@@ -221,6 +221,8 @@ class DelayedKalmanFilter:
         self._R_CW_default = tuple(camera.R_BC.T.ravel().tolist())
         self._R_CB = self._R_CW_default  # body -> camera, the same numbers
         self._buf: deque[_Entry] = deque()
+        self._Fm = np.array((0.0,) * 18 + _F_LOWER).reshape(6, 6)  # scratch F for _propagate
+        self._F_top = self._Fm.reshape(36)[:18]  # a view of its first three rows
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
@@ -279,10 +281,12 @@ class DelayedKalmanFilter:
         Q = (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
         return (x1, y1, rho1, vE, vN, vU), F, Q
 
-    @staticmethod
-    def _propagate(P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
-        """F P F^T + Q (symmetric to rounding; symmetrised at every update)."""
-        Fm = np.array(F + _F_LOWER).reshape(6, 6)
+    def _propagate(self, P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
+        """F P F^T + Q (symmetric to rounding; symmetrised at every update). F's first three
+        rows are written into a 6x6 scratch matrix whose last three rows are fixed (cheaper
+        than making the 36-number array each call; the same numbers, the same products)."""
+        self._F_top[:] = F
+        Fm = self._Fm
         P1 = Fm @ P @ Fm.T
         P1.flat[::7] += Q
         return P1
