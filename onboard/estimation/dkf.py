@@ -640,7 +640,7 @@ class DelayedKalmanFilter:
         d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
         if not d2 <= self._gate2_point:
             return x, P, False
-        K = P[:, :2] @ np.array([[i00, i01], [i01, i11]])
+        K = P[:, :2] @ np.array((i00, i01, i01, i11)).reshape(2, 2)  # flat: cheaper to make
         x = x + K @ np.array([y0, y1])
         A = P - K @ P[:2, :]  # (I - K H) P
         P = A - A[:, :2] @ K.T + r * (K @ K.T)
