@@ -222,7 +222,6 @@ class DelayedKalmanFilter:
         self._R_CB = self._R_CW_default  # body -> camera, the same numbers
         self._buf: deque[_Entry] = deque()
         self._Fm = np.array((0.0,) * 18 + _F_LOWER).reshape(6, 6)  # scratch F for _propagate
-        self._F_top = self._Fm.reshape(36)[:18]  # a view of its first three rows
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
@@ -285,8 +284,8 @@ class DelayedKalmanFilter:
         """F P F^T + Q (symmetric to rounding; symmetrised at every update). F's first three
         rows are written into a 6x6 scratch matrix whose last three rows are fixed (cheaper
         than making the 36-number array each call; the same numbers, the same products)."""
-        self._F_top[:] = F
         Fm = self._Fm
+        Fm.reshape(36)[:18] = F  # a view each call: a copied filter keeps its own scratch
         P1 = Fm @ P @ Fm.T
         P1.flat[::7] += Q
         return P1
