@@ -136,7 +136,8 @@ class InterceptionLoop:
 
     def on_gyro(self, sample: GyroSample) -> None:
         s0, s1, s2 = self._gyro_sum
-        r0, r1, r2 = (float(c) for c in sample.rates_flu_rad_s)
+        r = sample.rates_flu_rad_s
+        r0, r1, r2 = r.tolist() if type(r) is np.ndarray else (float(c) for c in r)
         self._gyro_sum = (s0 + r0, s1 + r1, s2 + r2)
         self._gyro_n += 1
 
@@ -289,6 +290,7 @@ class InterceptionLoop:
         if gains.t_att_lag > 0.0:
             R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
+        thrust_axis = R_WB[:, 2]  # body z in ENU
         v_est = state.velocity_enu_m_s
         v = v_est
         lag = gains.t_vel_lag
@@ -297,7 +299,7 @@ class InterceptionLoop:
             # thrust last commanded along the thrust axis, gravity and the observer's d^ (in
             # floats: numpy's elementwise operations, in the same order, to the bit)
             k = self._thrust_n / self.vehicle.mass_kg
-            z0, z1, z2 = R_WB[:, 2].tolist()
+            z0, z1, z2 = thrust_axis.tolist()
             a0, a1, a2 = z0 * k, z1 * k, z2 * k - GRAVITY_M_S2
             if self.disturbance.enabled:
                 d0, d1, d2 = self.disturbance.estimate_floats
@@ -323,7 +325,7 @@ class InterceptionLoop:
             for det in dets:
                 self.last_fusion.append(self.dkf.fuse(det))
 
-        d_hat = self.disturbance.update(t, v_est, R_WB[:, 2])
+        d_hat = self.disturbance.update(t, v_est, thrust_axis)
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan

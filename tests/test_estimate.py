@@ -1,6 +1,7 @@
 """The state-estimate model (groundstation/sim/estimate.py): its statistics, lag, bias growth,
 independent streams, the [estimate] table's checks, and its place in the sortie."""
 
+import copy
 import dataclasses
 import itertools
 import math
@@ -240,3 +241,37 @@ def test_the_simulator_hands_the_loop_the_attitude_carried_to_the_tick():
     rms, lag_rms = math.sqrt(np.mean(err**2)), math.sqrt(np.mean(lag_err**2))
     assert lag_rms > 1e-3  # the sortie turns: the lag alone is a milliradian or more
     assert rms < 0.1 * lag_rms
+
+
+def test_the_simulator_hands_the_loop_what_state_at_gives_the_runtime_bit_for_bit():
+    """The simulator calls ``fc_state.vehicle_state_at`` with the estimate model's floats (no
+    FcState built per tick); the runtime calls ``state_at`` on its FcState of arrays. Every
+    tick of a sortie with every estimate error on: the same numbers, bit for bit."""
+    from onboard.runtime.fc_state import FcState, state_at
+
+    sim = Simulation(load_scenario("cv-top-to-bottom"), seed=1)
+    hand = sim._as_the_runtime_hands_it
+    twin = copy.deepcopy(sim.estimate)  # the same streams, drawn in the same order
+    checked = []
+
+    def checking_hand(t, truth, gyro):
+        state = hand(t, truth, gyro)
+        est = twin.vehicle_state_of(t, *truth)
+        fc = FcState(
+            pos_enu_m=est.position_enu_m,
+            vel_enu_m_s=est.velocity_enu_m_s,
+            q_wxyz=est.attitude_wxyz,
+            q_time_s=t - twin.spec.att_lag_s,
+            rates_flu_rad_s=est.body_rates_flu_rad_s,
+            gyro_flu_rad_s=gyro,
+        )
+        ref = state_at(fc, t)
+        for name in ("position_enu_m", "velocity_enu_m_s", "attitude_wxyz"):
+            a, b = getattr(state, name), getattr(ref, name)
+            assert type(a) is np.ndarray and a.tobytes() == b.tobytes(), name
+        checked.append(t)
+        return state
+
+    sim._as_the_runtime_hands_it = checking_hand
+    sim.run()
+    assert len(checked) > 100

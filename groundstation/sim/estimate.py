@@ -296,6 +296,12 @@ class StateEstimateModel:
         """:meth:`vehicle_state` of the truth at ``t`` given as sequences of floats: position
         (m, ENU), velocity (m/s, ENU), attitude (w, x, y, z) and body rates (rad/s, FLU)
         (the simulator's own state, without making arrays of it first)."""
+        pos, vel, att, rates = self.state_floats_of(t, p, v, q, w)
+        return VehicleState(t, np.array(pos), np.array(vel), np.array(att), np.array(rates))
+
+    def state_floats_of(self, t: float, p, v, q, w) -> tuple[tuple[float, ...], ...]:
+        """:meth:`vehicle_state_of` as tuples of floats (position, velocity, attitude
+        (w, x, y, z), body rates), for a caller that makes its own arrays (or none)."""
         self._advance(t)
         now = _Sample(t, p, v, q, w)
         old = self._delay.push(now)
@@ -303,16 +309,13 @@ class StateEstimateModel:
         (p0, p1, p2), (e0, e1, e2) = old.p, self.position_error.x
         (v0, v1, v2), (u0, u1, u2) = old.v, self.velocity_error.x
         (w0, w1, w2), (b0, b1, b2) = old_att.w, self.gyro_bias.x
-        return VehicleState(
-            time_s=t,
-            position_enu_m=np.array([p0 + e0, p1 + e1, p2 + e2]),
-            velocity_enu_m_s=np.array([v0 + u0, v1 + u1, v2 + u2]),
+        return (
+            (p0 + e0, p1 + e1, p2 + e2),
+            (v0 + u0, v1 + u1, v2 + u2),
             # a unit quaternion times a unit quaternion: no renormalising, so that zero
             # errors hand the loop the truth bit for bit
-            attitude_wxyz=np.array(
-                quat_mul_floats(old_att.q, quat_exp_floats(self.attitude_error.x))
-            ),
-            body_rates_flu_rad_s=np.array([w0 + b0, w1 + b1, w2 + b2]),
+            quat_mul_floats(old_att.q, quat_exp_floats(self.attitude_error.x)),
+            (w0 + b0, w1 + b1, w2 + b2),
         )
 
     def gyro(self, time_s: float, rates_flu_rad_s: np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
-from onboard.runtime.fc_state import FcState, state_at
+from onboard.runtime.fc_state import vehicle_state_at
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
@@ -324,20 +324,17 @@ class Simulation:
             self._rel = (r0x, r0y, r0z)
             self.step_index = k + 1
 
-    def _as_the_runtime_hands_it(self, est: VehicleState, gyro: np.ndarray) -> VehicleState:
-        """The estimated state as ``onboard run`` hands it to the loop: PX4 stamps the attitude
-        with its sample time, ``estimate.att_lag_s`` before the tick, and the runtime carries
-        it to the tick with the latest gyro sample (``fc_state.state_at``, the same code);
-        position and velocity it uses unstamped, as they come (``gains.t_vel_lag``)."""
-        fc = FcState(
-            pos_enu_m=est.position_enu_m,
-            vel_enu_m_s=est.velocity_enu_m_s,
-            q_wxyz=est.attitude_wxyz,
-            q_time_s=est.time_s - self.estimate.spec.att_lag_s,
-            rates_flu_rad_s=est.body_rates_flu_rad_s,
-            gyro_flu_rad_s=gyro,
+    def _as_the_runtime_hands_it(self, t: float, truth: tuple, gyro: np.ndarray) -> VehicleState:
+        """The estimated state of ``truth`` (position, velocity, attitude, rates as tuples) at
+        ``t`` as ``onboard run`` hands it to the loop: PX4 stamps the attitude with its sample
+        time, ``estimate.att_lag_s`` before the tick, and the runtime carries it to the tick
+        with the latest gyro sample (``fc_state.vehicle_state_at``, the code ``state_at``
+        runs); position and velocity it uses unstamped, as they come (``gains.t_vel_lag``)."""
+        est = self.estimate
+        pos, vel, q, rates = est.state_floats_of(t, *truth)
+        return vehicle_state_at(
+            t, np.array(pos), np.array(vel), q, t - est.spec.att_lag_s, np.array(rates), gyro
         )
-        return state_at(fc, est.time_s)
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -358,7 +355,7 @@ class Simulation:
             gyro = est.gyro(t, rates)
             loop.on_gyro(GyroSample(t, gyro))
             truth = (tuple(veh.p), tuple(veh.v), tuple(veh.q), tuple(veh.w))
-            tel = loop.tick(self._as_the_runtime_hands_it(est.vehicle_state_of(t, *truth), gyro))
+            tel = loop.tick(self._as_the_runtime_hands_it(t, truth, gyro))
         for r in loop.last_fusion:
             if r is FusionResult.ACCEPTED or r is FusionResult.INITIALISED:
                 self._fused += 1

@@ -82,8 +82,16 @@ class DisturbanceObserverConfig:
                 raise ValueError(f"disturbance observer {name} = {value!r} is out of range")
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _finite3(x) -> tuple[float, float, float] | None:
     """Three finite floats from a 3-vector (ndarray of shape (3,) or sequence), else None."""
+    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (3,):  # the loop's: floats
+        x0, x1, x2 = x.tolist()
+        if math.isfinite(x0) and math.isfinite(x1) and math.isfinite(x2):
+            return x0, x1, x2
+        return None
     if isinstance(x, np.ndarray):
         if x.shape != (3,):
             return None
@@ -238,7 +246,8 @@ def feedforward_accel(
     cancelling the along-track drag as well would add up to k_drag v of pitch-down during the
     ramp, which moves the target up the image (measured: 2 of 12 static targets lost off the
     top with full feed-forward). The normal part is what bends the path and makes the miss."""
-    d0, d1, d2 = (-c for c in _floats(disturbance_enu_m_s2))
+    d0, d1, d2 = _floats(disturbance_enu_m_s2)
+    d0, d1, d2 = -d0, -d1, -d2
     v0, v1, v2 = _floats(velocity_enu_m_s)
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     keep_tangential = min(max(2.0 - speed / v_min_m_s, 0.0), 1.0) if v_min_m_s > 0.0 else 0.0

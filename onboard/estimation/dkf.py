@@ -221,6 +221,7 @@ class DelayedKalmanFilter:
         self._R_CW_default = tuple(camera.R_BC.T.ravel().tolist())
         self._R_CB = self._R_CW_default  # body -> camera, the same numbers
         self._buf: deque[_Entry] = deque()
+        self._Fm = np.array((0.0,) * 18 + _F_LOWER).reshape(6, 6)  # scratch F for _propagate
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
@@ -279,10 +280,12 @@ class DelayedKalmanFilter:
         Q = (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
         return (x1, y1, rho1, vE, vN, vU), F, Q
 
-    @staticmethod
-    def _propagate(P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
-        """F P F^T + Q (symmetric to rounding; symmetrised at every update)."""
-        Fm = np.array(F + _F_LOWER).reshape(6, 6)
+    def _propagate(self, P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
+        """F P F^T + Q (symmetric to rounding; symmetrised at every update). F's first three
+        rows are written into a 6x6 scratch matrix whose last three rows are fixed (cheaper
+        than making the 36-number array each call; the same numbers, the same products)."""
+        Fm = self._Fm
+        Fm.reshape(36)[:18] = F  # a view each call: a copied filter keeps its own scratch
         P1 = Fm @ P @ Fm.T
         P1.flat[::7] += Q
         return P1
@@ -636,7 +639,7 @@ class DelayedKalmanFilter:
         d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
         if not d2 <= self._gate2_point:
             return x, P, False
-        K = P[:, :2] @ np.array([[i00, i01], [i01, i11]])
+        K = P[:, :2] @ np.array((i00, i01, i01, i11)).reshape(2, 2)  # flat: cheaper to make
         x = x + K @ np.array([y0, y1])
         A = P - K @ P[:2, :]  # (I - K H) P
         P = A - A[:, :2] @ K.T + r * (K @ K.T)

@@ -5,6 +5,7 @@ loop the state by the same code without importing pymavlink."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,15 +40,40 @@ class FcState:
 
 def state_at(fc: FcState, now_s: float) -> VehicleState:
     """The vehicle state for a control tick at ``now_s`` (position and velocity required):
-    the last attitude PX4 sent, propagated from its sample time to the tick with the latest
-    gyro rates (the attitude's own rates before any HIGHRES_IMU), by at most
-    ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale. The loop
-    pairs it with an image estimate predicted to the tick, so an attitude left a stream
-    period old would show as a line-of-sight error of rate x age."""
-    q = fc.q_wxyz
-    if fc.q_time_s is not None:
-        dt = min(max(now_s - fc.q_time_s, 0.0), MAX_PROPAGATION_S)
-        rates = fc.rates_flu_rad_s if fc.gyro_flu_rad_s is None else fc.gyro_flu_rad_s
+    :func:`vehicle_state_at` of what the flight controller last said."""
+    return vehicle_state_at(
+        now_s,
+        fc.pos_enu_m,
+        fc.vel_enu_m_s,
+        fc.q_wxyz,
+        fc.q_time_s,
+        fc.rates_flu_rad_s,
+        fc.gyro_flu_rad_s,
+    )
+
+
+def vehicle_state_at(
+    now_s: float,
+    pos_enu_m: np.ndarray,
+    vel_enu_m_s: np.ndarray,
+    q_wxyz: np.ndarray | Sequence[float],
+    q_time_s: float | None,
+    rates_flu_rad_s: np.ndarray,
+    gyro_flu_rad_s: np.ndarray | None,
+) -> VehicleState:
+    """The vehicle state for a control tick at ``now_s``: the attitude ``q_wxyz`` (sampled at
+    ``q_time_s``, onboard clock s) propagated to the tick with the latest gyro rates
+    ``gyro_flu_rad_s`` (the attitude's own rates ``rates_flu_rad_s`` before any HIGHRES_IMU),
+    by at most ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale.
+    The loop pairs it with an image estimate predicted to the tick, so an attitude left a
+    stream period old would show as a line-of-sight error of rate x age. The simulator calls
+    this directly (no :class:`FcState` to build each tick)."""
+    q = q_wxyz
+    if q_time_s is not None:
+        dt = min(max(now_s - q_time_s, 0.0), MAX_PROPAGATION_S)
+        rates = rates_flu_rad_s if gyro_flu_rad_s is None else gyro_flu_rad_s
         if math.hypot(*rates.tolist()) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
             q = propagate_attitude(q, rates, dt)
-    return VehicleState(now_s, fc.pos_enu_m, fc.vel_enu_m_s, q, fc.rates_flu_rad_s)
+    if q is not None and type(q) is not np.ndarray:  # the simulator's floats
+        q = np.array(q, dtype=float)
+    return VehicleState(now_s, pos_enu_m, vel_enu_m_s, q, rates_flu_rad_s)
