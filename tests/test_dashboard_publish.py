@@ -87,3 +87,29 @@ def test_behind_the_clock_only_a_starved_simulator_publishes_less(monkeypatch):
         assert sess._publish_gap_s(t + 1.5 * tol_sim) == 1.0 / session_mod.BEHIND_PUBLISH_HZ
     finally:
         sess.close()
+
+
+def test_a_simulator_slower_than_the_clock_hands_the_thread_back_to_commands(monkeypatch):
+    """One paced stepping call runs at most about STEP_SLICE_S of wall, however far the clock
+    is ahead, so the operator's commands (pause, reset, speed) and the stop flag are served
+    while a slow simulator trails: here each step takes 20 ms and the clock is 5 s ahead."""
+    sess = SimSession()
+    try:
+        sess.start(SortieConfig(load_scenario("cv-top-to-bottom"), speed="1"))
+        sess.pause()
+        advance, steps = SimSession._advance_one, [0]
+
+        def slow_advance(self) -> None:
+            steps[0] += 1
+            time.sleep(0.02)
+            advance(self)
+
+        monkeypatch.setattr(SimSession, "_advance_one", slow_advance)
+        now = time.perf_counter()
+        sess._anchor_wall, sess._anchor_sim = now - 5.0, sess.sim.time_s
+        behind = sess._step_paced(now)
+        assert behind
+        # STEP_SLICE_S / 20 ms = 2.5 steps; without the slice it steps the whole 5 s (500)
+        assert 1 <= steps[0] <= session_mod.STEP_SLICE_S / 0.02 + 2, steps[0]
+    finally:
+        sess.close()

@@ -325,3 +325,24 @@ def test_a_tick_falling_due_during_a_fusion_waits_for_it_asleep(fused):
     assert t[3] == pytest.approx(0.0154, abs=1e-5)
     assert sched.input_waits == 1 and sched.input_wait_max_s == pytest.approx(0.0004, abs=1e-5)
     assert sched.early_ticks == 0
+
+
+def test_a_request_arriving_as_the_control_thread_goes_to_sleep_is_not_slept_through(
+    monkeypatch,
+):
+    """wait() reads the request flag, then blocks: a request_tick() landing in between must
+    wake it (return at once so wait() chooses again), not turn into a plain sleep for the
+    whole timeout the caller chose for its deadline."""
+    import onboard.runtime.scheduler as scheduler_mod
+
+    slept: list[float] = []
+    monkeypatch.setattr(scheduler_mod.time, "sleep", slept.append)
+    sched = PeriodicScheduler(0.005)
+    sched._block_saw_request = False  # the caller's timeout counted no request...
+    sched.request_tick()  # ...and one came before the block took the lock
+    sched._block_until_request(10.0)
+    assert slept == []
+    # a request the caller did count (waiting for the minimum gap) is a plain sleep
+    sched._block_saw_request = True
+    sched._block_until_request(0.001)
+    assert slept == [0.001]

@@ -45,6 +45,7 @@ BEHIND_TOLERANCE_S = 0.1
 # starved: behind by more than BEHIND_TOLERANCE_S and it ran under this share of the control
 # ticks due in the last second (a stall it is catching up from is not starving)
 BEHIND_MIN_SHARE = 0.9
+STEP_SLICE_S = 0.05  # most wall time one paced stepping call runs before commands are served
 MAX_EVENTS = 200
 
 
@@ -382,7 +383,12 @@ class SimSession(SessionView, SessionReplay):
         sim = self.sim
         period_sim = self.publish_period_s * self.speed
         target = self._anchor_sim + (now - self._anchor_wall) * self.speed
+        # a simulator slower than the clock must still hand the thread back to the operator's
+        # commands (pause, reset, speed) and the stop flag: at most STEP_SLICE_S of stepping
+        slice_end = now + STEP_SLICE_S
         while not sim.done and sim.time_s < target:
+            if time.perf_counter() > slice_end:
+                break
             self._advance_one()
             if sim.time_s < self._next_publish_sim - 1e-9 and not sim.done:
                 continue

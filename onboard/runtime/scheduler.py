@@ -74,6 +74,7 @@ class PeriodicScheduler:
         self.gc_runs = 0
         self._clock = clock
         self._block = block or self._block_until_request
+        self._block_saw_request = False  # whether the timeout given to _block counted a request
         self._next_s = 0.0
         self._last_start_s = -math.inf
         self._requested = False  # request_tick() since the last served()
@@ -148,6 +149,8 @@ class PeriodicScheduler:
             if not self._requested:
                 self._wake.wait(timeout_s)
                 return
+            if not self._block_saw_request:
+                return  # requested after the caller chose its timeout: let it choose again
         time.sleep(timeout_s)
 
     # ------------------------------------------------------------------ the grid
@@ -171,7 +174,8 @@ class PeriodicScheduler:
             waited_from = None
             while True:
                 target = deadline
-                if self._requested and earliest < deadline:
+                self._block_saw_request = self._requested
+                if self._block_saw_request and earliest < deadline:
                     target = earliest if earliest > now else now
                 if target - now <= self.spin_s:
                     break
@@ -186,6 +190,7 @@ class PeriodicScheduler:
                     if waited_from is None:
                         waited_from = now
                     self._awaiting_input = True
+                    self._block_saw_request = False
                     self._block(give_up - now)
                     self._awaiting_input = False
                     continue
