@@ -315,9 +315,9 @@ def test_a_tick_falling_due_during_a_fusion_waits_for_it_asleep(fused):
     sched._block = block
     clock.at(100.0098, sched.input_begins)  # in the spin before the 10 ms deadline
     if fused:
-        clock.at(100.0104, lambda: (sched.request_tick(), sched.input_done(False)))
+        clock.at(100.0104, lambda: (sched.request_tick(), sched.input_done()))
     else:
-        clock.at(100.0104, lambda: sched.input_done(False))  # screened out: nothing fused
+        clock.at(100.0104, lambda: sched.input_done())  # screened out: nothing fused
     starts = _run(clock, sched, 4)
     t = [s for s, _ in starts]
     assert [e for _, e in starts] == [False, False, False, False]

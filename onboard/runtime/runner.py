@@ -288,7 +288,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 if fused and self.config.early_tick:
                     sched.request_tick()
         finally:
-            sched.input_done(False)
+            sched.input_done()
 
     # ------------------------------------------------------------------ timing figures
     @property

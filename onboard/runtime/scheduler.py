@@ -126,13 +126,11 @@ class PeriodicScheduler:
         spinning against it for the GIL and then waiting for the lock as tick work."""
         self._inputting = True
 
-    def input_done(self, request: bool) -> None:
-        """The input is in (then ``request``: tick now, see :meth:`request_tick`) or came to
-        nothing: a tick waiting for it goes on either way."""
+    def input_done(self) -> None:
+        """The input is in (its tick asked for by :meth:`request_tick`) or came to nothing: a
+        tick waiting for it goes on either way."""
         with self._wake:
             self._inputting = False
-            if request:
-                self._requested = True
             self._wake.notify()
 
     def served(self) -> None:
