@@ -1,0 +1,38 @@
+"""Compiled arithmetic: numba's nopython JIT for the loop's and the simulator's hot kernels.
+
+A kernel is an ordinary Python function over floats and numpy arrays, decorated with
+:func:`kernel` and an explicit numba signature. It is compiled when its module is imported
+(from numba's on-disk cache after the first time, so a vehicle never compiles mid-sortie) and
+runs the same IEEE operations in the same order as the Python source: no fast-math, so no
+fused multiply-adds or reassociation. ``PEREGRINE_JIT=0`` in the environment runs the very
+same functions as plain Python (debugging, coverage, a platform without numba's LLVM).
+There is one implementation of each kernel either way.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
+
+
+def kernel(signature: str | None = None) -> Callable[[F], F]:
+    """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
+    for ``signature`` (eagerly, at import) or lazily on first call without one; with
+    ``PEREGRINE_JIT=0`` return it unchanged."""
+
+    def wrap(fn: F) -> F:
+        if not ENABLED:
+            return fn
+        import numba
+
+        options = {"cache": True, "nogil": True}
+        if signature is None:
+            return numba.njit(**options)(fn)
+        return numba.njit(signature, **options)(fn)
+
+    return wrap
