@@ -19,6 +19,8 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
 
+KERNELS: list[Callable[..., Any]] = []  # every kernel defined so far, compiled or not
+
 
 def kernel(signature: str | None = None) -> Callable[[F], F]:
     """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
@@ -27,12 +29,16 @@ def kernel(signature: str | None = None) -> Callable[[F], F]:
 
     def wrap(fn: F) -> F:
         if not ENABLED:
+            KERNELS.append(fn)
             return fn
         import numba
 
         options = {"cache": True, "nogil": True}
         if signature is None:
-            return numba.njit(**options)(fn)
-        return numba.njit(signature, **options)(fn)
+            compiled = numba.njit(**options)(fn)
+        else:
+            compiled = numba.njit(signature, **options)(fn)
+        KERNELS.append(compiled)
+        return compiled
 
     return wrap

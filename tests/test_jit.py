@@ -1,0 +1,83 @@
+"""onboard.jit: a compiled kernel is its Python source, operation for operation.
+
+A whole set of sorties flown with every kernel compiled (this process) and with
+``PEREGRINE_JIT=0`` (the same functions run as Python, in a subprocess) must agree to the
+bit, and nothing may compile after import (a vehicle never compiles mid-sortie)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from onboard import jit
+from tests.speed_reference import CASES, compute
+
+ROOT = Path(__file__).resolve().parents[1]
+# static, moving, windy/tethered, takeoff, all three laws, and the rendered camera
+BIT_CASES = [CASES[0], CASES[1], CASES[3], CASES[4], CASES[7], CASES[8]]
+
+_SCRIPT = """
+import json, sys
+from onboard import jit
+from tests.speed_reference import compute
+assert not jit.ENABLED
+cases = json.loads(sys.argv[1])
+print(json.dumps([compute(tuple(c)) for c in cases]))
+"""
+
+
+def test_disabled_kernel_is_the_function_itself(monkeypatch):
+    monkeypatch.setattr(jit, "ENABLED", False)
+    monkeypatch.setattr(jit, "KERNELS", [])
+
+    def add(a: float, b: float) -> float:
+        return a + b
+
+    assert jit.kernel("float64(float64, float64)")(add) is add
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_compiled_kernel_equals_its_source_bit_for_bit(monkeypatch):
+    monkeypatch.setattr(jit, "KERNELS", [])
+    # a sum that depends on the order of its operations: no reassociation, no FMA
+    def dot_then_scale(a: np.ndarray, b: np.ndarray, k: float) -> float:
+        s = 0.0
+        for i in range(a.shape[0]):
+            s += a[i] * b[i]
+        return s * k + a[0] * b[-1]
+
+    k = jit.kernel("float64(float64[::1], float64[::1], float64)")(dot_then_scale)
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        a, b = rng.normal(size=17) * 1e3, rng.normal(size=17) * 1e-3
+        c = float(rng.normal())
+        assert k(a, b, c) == dot_then_scale(a, b, c)
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_sorties_fly_the_same_compiled_and_as_python():
+    compiled = [compute(c) for c in BIT_CASES]
+    signatures_before = [len(getattr(k, "signatures", ())) for k in jit.KERNELS]
+    env = dict(os.environ, PEREGRINE_JIT="0")
+    proc = subprocess.run(
+        [sys.executable, "-c", _SCRIPT, json.dumps([list(c) for c in BIT_CASES])],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    )
+    as_python = json.loads(proc.stdout)
+    for case, got, want in zip(BIT_CASES, compiled, as_python, strict=True):
+        assert got == want, case  # exact: floats round-trip through JSON
+    # every kernel was compiled at import for its signature; flying compiled nothing more
+    assert [len(getattr(k, "signatures", ())) for k in jit.KERNELS] == signatures_before
+    for k in jit.KERNELS:
+        assert len(k.signatures) >= 1, k
