@@ -410,16 +410,17 @@ def _floats3(v) -> tuple[float, float, float]:
 
 
 def _vector3(v) -> np.ndarray:
-    """A 3-vector (ndarray or sequence) as a float64 array (the array itself when it is one)."""
-    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,):
+    """A 3-vector (ndarray or sequence) as a writable float64 array (the array itself when it
+    is one: the kernels' signatures take writable arrays)."""
+    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,) and v.flags.writeable:
         return v
     return np.array(_floats3(v))
 
 
 def _matrix3(m) -> np.ndarray:
-    """A 3x3 matrix (ndarray or nested sequence) as a float64 array."""
+    """A 3x3 matrix (ndarray or nested sequence) as a writable float64 array."""
     if type(m) is np.ndarray and m.dtype is _F64 and m.shape == (3, 3):
-        return m
+        return m if m.flags.writeable else m.copy()
     rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
     if len(rows) != 3:
         raise ValueError("expected a 3x3 matrix")
