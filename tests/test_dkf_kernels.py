@@ -144,9 +144,9 @@ def test_buffer_kernels_equal_their_python_source(seed):
         t_c = float(T[j] + 0.004)
         z0, z1 = float(X[j + 1, 0] + 1e-3), float(X[j + 1, 1] - 1e-3)
         r_px = float(rng.choice([math.nan, 3.1]))
-        args = (lo, hi, j, t_c, z0, z1, r_px, a._prm)
-        assert kernels._fuse_latest(*_buffer(a), *args) == kernels._fuse_latest.py_func(
-            *_buffer(b), *args
+        args = (j, t_c, z0, z1, r_px, a._prm)
+        assert kernels._fuse_latest(*_buffer(a), a._win, *args) == kernels._fuse_latest.py_func(
+            *_buffer(b), b._win, *args
         )
         assert all(_same(p, q) for p, q in zip(_buffer(a), _buffer(b), strict=True))
 
@@ -165,18 +165,31 @@ def test_buffer_kernels_equal_their_python_source(seed):
     assert _same(last[0], last[1])
     assert all(_same(p, q) for p, q in zip(_buffer(a), _buffer(b), strict=True))
 
-    for n in range(6):  # predictions: given, missing and non-finite inputs
+    for n in range(8):  # predictions: given, missing and non-finite inputs
         gyro = _vec(rng, 3, 0.3, 0.1)
         v_c = kernels._NO_INPUT if n == 1 else _vec(rng, 3, 2.0, 0.1)
-        R = (
-            kernels._NO_MATRIX
-            if n == 2
-            else np.where(rng.random((3, 3)) < 0.05, math.nan, CAM.R_BC)
-        )
-        args = (a._lo, a._hi, True, float(T[a._hi - 1] + 0.01), gyro, v_c, R, a._R_CB, a._prm)
-        assert kernels._predict(*_buffer(a)[:5], a._HX, a._HP, *args) == kernels._predict.py_func(
-            *_buffer(b)[:5], b._HX, b._HP, *args
+        R = np.where(rng.random((3, 3)) < 0.05, math.nan, CAM.R_BC)
+        R = kernels._NO_MATRIX if n == 2 else R
+        t = float(T[a._hi - 1] + 0.01)
+        horizon = t - (0.6 if n < 6 else 0.05)  # the last two: most rows leave
+        args = (True, t, horizon, gyro, v_c, R, a._R_CB, a._prm)
+        assert kernels._predict(*_buffer(a)[:6], a._HX, a._HP, a._win, *args) == (
+            kernels._predict.py_func(*_buffer(b)[:6], b._HX, b._HP, b._win, *args)
         )
         assert all(_same(p, q) for p, q in zip(_buffer(a), _buffer(b), strict=True))
-        a._hi += 1
-        b._hi += 1
+        assert _same(a._win, b._win)
+    assert a._lo > lo
+
+
+def test_bisect_right_is_pythons():
+    import bisect
+
+    rng = np.random.default_rng(14)
+    for _ in range(500):
+        a = np.sort(rng.choice([0.0, 0.5, 1.0, 1.5, 2.0], size=int(rng.integers(0, 12))))
+        t = float(rng.choice([-1.0, 0.0, 0.5, 0.7, 2.0, 3.0]))
+        lo = int(rng.integers(0, len(a) + 1))
+        hi = int(rng.integers(lo, len(a) + 1))
+        want = bisect.bisect_right(a.tolist(), t, lo, hi)
+        assert kernels._bisect_right(a, lo, hi, t) == kernels._bisect_right.py_func(a, lo, hi, t)
+        assert kernels._bisect_right(a, lo, hi, t) == want

@@ -104,6 +104,7 @@ _U_W, _U_V, _U_R = 0, 3, 6
 # flags; scalars; any-layout vector and matrix (inputs as the caller gives them)
 _V, _M, _PB, _FLAGS = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]", "uint8[::1]"
 _S, _I, _B, _VOID, _VA, _MA = "float64", "int64", "boolean", "void", "float64[:]", "float64[:, :]"
+_WIN = "int64[::1]"  # the buffer's window [lo, hi)
 
 
 def _sig(ret: str, *args: str) -> str:
@@ -265,13 +266,14 @@ def _covariance(P, F, Q, HX, HP, lo, i):
     return 1
 
 
-@kernel(_sig(_I, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _I, _I, _I, _S, _S, _S, _S, _V))
-def _fuse_latest(T, U, X, F, Q, P, HX, HP, lo, hi, j, t_c, z0, z1, r_px, prm):
+@kernel(_sig(_I, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _WIN, _I, _S, _S, _S, _S, _V))
+def _fuse_latest(T, U, X, F, Q, P, HX, HP, win, j, t_c, z0, z1, r_px, prm):
     """Fuse a measurement (later than every stored one) captured at t_c inside buffer
     interval (j, j+1]: exact at j+1, then the linearised correction of the state carried to
     row hi - 1 through the buffered F (dx_k = F_k dx_{k-1}); the later covariances are
     propagated when next needed. 1: accepted; 0: gated; < 0: _covariance's failure."""
-    code = _covariance(P, F, Q, HX, HP, lo, j)
+    hi = win[1]
+    code = _covariance(P, F, Q, HX, HP, win[0], j)
     if code < 1:
         return code
     nxt = j + 1
@@ -352,13 +354,18 @@ def _replay(T, U, X, F, Q, PB, HX, HP, hi, j, x, P, t, mt, mz, mr, k, new_t_c, p
     return new_accepted
 
 
-@kernel(_sig(_I, _V, _M, _M, _M, _M, _FLAGS, _FLAGS, _I, _I, _B, _S, _VA, _VA, _MA, _V, _V))
-def _predict(T, U, X, F, Q, HX, HP, lo, hi, tracking, time_s, gyro, v_c, R_WC, R_CB, prm):
-    """Write the prediction at time_s into row hi: the inputs (gyro in the body frame,
-    rad/s; vehicle velocity ENU, m/s, or empty: still; camera attitude camera -> ENU, or
-    empty: level, R_CW = R_CB), a non-finite one replaced by the previous row's (the filter
-    never sees NaN), and, when tracking, the state stepped from row hi - 1 with F and Q.
-    1: stepped; 0: not tracking; -1: the step left the view or turned non-finite."""
+@kernel(_sig(_I, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _WIN, _B, _S, _S, _VA, _VA, _MA, _V, _V))
+def _predict(T, U, X, F, Q, P, HX, HP, win, tracking, time_s, horizon, gyro, v_c, R_WC, R_CB, prm):
+    """Append the prediction at time_s to the window win = [lo, hi): the inputs (gyro in the
+    body frame, rad/s; vehicle velocity ENU, m/s, or empty: still; camera attitude camera ->
+    ENU, or empty: level, R_CW = R_CB), a non-finite one replaced by the previous row's (the
+    filter never sees NaN), and, when tracking, the state stepped from row hi - 1 with F and
+    Q. Then the rows at or before ``horizon`` leave the window (but the last two), the oldest
+    remaining one with its covariance propagated (it is where P is propagated from).
+    1: stepped; 0: not tracking; -1: the step left the view or turned non-finite (nothing
+    has left); -2: a covariance turned non-finite (the rows before it have left); on < 0 the
+    track is to be dropped and the old rows removed by the caller."""
+    lo, hi = win[0], win[1]
     u = U[hi]
     g0, g1, g2 = gyro[0], gyro[1], gyro[2]
     c = R_CB
@@ -390,13 +397,34 @@ def _predict(T, U, X, F, Q, HX, HP, lo, hi, tracking, time_s, gyro, v_c, R_WC, R
                     u[m] = 0.0
     T[hi] = time_s
     HX[hi] = HP[hi] = 0
-    if not tracking:
-        return 0
-    _step_x(X[hi - 1], u, time_s - T[hi - 1], prm, X[hi], F[hi], Q[hi])
-    if not _valid(X[hi]):
-        return -1
-    HX[hi] = 1
-    return 1
+    win[1] = hi + 1
+    code = 0
+    if tracking:
+        _step_x(X[hi - 1], u, time_s - T[hi - 1], prm, X[hi], F[hi], Q[hi])
+        if not _valid(X[hi]):
+            return -1
+        HX[hi] = 1
+        code = 1
+    hi += 1
+    while hi - lo > 2 and T[lo + 1] <= horizon:
+        if not HP[lo + 1] and HX[lo + 1] and _covariance(P, F, Q, HX, HP, lo, lo + 1) < 0:
+            return -2
+        lo += 1
+        win[0] = lo
+    return code
+
+
+@kernel(_sig(_I, _V, _I, _I, _S))
+def _bisect_right(a, lo, hi, t):
+    """The index in [lo, hi] where t would be inserted after its equals in the sorted a
+    (Python's ``bisect.bisect_right``, the same comparisons)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
 
 
 def _floats3(v) -> tuple[float, float, float]:
@@ -536,7 +564,15 @@ class DelayedKalmanFilter:
         self._P = np.zeros((n, _N, _N))
         self._HX = np.zeros(n, dtype=np.uint8)
         self._HP = np.zeros(n, dtype=np.uint8)
-        self._lo = self._hi = 0
+        self._win = np.zeros(2, dtype=np.int64)  # the rows in use: [lo, hi)
+
+    @property
+    def _lo(self) -> int:
+        return int(self._win[0])
+
+    @property
+    def _hi(self) -> int:
+        return int(self._win[1])
 
     def _make_room(self) -> None:
         """Free row hi: shift the window to the start of the arrays, or grow them."""
@@ -553,7 +589,7 @@ class DelayedKalmanFilter:
             for a in arrays:
                 arr = getattr(self, a)
                 arr[:n] = arr[lo:hi]
-        self._lo, self._hi = 0, n
+        self._win[:] = 0, n
 
     @property
     def config(self) -> DkfConfig:
@@ -592,6 +628,8 @@ class DelayedKalmanFilter:
     def _covariance(self, i: int) -> np.ndarray | None:
         """P at buffer row i (absolute), propagated from the last row before it that holds
         one (None without a track; the track is dropped if it turns non-finite)."""
+        if self._HP[i]:
+            return self._P[i]
         code = _covariance(self._P, self._F, self._Q, self._HX, self._HP, self._lo, i)
         if code == 1:
             return self._P[i]
@@ -609,7 +647,7 @@ class DelayedKalmanFilter:
         """Advance to ``time_s`` with the body rate, vehicle velocity (ENU) and camera attitude
         (camera -> ENU) held since the previous call. Without velocity and attitude the vehicle
         is taken as still and level, and the target velocity state absorbs its motion."""
-        lo, hi = self._lo, self._hi
+        lo, hi = self._win.tolist()
         if hi > lo and time_s <= self._T[hi - 1] + _TIME_EPS_S:
             return
         gyro = _vector3(gyro_rates_flu_rad_s)
@@ -617,25 +655,23 @@ class DelayedKalmanFilter:
         R = _NO_MATRIX if R_WC is None else _matrix3(R_WC)
         if hi == self._T.shape[0]:
             self._make_room()
-            lo, hi = self._lo, self._hi
         T = self._T
-        code = _predict(
-            T, self._U, self._X, self._F, self._Q, self._HX, self._HP, lo, hi,
-            self._initialised, float(time_s), gyro, v_c, R, self._R_CB, self._prm,
-        )  # fmt: skip
-        if code < 0:
-            self._drop_track()
-        self._hi = hi = hi + 1
         horizon = time_s - self._config.buffer_s
-        while hi - lo > 2 and T[lo + 1] <= horizon:
-            if not self._HP[lo + 1] and self._HX[lo + 1]:
-                self._covariance(lo + 1)  # the oldest entry is where P is propagated from
-            lo += 1
-            self._lo = lo
+        code = _predict(
+            T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP, self._win,
+            self._initialised, float(time_s), horizon, gyro, v_c, R, self._R_CB, self._prm,
+        )  # fmt: skip
+        if code < 0:  # the track is lost: drop it, then the rows older than the horizon
+            self._drop_track()
+            lo, hi = self._win.tolist()
+            while hi - lo > 2 and T[lo + 1] <= horizon:
+                lo += 1
+            self._win[0] = lo
         # measurements before the oldest buffered state can never be replayed again (they
         # are in capture order: none to cut unless the first one is)
         meas = self._meas
-        if meas and meas[0].t < T[lo]:
+        if meas and meas[0].t < T[self._win[0]]:
+            lo = self._lo
             del meas[: bisect.bisect_left(meas, T[lo], key=_meas_time)]
 
     # ----------------------------------------------------------------- fusion
@@ -680,7 +716,7 @@ class DelayedKalmanFilter:
         t_c = det.capture_time_s
         if not isinstance(t_c, int | float) or not math.isfinite(t_c):
             return FusionResult.GATED
-        lo, hi, T = self._lo, self._hi, self._T
+        (lo, hi), T = self._win.tolist(), self._T
         if hi == lo or t_c > T[hi - 1] + self.config.future_tolerance_s:
             return FusionResult.FUTURE
         now = float(T[hi - 1])
@@ -711,7 +747,7 @@ class DelayedKalmanFilter:
         else:
             code = _fuse_latest(
                 T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP,
-                lo, hi, j, m.t, float(m.z[0]), float(m.z[1]),
+                self._win, j, m.t, float(m.z[0]), float(m.z[1]),
                 math.nan if m.r_px is None else m.r_px, self._prm,
             )  # fmt: skip
             accepted = code == 1
@@ -727,12 +763,11 @@ class DelayedKalmanFilter:
     def _index_at_or_before(self, t: float) -> int:
         """The buffer row (absolute) of the last prediction at or before t (the oldest if
         none is)."""
-        lo, hi = self._lo, self._hi
-        k = int(np.searchsorted(self._T[lo:hi], t + _TIME_EPS_S, side="right")) - 1
-        return lo + max(k, 0)
+        lo, hi = self._win.tolist()
+        return max(_bisect_right(self._T, lo, hi, t + _TIME_EPS_S) - 1, lo)
 
     def _drop_track(self) -> None:
-        lo, hi = self._lo, self._hi
+        lo, hi = self._win.tolist()
         if self._initialised:
             # remember the target velocity at the last entry holding a covariance (v_t is a
             # random walk: from there on only its variance grows, by q_v per second)
