@@ -565,6 +565,7 @@ class DelayedKalmanFilter:
         self._HX = np.zeros(n, dtype=np.uint8)
         self._HP = np.zeros(n, dtype=np.uint8)
         self._win = np.zeros(2, dtype=np.int64)  # the rows in use: [lo, hi)
+        self._head_cache: tuple | None = None  # see _head
 
     @property
     def _lo(self) -> int:
@@ -653,6 +654,7 @@ class DelayedKalmanFilter:
         gyro = _vector3(gyro_rates_flu_rad_s)
         v_c = _NO_INPUT if velocity_enu_m_s is None else _vector3(velocity_enu_m_s)
         R = _NO_MATRIX if R_WC is None else _matrix3(R_WC)
+        self._head_cache = None
         if hi == self._T.shape[0]:
             self._make_room()
         T = self._T
@@ -677,11 +679,13 @@ class DelayedKalmanFilter:
     # ----------------------------------------------------------------- fusion
     @property
     def time_s(self) -> float:
-        return float(self._T[self._hi - 1]) if self._hi > self._lo else -math.inf
+        h = self._head()
+        return h[1][-1] if h else -math.inf
 
     def fuse(self, det: Detection) -> FusionResult:
         """Fuse one detection at its capture time; returns what happened to it."""
         result = self._fuse(det)
+        self._head_cache = None
         self.counts[result] += 1
         return result
 
@@ -713,6 +717,7 @@ class DelayedKalmanFilter:
         return _Meas(t_c, z, r_px)
 
     def _fuse(self, det: Detection) -> FusionResult:
+        self._head_cache = None  # the states may change
         t_c = det.capture_time_s
         if not isinstance(t_c, int | float) or not math.isfinite(t_c):
             return FusionResult.GATED
@@ -767,6 +772,7 @@ class DelayedKalmanFilter:
         return max(_bisect_right(self._T, lo, hi, t + _TIME_EPS_S) - 1, lo)
 
     def _drop_track(self) -> None:
+        self._head_cache = None
         lo, hi = self._win.tolist()
         if self._initialised:
             # remember the target velocity at the last entry holding a covariance (v_t is a
@@ -915,17 +921,37 @@ class DelayedKalmanFilter:
         now = self.time_s if now_s is None else now_s
         return (not self._initialised) or (now - self._last_accepted_s > self.config.lost_timeout_s)
 
-    def _tracked(self) -> int | None:
-        """The newest buffer row when it holds a state (a track), else None."""
-        i = self._hi - 1
-        if not self._initialised or i < self._lo or not self._HX[i]:
-            return None
-        return i
+    def _head(self) -> tuple:
+        """The newest rows as Python floats, read once per change of the buffer: (index of
+        the newest row, times, state-held flags and states of the newest two rows, the
+        newest row's inputs), or () when the buffer is empty."""
+        h = self._head_cache
+        if h is None:
+            lo, hi = self._win.tolist()
+            if hi == lo:
+                h = ()
+            else:
+                k = max(hi - 2, lo)
+                T, HX, X = self._T[k:hi].tolist(), self._HX[k:hi].tolist(), self._X[k:hi].tolist()
+                h = (hi - 1, T, HX, X, self._U[hi - 1].tolist())
+            self._head_cache = h
+        return h
 
-    def _flow(self, i: int) -> tuple[tuple[float, float], tuple[float, float]]:
-        """Image-point rate at buffer row i (normalised/s): (rotational, translational)."""
-        xn, yn, rho, vE, vN, vU = self._X[i].tolist()
-        wx, wy, wz, c0, c1, c2, *r = self._U[i].tolist()
+    def _tracked(self) -> tuple | None:
+        """The newest row as (index, time, state, inputs) when it holds a state (a track)."""
+        if not self._initialised:
+            return None
+        h = self._head()
+        if not h or not h[2][-1]:
+            return None
+        return h[0], h[1][-1], h[3][-1], h[4]
+
+    @staticmethod
+    def _flow(x: list, u: list) -> tuple[tuple[float, float], tuple[float, float]]:
+        """Image-point rate at state x with inputs u (a row of U) (normalised/s):
+        (rotational, translational)."""
+        xn, yn, rho, vE, vN, vU = x
+        wx, wy, wz, c0, c1, c2, *r = u
         dE, dN, dU = vE - c0, vN - c1, vU - c2
         ux = r[0] * dE + r[1] * dN + r[2] * dU
         uy = r[3] * dE + r[4] * dN + r[5] * dU
@@ -938,17 +964,16 @@ class DelayedKalmanFilter:
 
     def estimate(self) -> ImageEstimate | None:
         """Current estimate (at the last prediction time), or None before the first detection."""
-        i = self._tracked()
-        if i is None:
+        head = self._tracked()
+        if head is None:
             return None
+        _, t, x, u = head
         f = self._f
-        rot, tr = self._flow(i)
-        t = float(self._T[i])
-        x0, x1 = self._X[i, :2].tolist()
+        rot, tr = self._flow(x, u)
         since = t - self._last_accepted_s
         return ImageEstimate(
             time_s=t,
-            e_px=(x0 * f, x1 * f),
+            e_px=(x[0] * f, x[1] * f),
             e_rate_px_s=((rot[0] + tr[0]) * f, (rot[1] + tr[1]) * f),
             time_since_detection_s=since,
             lost=since > self.config.lost_timeout_s,
@@ -958,15 +983,16 @@ class DelayedKalmanFilter:
         """The current estimate as (e_x, e_y, r_x, r_y) in px and px/s, r being the image rate
         the camera's rotation does not explain, and the diagonal of its covariance (r's
         variance through the Jacobian of the translational flow)."""
-        i = self._tracked()
-        if i is None or self._covariance(i) is None:
+        head = self._tracked()
+        if head is None or self._covariance(head[0]) is None:
             return None
+        i, _, x, u = head
         f = self._f
-        _, tr = self._flow(i)
+        _, tr = self._flow(x, u)
         # in floats (numpy's per-call cost on these small arrays is most of the work): J is
         # the Jacobian of the translational flow rho (u_xy - s_xy u_z), u = R_CW (v_t - v_c)
-        xn, yn, rho, vE, vN, vU = self._X[i].tolist()
-        _, _, _, c0, c1, c2, r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._U[i].tolist()
+        xn, yn, rho, vE, vN, vU = x
+        _, _, _, c0, c1, c2, r0, r1, r2, r3, r4, r5, r6, r7, r8 = u
         dE, dN, dU = vE - c0, vN - c1, vU - c2
         u0 = r0 * dE + r1 * dN + r2 * dU
         u1 = r3 * dE + r4 * dN + r5 * dU
@@ -997,44 +1023,54 @@ class DelayedKalmanFilter:
     def range_m(self) -> float | None:
         """Current range along the line of sight (m) from the mean alone (no covariance), or
         None without a track."""
-        i = self._tracked()
-        if i is None:
+        head = self._tracked()
+        if head is None:
             return None
-        xn, yn, rho = self._X[i, :3].tolist()
+        xn, yn, rho = head[2][:3]
         return math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
 
     def image_std_px(self) -> tuple[float, float] | None:
         """The 1-sigma of the current image point (px, x and y), or None without a track
         (propagates the covariance if it is still lazy)."""
-        i = self._tracked()
-        if i is None or self._covariance(i) is None:
+        head = self._tracked()
+        if head is None:
             return None
-        P = self._P[i]
+        P = self._covariance(head[0])
+        if P is None:
+            return None
         f = self._f
         return math.sqrt(max(float(P[0, 0]), 0.0)) * f, math.sqrt(max(float(P[1, 1]), 0.0)) * f
 
     def depth_velocity(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         """Current range along the line of sight (m), the target's velocity (ENU, m/s) and the
         full 6x6 covariance of the internal state, or None without a track."""
-        i = self._tracked()
-        if i is None or self._covariance(i) is None:
+        head = self._tracked()
+        if head is None:
             return None
-        xn, yn, rho = self._X[i, :3].tolist()
-        return (
-            math.sqrt(1.0 + xn * xn + yn * yn) / rho,
-            self._X[i, 3:].copy(),
-            self._P[i].copy(),
-        )
+        P = self._covariance(head[0])
+        if P is None:
+            return None
+        xn, yn, rho = head[2][:3]
+        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, np.array(head[2][3:]), P.copy()
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
-        T = self._T
-        for i in range(self._hi - 1, self._lo - 1, -1):
-            t = T[i]
+        h = self._head()
+        if not h:
+            return None
+        i, T, HX, X, _ = h
+        for n in range(len(T) - 1, -1, -1):  # the newest rows first, as floats
+            t = T[n]
             if abs(t - time_s) < _TIME_EPS_S:
-                if not self._HX[i]:
+                return (X[n][0] * self._f, X[n][1] * self._f) if HX[n] else None
+            if t < time_s:
+                return None
+        for k in range(i - len(T), self._lo - 1, -1):
+            t = float(self._T[k])
+            if abs(t - time_s) < _TIME_EPS_S:
+                if not self._HX[k]:
                     return None
-                x0, x1 = self._X[i, :2].tolist()
+                x0, x1 = self._X[k, :2].tolist()
                 return x0 * self._f, x1 * self._f
             if t < time_s:
                 break
