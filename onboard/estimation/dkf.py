@@ -47,6 +47,17 @@ one that never does. A detection captured before one already fused (out of order
 replay in capture order (every step re-propagated with the buffered inputs). Every replayed
 state is written back. The delay comes from timestamps only.
 
+Compiled (``onboard.jit``): the buffer is a window of preallocated arrays (one row per
+prediction: time, inputs, x, F, Q, P and whether x and P are held), and a prediction (with the
+oldest rows leaving), a fusion with its replay, a covariance propagation and the update are
+each one numba kernel over those arrays, compiled at import. The kernels are the filter's only
+implementation (``PEREGRINE_JIT=0`` runs them as Python). Their scalar arithmetic is Python's,
+operation for operation; their matrix products are numpy's expressions, which numba hands to
+the same OpenBLAS routines numpy calls, so the filter's numbers are numpy's to the bit
+(tests/test_dkf_kernels.py compares every kernel with its Python source; ``a ** two`` with
+the exponent from the parameter array is libm's pow as Python's ``a ** 2`` is, where a
+literal 2 would compile to a * a, which differs in the last bit for ~1 in 1000 a).
+
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
 (Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every
 update, rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves
