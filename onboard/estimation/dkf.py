@@ -47,6 +47,17 @@ one that never does. A detection captured before one already fused (out of order
 replay in capture order (every step re-propagated with the buffered inputs). Every replayed
 state is written back. The delay comes from timestamps only.
 
+Compiled (``onboard.jit``): the buffer is a window of preallocated arrays (one row per
+prediction: time, inputs, x, F, Q, P and whether x and P are held), and a prediction (with the
+oldest rows leaving), a fusion with its replay, a covariance propagation and the update are
+each one numba kernel over those arrays, compiled at import. The kernels are the filter's only
+implementation (``PEREGRINE_JIT=0`` runs them as Python). Their scalar arithmetic is Python's,
+operation for operation; their matrix products are numpy's expressions, which numba hands to
+the same OpenBLAS routines numpy calls, so the filter's numbers are numpy's to the bit
+(tests/test_dkf_kernels.py compares every kernel with its Python source; ``a ** two`` with
+the exponent from the parameter array is libm's pow as Python's ``a ** 2`` is, where a
+literal 2 would compile to a * a, which differs in the last bit for ~1 in 1000 a).
+
 Robustness: non-finite or out-of-view detections are refused, the point innovation is gated
 (Mahalanobis, 2 dof) and the size innovation separately (1 dof), P is symmetrised at every
 update, rho is kept in (0, 1/min_depth_m], and the track is dropped when the prediction leaves
@@ -69,22 +80,362 @@ import bisect
 import dataclasses
 import enum
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..camera_model import CameraModel
 from ..datatypes import Detection
+from ..jit import kernel
 
 _TIME_EPS_S = 1e-9
 _F64 = np.dtype(np.float64)  # the descriptor of ordinary float arrays
 _N = 6  # state size
 _MAX_ABS_N = 4.0  # |x_n| beyond this (~76 deg off axis): the track has left the view
 _MIN_SZ = 0.2  # one step never shrinks the depth by more than 80 %
-_F_LOWER = (
-    (0.0,) * 3 + (1.0, 0.0, 0.0) + (0.0,) * 4 + (1.0, 0.0) + (0.0,) * 5 + (1.0,)
-)  # F rows 3-5
+_CAPACITY = 256  # buffered entries before the window grows (0.6 s at 200 Hz is 120)
+
+# The filter's constants as one array for the kernels (_PRM_* are its indices).
+_PRM_Q_IMG, _PRM_Q_V, _PRM_Q_RHO_REL, _PRM_RHO_MAX, _PRM_R_POINT, _PRM_GATE2 = range(6)
+_PRM_RADIUS, _PRM_F, _PRM_SIZE_VAR_PX, _PRM_SIZE_REL, _PRM_TWO = range(6, 11)
+# _PRM_TWO holds 2.0: ``a ** two`` with the exponent unknown to the compiler is libm's pow,
+# as Python's ``a ** 2`` is (pow(a, 2) and a * a differ in the last bit for ~1 in 1000 a;
+# a literal exponent would be compiled to a * a)
+
+# Buffer layout: one row per buffered prediction (a window [lo, hi) of preallocated arrays).
+# U holds the inputs held over (previous entry, t]: the camera-frame angular rate w (rad/s,
+# 3), the vehicle velocity v_c (ENU, m/s, 3) and the world -> camera rotation R_CW (9,
+# row-major); X the state at t, F the first three rows of the transition from the previous
+# entry's state (18, row-major; the rest is the identity), Q the process noise's diagonal, P
+# the covariance at t once it has been propagated; HX / HP say whether X / P are held.
+_U_W, _U_V, _U_R = 0, 3, 6
+
+
+# numba types of the kernels' arguments: contiguous vector, matrix, the buffer's P (rows of 6x6),
+# flags; scalars; any-layout vector and matrix (inputs as the caller gives them)
+_V, _M, _PB, _FLAGS = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]", "uint8[::1]"
+_S, _I, _B, _VOID, _VA, _MA = "float64", "int64", "boolean", "void", "float64[:]", "float64[:, :]"
+_WIN = "int64[::1]"  # the buffer's window [lo, hi)
+
+
+def _sig(ret: str, *args: str) -> str:
+    """A numba signature string: ``ret(args...)``."""
+    return f"{ret}({', '.join(args)})"
+
+
+@kernel(_sig(_B, _V))
+def _valid(x):
+    """Finite, in front of the camera and within ~76 degrees of the axis (x: 6 floats)."""
+    return (
+        abs(x[0]) < _MAX_ABS_N
+        and abs(x[1]) < _MAX_ABS_N
+        and x[2] > 0.0
+        and math.isfinite(x[3] + x[4] + x[5])
+    )
+
+
+@kernel(_sig(_VOID, _V, _V, _S, _V, _V, _V, _V))
+def _step_x(x, u, dt, prm, x1, F, Q):
+    """Propagate x (6) by dt with inputs u (a U row) into x1 (6), F's first three rows (18)
+    and Q's diagonal (6)."""
+    xn, yn, rho, vE, vN, vU = x[0], x[1], x[2], x[3], x[4], x[5]
+    wx, wy, wz = u[0], u[1], u[2]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
+        u[6],
+        u[7],
+        u[8],
+        u[9],
+        u[10],
+        u[11],
+        u[12],
+        u[13],
+        u[14],
+    )
+    dE, dN, dU = vE - u[3], vN - u[4], vU - u[5]
+    ux = r00 * dE + r01 * dN + r02 * dU
+    uy = r10 * dE + r11 * dN + r12 * dU
+    uz = r20 * dE + r21 * dN + r22 * dU
+    sx = xn + dt * (rho * ux - wy + wz * yn)
+    sy = yn + dt * (rho * uy - wz * xn + wx)
+    sz = 1.0 + dt * (rho * uz - wx * yn + wy * xn)
+    if sz < _MIN_SZ:
+        sz = _MIN_SZ
+    iz = 1.0 / sz
+    x_1, y_1, rho1 = sx * iz, sy * iz, min(rho * iz, prm[_PRM_RHO_MAX])
+    # exact Jacobian of the map: d(s_i/s_z) = (ds_i - (s_i/s_z) ds_z) / s_z
+    a, b = dt * iz, dt * rho * iz
+    F[0] = iz - x_1 * a * wy
+    F[1] = a * (wz + x_1 * wx)
+    F[2] = a * (ux - x_1 * uz)
+    F[3] = b * (r00 - x_1 * r20)
+    F[4] = b * (r01 - x_1 * r21)
+    F[5] = b * (r02 - x_1 * r22)
+    F[6] = -a * (wz + y_1 * wy)
+    F[7] = iz + y_1 * a * wx
+    F[8] = a * (uy - y_1 * uz)
+    F[9] = b * (r10 - y_1 * r20)
+    F[10] = b * (r11 - y_1 * r21)
+    F[11] = b * (r12 - y_1 * r22)
+    F[12] = -rho1 * a * wy
+    F[13] = rho1 * a * wx
+    F[14] = iz - rho1 * a * uz
+    F[15] = -rho1 * b * r20
+    F[16] = -rho1 * b * r21
+    F[17] = -rho1 * b * r22
+    qi, qv = prm[_PRM_Q_IMG] * dt, prm[_PRM_Q_V] * dt
+    Q[0] = qi
+    Q[1] = qi
+    Q[2] = prm[_PRM_Q_RHO_REL] * rho1 * rho1 * dt
+    Q[3] = qv
+    Q[4] = qv
+    Q[5] = qv
+    x1[0], x1[1], x1[2], x1[3], x1[4], x1[5] = x_1, y_1, rho1, vE, vN, vU
+
+
+@kernel(_sig(_M, _M, _V, _V))
+def _propagate(P, F, Q):
+    """F P F^T + Q (symmetric to rounding; symmetrised at every update), F given by its first
+    three rows (the last three are the identity's)."""
+    Fm = np.zeros((6, 6))
+    for i in range(18):
+        Fm[i // 6, i % 6] = F[i]
+    Fm[3, 3] = Fm[4, 4] = Fm[5, 5] = 1.0
+    P1 = Fm @ P @ Fm.T
+    for i in range(6):
+        P1[i, i] += Q[i]
+    return P1
+
+
+@kernel(_sig(_B, _V, _M, _S, _S, _S, _V, _V, _M))
+def _update(x, P, z0, z1, r_px, prm, x_out, P_out):
+    """Gated EKF update of (x, P) with the image point (z0, z1), then (sequentially,
+    relinearised at the updated state) the apparent radius r_px (px; NaN: not usable) if
+    within its own gate, into (x_out, P_out). Joseph form in closed form for the 2-D and the
+    scalar measurement (equal to filterpy's ``update``; tested). False (outputs untouched)
+    when the point is gated."""
+    r = prm[_PRM_R_POINT]
+    y0, y1 = z0 - x[0], z1 - x[1]
+    s00, s01, s11 = P[0, 0] + r, P[0, 1], P[1, 1] + r
+    det = s00 * s11 - s01 * s01
+    if not det > 0.0:
+        return False
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+    if not d2 <= prm[_PRM_GATE2]:
+        return False
+    S_inv = np.empty((2, 2))
+    S_inv[0, 0], S_inv[0, 1], S_inv[1, 0], S_inv[1, 1] = i00, i01, i01, i11
+    K = np.ascontiguousarray(P[:, :2]) @ S_inv
+    y = np.empty(2)
+    y[0], y[1] = y0, y1
+    x = x + K @ y
+    A = P - K @ np.ascontiguousarray(P[:2, :])  # (I - K H) P
+    P = A - np.ascontiguousarray(A[:, :2]) @ K.T + r * (K @ K.T)
+    if not math.isnan(r_px):
+        two = prm[_PRM_TWO]
+        xn, yn, rho = x[0], x[1], x[2]
+        R, f = prm[_PRM_RADIUS], prm[_PRM_F]
+        n2 = max(1.0 + xn * xn + yn * yn - (R * rho) ** two, 1e-6)
+        d = f * R / (n2 * math.sqrt(n2))
+        hs = np.zeros(6)
+        hs[0], hs[1], hs[2] = -d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** two)
+        var_s = prm[_PRM_SIZE_VAR_PX] + (prm[_PRM_SIZE_REL] * r_px) ** two
+        ys = r_px - f * R * rho / math.sqrt(n2)
+        Ph = P @ hs
+        ss = hs @ Ph + var_s
+        if ys * ys <= prm[_PRM_GATE2] * ss:
+            k = Ph / ss
+            x = x + k * ys
+            A = P - np.outer(k, Ph)
+            P = A - np.outer(A @ hs, k) + var_s * np.outer(k, k)
+    x[2] = min(max(x[2], 1e-6), prm[_PRM_RHO_MAX])
+    x_out[:] = x
+    P_out[:, :] = 0.5 * (P + P.T)
+    return True
+
+
+@kernel(_sig(_I, _PB, _M, _M, _FLAGS, _FLAGS, _I, _I))
+def _covariance(P, F, Q, HX, HP, lo, i):
+    """P at buffer row i, propagated from the last row before it that holds one: 1 when
+    held, 0 without a state at i, -1 when there is none to start from (cannot happen with a
+    track), -2 when it turned non-finite (the track is to be dropped)."""
+    if HP[i]:
+        return 1
+    if not HX[i]:
+        return 0
+    k = i
+    while k > lo and not HP[k] and HX[k - 1]:
+        k -= 1
+    if not HP[k]:
+        return -1
+    for n in range(k + 1, i + 1):
+        P[n] = _propagate(P[n - 1], F[n], Q[n])
+        HP[n] = 1
+    Pi = P[i]
+    if not math.isfinite(Pi[0, 0] + Pi[1, 1] + Pi[2, 2] + Pi[3, 3] + Pi[4, 4] + Pi[5, 5]):
+        return -2
+    return 1
+
+
+@kernel(_sig(_I, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _WIN, _I, _S, _S, _S, _S, _V))
+def _fuse_latest(T, U, X, F, Q, P, HX, HP, win, j, t_c, z0, z1, r_px, prm):
+    """Fuse a measurement (later than every stored one) captured at t_c inside buffer
+    interval (j, j+1]: exact at j+1, then the linearised correction of the state carried to
+    row hi - 1 through the buffered F (dx_k = F_k dx_{k-1}); the later covariances are
+    propagated when next needed. 1: accepted; 0: gated; < 0: _covariance's failure."""
+    hi = win[1]
+    code = _covariance(P, F, Q, HX, HP, win[0], j)
+    if code < 1:
+        return code
+    nxt = j + 1
+    x, Fs, Qs = np.empty(6), np.empty(18), np.empty(6)
+    _step_x(X[j], U[nxt], t_c - T[j], prm, x, Fs, Qs)
+    P1 = _propagate(P[j], Fs, Qs)
+    xu, Pu = np.empty(6), np.empty((6, 6))
+    if not _update(x, P1, z0, z1, r_px, prm, xu, Pu):
+        return 0
+    _step_x(xu, U[nxt], T[nxt] - t_c, prm, x, Fs, Qs)  # F of the full step stays buffered
+    P[nxt] = _propagate(Pu, Fs, Qs)
+    HP[nxt] = 1
+    b = X[nxt]
+    d0, d1, d2, d3, d4, d5 = (
+        x[0] - b[0],
+        x[1] - b[1],
+        x[2] - b[2],
+        x[3] - b[3],
+        x[4] - b[4],
+        x[5] - b[5],
+    )
+    b[:] = x
+    rho_max = prm[_PRM_RHO_MAX]
+    for k in range(j + 2, hi):
+        # dx_k = F_k dx_{k-1}: F's last three rows are the identity
+        G = F[k]
+        d0, d1, d2 = (
+            G[0] * d0 + G[1] * d1 + G[2] * d2 + G[3] * d3 + G[4] * d4 + G[5] * d5,
+            G[6] * d0 + G[7] * d1 + G[8] * d2 + G[9] * d3 + G[10] * d4 + G[11] * d5,
+            G[12] * d0 + G[13] * d1 + G[14] * d2 + G[15] * d3 + G[16] * d4 + G[17] * d5,
+        )
+        e = X[k]
+        e[0] = e[0] + d0
+        e[1] = e[1] + d1
+        e[2] = min(max(e[2] + d2, 1e-6), rho_max)
+        e[3] = e[3] + d3
+        e[4] = e[4] + d4
+        e[5] = e[5] + d5
+        HP[k] = 0
+    return 1
+
+
+@kernel(
+    _sig(
+        _B, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _I, _I, _V, _M, _S, _V, _M, _V, _I, _S, _V, _V
+    )
+)
+def _replay(T, U, X, F, Q, PB, HX, HP, hi, j, x, P, t, mt, mz, mr, k, new_t_c, prm, last):
+    """From state (x, P) at time t inside buffer interval j, re-run every later buffered
+    step, fusing the stored measurements (capture times mt, points mz, radii mr) from index
+    k on in capture order; writes every state back. last[0] is raised to the capture time of
+    each accepted measurement. True when the one captured at new_t_c (NaN: none) was."""
+    new_accepted = False
+    xu, Pu = np.empty(6), np.empty((6, 6))
+    x1, Fs, Qs = np.empty(6), np.empty(18), np.empty(6)
+    for i in range(j + 1, hi):
+        u = U[i]
+        while k < mt.shape[0] and mt[k] <= T[i] + _TIME_EPS_S:
+            _step_x(x, u, mt[k] - t, prm, x1, Fs, Qs)
+            P = _propagate(P, Fs, Qs)
+            x = x1.copy()
+            t = mt[k]
+            ok = _update(x, P, mz[k, 0], mz[k, 1], mr[k], prm, xu, Pu)
+            if ok:
+                x = xu.copy()
+                P = Pu.copy()
+                last[0] = max(last[0], mt[k])
+            if mt[k] == new_t_c:
+                new_accepted = ok
+            k += 1
+        _step_x(x, u, T[i] - t, prm, X[i], F[i], Q[i])
+        P = _propagate(P, F[i], Q[i])
+        x = X[i].copy()
+        t = T[i]
+        PB[i] = P
+        HX[i] = 1
+        HP[i] = 1
+    return new_accepted
+
+
+@kernel(_sig(_I, _V, _M, _M, _M, _M, _PB, _FLAGS, _FLAGS, _WIN, _B, _S, _S, _VA, _VA, _MA, _V, _V))
+def _predict(T, U, X, F, Q, P, HX, HP, win, tracking, time_s, horizon, gyro, v_c, R_WC, R_CB, prm):
+    """Append the prediction at time_s to the window win = [lo, hi): the inputs (gyro in the
+    body frame, rad/s; vehicle velocity ENU, m/s, or empty: still; camera attitude camera ->
+    ENU, or empty: level, R_CW = R_CB), a non-finite one replaced by the previous row's (the
+    filter never sees NaN), and, when tracking, the state stepped from row hi - 1 with F and
+    Q. Then the rows at or before ``horizon`` leave the window (but the last two), the oldest
+    remaining one with its covariance propagated (it is where P is propagated from).
+    1: stepped; 0: not tracking; -1: the step left the view or turned non-finite (nothing
+    has left); -2: a covariance turned non-finite (the rows before it have left); on < 0 the
+    track is to be dropped and the old rows removed by the caller."""
+    lo, hi = win[0], win[1]
+    u = U[hi]
+    g0, g1, g2 = gyro[0], gyro[1], gyro[2]
+    c = R_CB
+    u[0] = c[0] * g0 + c[1] * g1 + c[2] * g2
+    u[1] = c[3] * g0 + c[4] * g1 + c[5] * g2
+    u[2] = c[6] * g0 + c[7] * g1 + c[8] * g2
+    if v_c.shape[0] == 3:
+        u[3], u[4], u[5] = v_c[0], v_c[1], v_c[2]
+    else:
+        u[3] = u[4] = u[5] = 0.0
+    if R_WC.shape[0] == 3:
+        for a in range(3):
+            for b in range(3):
+                u[6 + 3 * a + b] = R_WC[b, a]
+    else:
+        u[6:15] = R_CB
+    has_prev = hi > lo
+    for first, n in ((0, 3), (3, 3), (6, 9)):
+        s = 0.0
+        for m in range(first, first + n):
+            s += u[m]
+        if not math.isfinite(s):
+            for m in range(first, first + n):
+                if has_prev:
+                    u[m] = U[hi - 1, m]
+                elif first == 6:
+                    u[m] = R_CB[m - 6]
+                else:
+                    u[m] = 0.0
+    T[hi] = time_s
+    HX[hi] = HP[hi] = 0
+    win[1] = hi + 1
+    code = 0
+    if tracking:
+        _step_x(X[hi - 1], u, time_s - T[hi - 1], prm, X[hi], F[hi], Q[hi])
+        if not _valid(X[hi]):
+            return -1
+        HX[hi] = 1
+        code = 1
+    hi += 1
+    while hi - lo > 2 and T[lo + 1] <= horizon:
+        if not HP[lo + 1] and HX[lo + 1] and _covariance(P, F, Q, HX, HP, lo, lo + 1) < 0:
+            return -2
+        lo += 1
+        win[0] = lo
+    return code
+
+
+@kernel(_sig(_I, _V, _I, _I, _S))
+def _bisect_right(a, lo, hi, t):
+    """The index in [lo, hi] where t would be inserted after its equals in the sorted a
+    (Python's ``bisect.bisect_right``, the same comparisons)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
 
 
 def _floats3(v) -> tuple[float, float, float]:
@@ -97,12 +448,22 @@ def _floats3(v) -> tuple[float, float, float]:
     return (float(out[0]), float(out[1]), float(out[2]))
 
 
-def _transposed9(m) -> tuple:
-    """The transpose of a 3x3 matrix (ndarray or nested sequence) as 9 floats, row-major."""
-    if isinstance(m, np.ndarray) and m.shape == (3, 3) and m.dtype == np.float64:
-        return tuple(m.T.ravel().tolist())
-    a0, a1, a2 = (_floats3(row) for row in _rows3(m))
-    return (a0[0], a1[0], a2[0], a0[1], a1[1], a2[1], a0[2], a1[2], a2[2])
+def _vector3(v) -> np.ndarray:
+    """A 3-vector (ndarray or sequence) as a writable float64 array (the array itself when it
+    is one: the kernels' signatures take writable arrays)."""
+    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,) and v.flags.writeable:
+        return v
+    return np.array(_floats3(v))
+
+
+def _matrix3(m) -> np.ndarray:
+    """A 3x3 matrix (ndarray or nested sequence) as a writable float64 array."""
+    if type(m) is np.ndarray and m.dtype is _F64 and m.shape == (3, 3):
+        return m if m.flags.writeable else m.copy()
+    rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
+    if len(rows) != 3:
+        raise ValueError("expected a 3x3 matrix")
+    return np.array([_floats3(row) for row in rows])
 
 
 def _quadratic_form(P: list, J: tuple) -> float:
@@ -123,11 +484,8 @@ def _quadratic_form(P: list, J: tuple) -> float:
     return out
 
 
-def _rows3(m) -> list:
-    rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
-    if len(rows) != 3:
-        raise ValueError("expected a 3x3 matrix")
-    return rows
+_NO_INPUT = np.empty(0)  # "not given" for _predict's velocity
+_NO_MATRIX = np.empty((0, 0))  # "not given" for _predict's attitude
 
 
 @dataclass(frozen=True)
@@ -176,33 +534,6 @@ class ImageEstimate:
     lost: bool
 
 
-class _Entry:
-    """One buffered prediction: inputs held over (previous entry, t], the state at t (6
-    floats), the transition F from the previous entry's state (its first three rows, 18 floats
-    row-major; the rest is the identity), the process noise Q's diagonal over the step, and P
-    at t once it has been propagated (None until then)."""
-
-    __slots__ = ("F", "P", "Q", "R_CW", "t", "v_c", "w", "x")
-
-    def __init__(self, t: float, w: tuple, v_c: tuple, R_CW: tuple) -> None:
-        self.t = t
-        self.w = w  # camera-frame angular rate (rad/s), 3 floats
-        self.v_c = v_c  # vehicle velocity ENU (m/s), 3 floats
-        self.R_CW = R_CW  # world -> camera rotation, 9 floats row-major
-        self.x = None
-        self.P = None
-        self.F = None
-        self.Q = None
-
-
-def _entry_time(e: _Entry) -> float:
-    return e.t
-
-
-def _meas_time(m: _Meas) -> float:
-    return m.t
-
-
 class _Meas:
     __slots__ = ("r_px", "t", "z")
 
@@ -212,16 +543,18 @@ class _Meas:
         self.r_px = r_px  # apparent radius in px, or None when not usable
 
 
+def _meas_time(m: _Meas) -> float:
+    return m.t
+
+
 class DelayedKalmanFilter:
     def __init__(self, camera: CameraModel, config: DkfConfig | None = None) -> None:
         self.camera = camera
         self._f = camera.f_px
         self.config = config or DkfConfig()
         # default inputs for callers that give only the gyro: vehicle still, body = world
-        self._R_CW_default = tuple(camera.R_BC.T.ravel().tolist())
-        self._R_CB = self._R_CW_default  # body -> camera, the same numbers
-        self._buf: deque[_Entry] = deque()
-        self._Fm = np.array((0.0,) * 18 + _F_LOWER).reshape(6, 6)  # scratch F for _propagate
+        self._R_CB = np.ascontiguousarray(camera.R_BC.T.ravel(), dtype=np.float64)
+        self._alloc(_CAPACITY)
         self._meas: list[_Meas] = []  # in capture order
         self._initialised = False
         self._last_accepted_s = -math.inf
@@ -231,6 +564,44 @@ class DelayedKalmanFilter:
         # the last dropped track's (time, v_t, P_vv): the velocity it knew when it was dropped
         self._memory: tuple[float, np.ndarray, np.ndarray] | None = None
         self.counts: dict[FusionResult, int] = {r: 0 for r in FusionResult}
+
+    def _alloc(self, n: int) -> None:
+        """The buffer's arrays for n rows (see the buffer layout above), empty."""
+        self._T = np.zeros(n)
+        self._U = np.zeros((n, 15))
+        self._X = np.zeros((n, _N))
+        self._F = np.zeros((n, 18))
+        self._Q = np.zeros((n, _N))
+        self._P = np.zeros((n, _N, _N))
+        self._HX = np.zeros(n, dtype=np.uint8)
+        self._HP = np.zeros(n, dtype=np.uint8)
+        self._win = np.zeros(2, dtype=np.int64)  # the rows in use: [lo, hi)
+        self._head_cache: tuple | None = None  # see _head
+
+    @property
+    def _lo(self) -> int:
+        return int(self._win[0])
+
+    @property
+    def _hi(self) -> int:
+        return int(self._win[1])
+
+    def _make_room(self) -> None:
+        """Free row hi: shift the window to the start of the arrays, or grow them."""
+        lo, hi = self._lo, self._hi
+        n = hi - lo
+        cap = self._T.shape[0]
+        arrays = ("_T", "_U", "_X", "_F", "_Q", "_P", "_HX", "_HP")
+        if n + 1 > cap // 2:  # grow (to keep the shifts rare)
+            old = {a: getattr(self, a) for a in arrays}
+            self._alloc(2 * cap)
+            for a in arrays:
+                getattr(self, a)[:n] = old[a][lo:hi]
+        else:
+            for a in arrays:
+                arr = getattr(self, a)
+                arr[:n] = arr[lo:hi]
+        self._win[:] = 0, n
 
     @property
     def config(self) -> DkfConfig:
@@ -242,81 +613,41 @@ class DelayedKalmanFilter:
         c, f = config, self._f
         self._r_point = (c.meas_noise_px / f) ** 2
         self._gate2_point = c.gate_sigma**2
-        self._q_img = (c.flow_noise_px_s / f) ** 2
         self._q_v = c.target_accel_noise_m_s2**2
-        self._q_rho_rel = c.depth_noise_rel**2
         self._rho_max = 1.0 / c.min_depth_m
         self._radius_m = 0.5 * c.target_diameter_m
+        prm = np.zeros(11)
+        prm[_PRM_Q_IMG] = (c.flow_noise_px_s / f) ** 2
+        prm[_PRM_Q_V] = self._q_v
+        prm[_PRM_Q_RHO_REL] = c.depth_noise_rel**2
+        prm[_PRM_RHO_MAX] = self._rho_max
+        prm[_PRM_R_POINT] = self._r_point
+        prm[_PRM_GATE2] = self._gate2_point
+        prm[_PRM_RADIUS] = self._radius_m
+        prm[_PRM_F] = f
+        prm[_PRM_SIZE_VAR_PX] = c.size_noise_px**2
+        prm[_PRM_SIZE_REL] = c.size_noise_rel
+        prm[_PRM_TWO] = 2.0
+        self._prm = prm
 
     # ----------------------------------------------------------------- propagation
-    def _step_x(self, x: tuple, e: _Entry, dt: float):
-        """Propagate x (6 floats) by dt with entry e's inputs: returns (x' as 6 floats, F's
-        first three rows, Q's diagonal)."""
-        xn, yn, rho, vE, vN, vU = x
-        wx, wy, wz = e.w
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = e.R_CW
-        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
-        ux = r00 * dE + r01 * dN + r02 * dU
-        uy = r10 * dE + r11 * dN + r12 * dU
-        uz = r20 * dE + r21 * dN + r22 * dU
-        sx = xn + dt * (rho * ux - wy + wz * yn)
-        sy = yn + dt * (rho * uy - wz * xn + wx)
-        sz = 1.0 + dt * (rho * uz - wx * yn + wy * xn)
-        if sz < _MIN_SZ:
-            sz = _MIN_SZ
-        iz = 1.0 / sz
-        x1, y1, rho1 = sx * iz, sy * iz, min(rho * iz, self._rho_max)
-        # exact Jacobian of the map: d(s_i/s_z) = (ds_i - (s_i/s_z) ds_z) / s_z
-        a, b = dt * iz, dt * rho * iz
-        F = (
-            iz - x1 * a * wy, a * (wz + x1 * wx), a * (ux - x1 * uz),
-            b * (r00 - x1 * r20), b * (r01 - x1 * r21), b * (r02 - x1 * r22),
-            -a * (wz + y1 * wy), iz + y1 * a * wx, a * (uy - y1 * uz),
-            b * (r10 - y1 * r20), b * (r11 - y1 * r21), b * (r12 - y1 * r22),
-            -rho1 * a * wy, rho1 * a * wx, iz - rho1 * a * uz,
-            -rho1 * b * r20, -rho1 * b * r21, -rho1 * b * r22,
-        )  # fmt: skip
-        qi, qv = self._q_img * dt, self._q_v * dt
-        Q = (qi, qi, self._q_rho_rel * rho1 * rho1 * dt, qv, qv, qv)
-        return (x1, y1, rho1, vE, vN, vU), F, Q
-
-    def _propagate(self, P: np.ndarray, F: tuple, Q: tuple) -> np.ndarray:
-        """F P F^T + Q (symmetric to rounding; symmetrised at every update). F's first three
-        rows are written into a 6x6 scratch matrix whose last three rows are fixed (cheaper
-        than making the 36-number array each call; the same numbers, the same products)."""
-        Fm = self._Fm
-        Fm.reshape(36)[:18] = F  # a view each call: a copied filter keeps its own scratch
-        P1 = Fm @ P @ Fm.T
-        P1.flat[::7] += Q
-        return P1
-
-    def _step(self, x: np.ndarray, P: np.ndarray, e: _Entry, dt: float):
-        """Propagate (x, P) by dt with entry e's inputs: returns (x', P', F, Q)."""
-        x1, F, Q = self._step_x(x, e, dt)
-        return x1, self._propagate(P, F, Q), F, Q
+    def _step(self, x, P: np.ndarray, i: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Propagate (x, P) by dt with buffer row i's inputs: returns (x', P')."""
+        x1, F, Q = np.empty(_N), np.empty(18), np.empty(_N)
+        _step_x(np.array(x, dtype=np.float64), self._U[i], dt, self._prm, x1, F, Q)
+        return x1, _propagate(np.ascontiguousarray(P), F, Q)
 
     def _covariance(self, i: int) -> np.ndarray | None:
-        """P at buffered entry i, propagated from the last entry before it that holds one
-        (None without a track; the track is dropped if it turns non-finite)."""
-        buf = self._buf
-        e = buf[i]
-        if e.P is not None or e.x is None:
-            return e.P
-        k = i
-        while k > 0 and buf[k].P is None and buf[k - 1].x is not None:
-            k -= 1
-        P = buf[k].P
-        if P is None:  # no covariance to start from (cannot happen with a track): drop it
+        """P at buffer row i (absolute), propagated from the last row before it that holds
+        one (None without a track; the track is dropped if it turns non-finite)."""
+        if self._HP[i]:
+            return self._P[i]
+        code = _covariance(self._P, self._F, self._Q, self._HX, self._HP, self._lo, i)
+        if code == 1:
+            return self._P[i]
+        if code < 0:
             self._drop_track()
-            return None
-        for n in range(k + 1, i + 1):
-            e = buf[n]
-            P = self._propagate(P, e.F, e.Q)
-            e.P = P
-        if not math.isfinite(float(P.trace())):
-            self._drop_track()
-            return None
-        return P
+        return None
 
     def predict(
         self,
@@ -328,66 +659,44 @@ class DelayedKalmanFilter:
         """Advance to ``time_s`` with the body rate, vehicle velocity (ENU) and camera attitude
         (camera -> ENU) held since the previous call. Without velocity and attitude the vehicle
         is taken as still and level, and the target velocity state absorbs its motion."""
-        if self._buf and time_s <= self._buf[-1].t + _TIME_EPS_S:
+        lo, hi = self._win.tolist()
+        if hi > lo and time_s <= self._T[hi - 1] + _TIME_EPS_S:
             return
-        prev = self._buf[-1] if self._buf else None
-        # plain floats from here on: a handful of numpy calls per tick is the filter's cost
-        g0, g1, g2 = _floats3(gyro_rates_flu_rad_s)
-        c = self._R_CB
-        w = (
-            c[0] * g0 + c[1] * g1 + c[2] * g2,
-            c[3] * g0 + c[4] * g1 + c[5] * g2,
-            c[6] * g0 + c[7] * g1 + c[8] * g2,
-        )
-        v_c = (0.0, 0.0, 0.0) if velocity_enu_m_s is None else _floats3(velocity_enu_m_s)
-        R_CW = self._R_CW_default if R_WC is None else _transposed9(R_WC)
-        # a non-finite input is not used: hold the previous one (the filter never sees NaN)
-        if not math.isfinite(sum(w)):
-            w = prev.w if prev is not None else (0.0, 0.0, 0.0)
-        if not math.isfinite(sum(v_c)):
-            v_c = prev.v_c if prev is not None else (0.0, 0.0, 0.0)
-        if not math.isfinite(sum(R_CW)):
-            R_CW = prev.R_CW if prev is not None else self._R_CW_default
-        entry = _Entry(time_s, w, v_c, R_CW)
-        if self._initialised:
-            last = self._buf[-1]
-            x, F, Q = self._step_x(last.x, entry, time_s - last.t)
-            if self._valid(x):
-                entry.x, entry.F, entry.Q = x, F, Q
-            else:
-                self._drop_track()
-        buf = self._buf
-        buf.append(entry)
+        gyro = _vector3(gyro_rates_flu_rad_s)
+        v_c = _NO_INPUT if velocity_enu_m_s is None else _vector3(velocity_enu_m_s)
+        R = _NO_MATRIX if R_WC is None else _matrix3(R_WC)
+        self._head_cache = None
+        if hi == self._T.shape[0]:
+            self._make_room()
+        T = self._T
         horizon = time_s - self._config.buffer_s
-        while len(buf) > 2 and buf[1].t <= horizon:
-            if buf[1].P is None and buf[1].x is not None:
-                self._covariance(1)  # the oldest entry is where P is propagated from
-            buf.popleft()
+        code = _predict(
+            T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP, self._win,
+            self._initialised, float(time_s), horizon, gyro, v_c, R, self._R_CB, self._prm,
+        )  # fmt: skip
+        if code < 0:  # the track is lost: drop it, then the rows older than the horizon
+            self._drop_track()
+            lo, hi = self._win.tolist()
+            while hi - lo > 2 and T[lo + 1] <= horizon:
+                lo += 1
+            self._win[0] = lo
         # measurements before the oldest buffered state can never be replayed again (they
         # are in capture order: none to cut unless the first one is)
         meas = self._meas
-        if meas and meas[0].t < buf[0].t:
-            del meas[: bisect.bisect_left(meas, buf[0].t, key=_meas_time)]
-
-    @staticmethod
-    def _valid(x: tuple) -> bool:
-        """Finite, in front of the camera and within ~76 degrees of the axis (x: 6 floats)."""
-        xn, yn, rho, vE, vN, vU = x
-        return (
-            abs(xn) < _MAX_ABS_N
-            and abs(yn) < _MAX_ABS_N
-            and rho > 0.0
-            and math.isfinite(vE + vN + vU)
-        )
+        if meas and meas[0].t < T[self._win[0]]:
+            lo = self._lo
+            del meas[: bisect.bisect_left(meas, T[lo], key=_meas_time)]
 
     # ----------------------------------------------------------------- fusion
     @property
     def time_s(self) -> float:
-        return self._buf[-1].t if self._buf else -math.inf
+        h = self._head()
+        return h[1][-1] if h else -math.inf
 
     def fuse(self, det: Detection) -> FusionResult:
         """Fuse one detection at its capture time; returns what happened to it."""
         result = self._fuse(det)
+        self._head_cache = None
         self.counts[result] += 1
         return result
 
@@ -419,53 +728,74 @@ class DelayedKalmanFilter:
         return _Meas(t_c, z, r_px)
 
     def _fuse(self, det: Detection) -> FusionResult:
+        self._head_cache = None  # the states may change
         t_c = det.capture_time_s
         if not isinstance(t_c, int | float) or not math.isfinite(t_c):
             return FusionResult.GATED
-        if not self._buf or t_c > self._buf[-1].t + self.config.future_tolerance_s:
+        (lo, hi), T = self._win.tolist(), self._T
+        if hi == lo or t_c > T[hi - 1] + self.config.future_tolerance_s:
             return FusionResult.FUTURE
-        if t_c > self._buf[-1].t:
-            t_c = self._buf[-1].t
+        now = float(T[hi - 1])
+        if t_c > now:
+            t_c = now
             det = dataclasses.replace(det, capture_time_s=t_c)
-        if t_c < self._buf[0].t - _TIME_EPS_S:
+        if t_c < T[lo] - _TIME_EPS_S:
             return FusionResult.TOO_OLD
         m = self._measurement(det)
         if m is None:
             return FusionResult.GATED
         if any(abs(o.t - t_c) < _TIME_EPS_S for o in self._meas):
             return FusionResult.DUPLICATE
-        now = self._buf[-1].t
         if not self._initialised or now - self._last_accepted_s > self.config.lost_timeout_s:
             return self._initialise(m)
         # replay from the last buffered state strictly before t_c: an entry at exactly t_c
         # must come out of the replay with this measurement applied
         j = self._index_at_or_before(t_c - 2.0 * _TIME_EPS_S)
-        if self._buf[j].t >= t_c - _TIME_EPS_S or self._buf[j].x is None:
+        if T[j] >= t_c - _TIME_EPS_S or not self._HX[j]:
             return FusionResult.TOO_OLD
         if self._meas and self._meas[-1].t > t_c:
             # out of order: full replay in capture order from just before t_c
-            bisect.insort(self._meas, m, key=lambda o: o.t)
-            b = self._buf[j]
-            accepted = self._replay(j, b.x, b.P, b.t, t_c)
+            bisect.insort(self._meas, m, key=_meas_time)
+            P = self._covariance(j)
+            if P is None:
+                return FusionResult.GATED
+            accepted = self._replay(j, self._X[j], P, float(T[j]), t_c)
         else:
-            accepted = self._fuse_latest(j, m)
+            code = _fuse_latest(
+                T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP,
+                self._win, j, m.t, float(m.z[0]), float(m.z[1]),
+                math.nan if m.r_px is None else m.r_px, self._prm,
+            )  # fmt: skip
+            accepted = code == 1
+            if code < 0:
+                self._drop_track()
+            elif accepted:
+                self._meas.append(m)
+                self._last_accepted_s = max(self._last_accepted_s, m.t)
+                if not _valid(self._X[hi - 1]):
+                    self._drop_track()
         return FusionResult.ACCEPTED if accepted else FusionResult.GATED
 
     def _index_at_or_before(self, t: float) -> int:
-        return max(bisect.bisect_right(self._buf, t + _TIME_EPS_S, key=_entry_time) - 1, 0)
+        """The buffer row (absolute) of the last prediction at or before t (the oldest if
+        none is)."""
+        lo, hi = self._win.tolist()
+        return max(_bisect_right(self._T, lo, hi, t + _TIME_EPS_S) - 1, lo)
 
     def _drop_track(self) -> None:
+        self._head_cache = None
+        lo, hi = self._win.tolist()
         if self._initialised:
             # remember the target velocity at the last entry holding a covariance (v_t is a
             # random walk: from there on only its variance grows, by q_v per second)
-            for e in reversed(self._buf):
-                if e.x is not None and e.P is not None:
-                    v, P_vv = np.array(e.x[3:]), e.P[3:, 3:].copy()
+            for i in range(hi - 1, lo - 1, -1):
+                if self._HX[i] and self._HP[i]:
+                    v, P_vv = self._X[i, 3:].copy(), self._P[i, 3:, 3:].copy()
                     if math.isfinite(float(v.sum() + P_vv.sum())):
-                        self._memory = (e.t, v, P_vv)
+                        self._memory = (float(self._T[i]), v, P_vv)
                     break
-        for e in self._buf:
-            e.x = e.P = e.F = e.Q = None
+        self._HX[lo:hi] = 0
+        self._HP[lo:hi] = 0
         self._meas = []
         self._initialised = False
 
@@ -482,15 +812,14 @@ class DelayedKalmanFilter:
             return None
         c = self.config
         s_v2 = c.init_target_speed_m_s**2
-        buf = self._buf
         j = self._index_at_or_before(m.t)
         x = P = None
-        if self._initialised and buf[j].x is not None:
+        if self._initialised and self._HX[j]:
             P = self._covariance(j)
-            x = buf[j].x
-            if P is not None and m.t > buf[j].t + _TIME_EPS_S and j + 1 < len(buf):
-                x, P, _, _ = self._step(x, P, buf[j + 1], m.t - buf[j].t)
-            if P is None or not (self._valid(x) and math.isfinite(float(P.trace()))):
+            x = self._X[j]
+            if P is not None and m.t > self._T[j] + _TIME_EPS_S and j + 1 < self._hi:
+                x, P = self._step(x, P, j + 1, m.t - float(self._T[j]))
+            if P is None or not (_valid(x) and math.isfinite(float(P.trace()))):
                 x = P = None
         if P is not None:
             if float(max(P[3, 3], P[4, 4], P[5, 5])) > s_v2:
@@ -504,14 +833,13 @@ class DelayedKalmanFilter:
                 # m where the old track predicted it: keep depth and velocity with their
                 # covariance, reset the image point (variance 1, ~45 deg: uncorrelated) and
                 # fuse m into it (the point, then its size against the carried depth)
-                x0 = x
                 P0 = P.copy()
                 P0[:2, :] = 0.0
                 P0[:, :2] = 0.0
                 P0[0, 0] = P0[1, 1] = 1.0
-                x0, P0, ok = self._update(x0, P0, m)
+                x0, P0, ok = self._update(x.copy(), P0, m)
                 return (x0, P0) if ok else None
-            v, P_vv = x[3:], P[3:, 3:].copy()
+            v, P_vv = x[3:].copy(), P[3:, 3:].copy()
         elif self._memory is not None:
             t0, v, P_vv = self._memory
             P_vv = P_vv + np.eye(3) * (self._q_v * max(m.t - t0, 0.0))
@@ -520,7 +848,7 @@ class DelayedKalmanFilter:
         else:
             return None
         x0, P0 = self._fresh(m)
-        x0 = (*x0[:3], *(v.tolist() if isinstance(v, np.ndarray) else v))
+        x0 = (*x0[:3], *v.tolist())
         P0[3:, 3:] = P_vv
         return x0, P0
 
@@ -551,128 +879,91 @@ class DelayedKalmanFilter:
         self._drop_track()
         self._meas = [m]
         x0, P0 = self._fresh(m) if carried is None else carried
+        x0 = np.array(x0, dtype=np.float64)
+        P0 = np.ascontiguousarray(P0, dtype=np.float64)
         j = self._index_at_or_before(m.t)
-        if abs(self._buf[j].t - m.t) < _TIME_EPS_S:
-            self._buf[j].x, self._buf[j].P = x0, P0
+        if abs(self._T[j] - m.t) < _TIME_EPS_S:
+            self._X[j], self._P[j] = x0, P0
+            self._HX[j] = self._HP[j] = 1
         self._initialised = True
         self._last_accepted_s = m.t
         # the state at t_c is the measurement itself; replay forward from there
         self._replay(j, x0, P0, m.t, None)
         return FusionResult.INITIALISED
 
-    def _fuse_latest(self, j: int, m: _Meas) -> bool:
-        """Fuse m (later than every stored measurement) captured inside buffer interval
-        (j, j+1]: exact at j+1, then the linearised correction of the state carried to now;
-        the later covariances are propagated when next needed."""
-        buf = self._buf
-        P_j = self._covariance(j)
-        if P_j is None:
-            return False
-        nxt = buf[j + 1]
-        x, P, _, _ = self._step(buf[j].x, P_j, nxt, m.t - buf[j].t)
-        x, P, ok = self._update(x, P, m)
-        if not ok:
-            return False
-        self._meas.append(m)
-        self._last_accepted_s = max(self._last_accepted_s, m.t)
-        x, P, _, _ = self._step(x, P, nxt, nxt.t - m.t)  # F of the full step stays buffered
-        (a0, a1, a2, a3, a4, a5), (b0, b1, b2, b3, b4, b5) = x, nxt.x
-        d0, d1, d2, d3, d4, d5 = a0 - b0, a1 - b1, a2 - b2, a3 - b3, a4 - b4, a5 - b5
-        nxt.x, nxt.P = x, P
-        rho_max = self._rho_max
-        for k in range(j + 2, len(buf)):
-            # dx_k = F_k dx_{k-1}: F's last three rows are the identity
-            e = buf[k]
-            F = e.F
-            d0, d1, d2 = (
-                F[0] * d0 + F[1] * d1 + F[2] * d2 + F[3] * d3 + F[4] * d4 + F[5] * d5,
-                F[6] * d0 + F[7] * d1 + F[8] * d2 + F[9] * d3 + F[10] * d4 + F[11] * d5,
-                F[12] * d0 + F[13] * d1 + F[14] * d2 + F[15] * d3 + F[16] * d4 + F[17] * d5,
-            )
-            x0, x1, x2, x3, x4, x5 = e.x
-            x2 = min(max(x2 + d2, 1e-6), rho_max)
-            e.x = (x0 + d0, x1 + d1, x2, x3 + d3, x4 + d4, x5 + d5)
-            e.P = None
-        if not self._valid(buf[-1].x):
-            self._drop_track()
-        return True
-
     def _replay(self, j: int, x, P, t: float, new_t_c: float | None) -> bool:
         """From state (x, P) at time t inside buffer interval j, re-run every later buffered
         step, fusing stored measurements after t in capture order. Writes states back."""
-        new_accepted = False
         meas = self._meas
-        k = bisect.bisect_right(meas, t + _TIME_EPS_S, key=lambda o: o.t)
-        buf = self._buf
-        for i in range(j + 1, len(buf)):
-            entry = buf[i]
-            while k < len(meas) and meas[k].t <= entry.t + _TIME_EPS_S:
-                m = meas[k]
-                x, P, _, _ = self._step(x, P, entry, m.t - t)
-                t = m.t
-                x, P, ok = self._update(x, P, m)
-                if ok:
-                    self._last_accepted_s = max(self._last_accepted_s, m.t)
-                if m.t == new_t_c:
-                    new_accepted = ok
-                k += 1
-            x, P, F, Q = self._step(x, P, entry, entry.t - t)
-            t = entry.t
-            entry.x, entry.P, entry.F, entry.Q = x, P, F, Q
-        last = buf[-1]
-        if not (self._valid(last.x) and math.isfinite(float(last.P.trace()))):
+        k = bisect.bisect_right(meas, t + _TIME_EPS_S, key=_meas_time)
+        mt = np.array([o.t for o in meas], dtype=np.float64)
+        mz = np.array([o.z for o in meas], dtype=np.float64).reshape(len(meas), 2)
+        mr = np.array([math.nan if o.r_px is None else o.r_px for o in meas], dtype=np.float64)
+        last = np.array([self._last_accepted_s])
+        hi = self._hi
+        new_accepted = _replay(
+            self._T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP, hi, j,
+            np.array(x, dtype=np.float64), np.array(P, dtype=np.float64), float(t),
+            mt, mz, mr, k, math.nan if new_t_c is None else float(new_t_c), self._prm, last,
+        )  # fmt: skip
+        self._last_accepted_s = float(last[0])
+        if not (self._HX[hi - 1] and self._HP[hi - 1]):
+            return new_accepted  # no later entry (j is the newest) and none at j
+        if not (_valid(self._X[hi - 1]) and math.isfinite(float(self._P[hi - 1].trace()))):
             self._drop_track()
         return new_accepted
 
-    def _update(self, x: tuple | np.ndarray, P: np.ndarray, m: _Meas):
-        """Gated EKF update with the image point, then (sequentially, relinearised at the
-        updated state) the apparent radius if usable and within its own gate. Joseph form in
-        closed form for the 2-D and the scalar measurement (equal to filterpy's ``update``;
-        tested), cheap enough for every replayed fusion. Returns x as 6 floats."""
-        r = self._r_point
-        y0, y1 = float(m.z[0] - x[0]), float(m.z[1] - x[1])
-        s00, s01, s11 = float(P[0, 0]) + r, float(P[0, 1]), float(P[1, 1]) + r
-        det = s00 * s11 - s01 * s01
-        if not det > 0.0:
-            return x, P, False
-        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-        d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
-        if not d2 <= self._gate2_point:
-            return x, P, False
-        K = P[:, :2] @ np.array((i00, i01, i01, i11)).reshape(2, 2)  # flat: cheaper to make
-        x = x + K @ np.array([y0, y1])
-        A = P - K @ P[:2, :]  # (I - K H) P
-        P = A - A[:, :2] @ K.T + r * (K @ K.T)
-        if m.r_px is not None:
-            xn, yn, rho = float(x[0]), float(x[1]), float(x[2])
-            R, f = self._radius_m, self._f
-            n2 = max(1.0 + xn * xn + yn * yn - (R * rho) ** 2, 1e-6)
-            d = f * R / (n2 * math.sqrt(n2))
-            hs = np.array([-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0])
-            c = self.config
-            var_s = c.size_noise_px**2 + (c.size_noise_rel * m.r_px) ** 2
-            ys = m.r_px - f * R * rho / math.sqrt(n2)
-            Ph = P @ hs
-            ss = float(hs @ Ph) + var_s
-            if ys * ys <= self._gate2_point * ss:
-                k = Ph / ss
-                x = x + k * ys
-                A = P - np.outer(k, Ph)
-                P = A - np.outer(A @ hs, k) + var_s * np.outer(k, k)
-        x[2] = min(max(x[2], 1e-6), self._rho_max)
-        return tuple(x.tolist()), 0.5 * (P + P.T), True
+    def _update(self, x, P: np.ndarray, m: _Meas) -> tuple[tuple, np.ndarray, bool]:
+        """Gated EKF update of (x, P) with m (the kernel :func:`_update`): returns x as 6
+        floats, P and whether it was accepted (x and P unchanged when not)."""
+        x_out, P_out = np.empty(_N), np.empty((_N, _N))
+        x = np.array(x, dtype=np.float64)
+        r_px = math.nan if m.r_px is None else float(m.r_px)
+        ok = _update(
+            x, np.ascontiguousarray(P, dtype=np.float64), float(m.z[0]), float(m.z[1]), r_px,
+            self._prm, x_out, P_out,
+        )  # fmt: skip
+        if not ok:
+            return tuple(x.tolist()), P, False
+        return tuple(x_out.tolist()), P_out, True
 
     # ----------------------------------------------------------------- outputs
     def lost(self, now_s: float | None = None) -> bool:
         now = self.time_s if now_s is None else now_s
         return (not self._initialised) or (now - self._last_accepted_s > self.config.lost_timeout_s)
 
-    def _flow(self, e: _Entry) -> tuple[tuple[float, float], tuple[float, float]]:
-        """Image-point rate at entry e (normalised/s): (rotational, translational)."""
-        xn, yn, rho, vE, vN, vU = e.x
-        wx, wy, wz = e.w
-        r = e.R_CW
-        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
+    def _head(self) -> tuple:
+        """The newest rows as Python floats, read once per change of the buffer: (index of
+        the newest row, times, state-held flags and states of the newest two rows, the
+        newest row's inputs), or () when the buffer is empty."""
+        h = self._head_cache
+        if h is None:
+            lo, hi = self._win.tolist()
+            if hi == lo:
+                h = ()
+            else:
+                k = max(hi - 2, lo)
+                T, HX, X = self._T[k:hi].tolist(), self._HX[k:hi].tolist(), self._X[k:hi].tolist()
+                h = (hi - 1, T, HX, X, self._U[hi - 1].tolist())
+            self._head_cache = h
+        return h
+
+    def _tracked(self) -> tuple | None:
+        """The newest row as (index, time, state, inputs) when it holds a state (a track)."""
+        if not self._initialised:
+            return None
+        h = self._head()
+        if not h or not h[2][-1]:
+            return None
+        return h[0], h[1][-1], h[3][-1], h[4]
+
+    @staticmethod
+    def _flow(x: list, u: list) -> tuple[tuple[float, float], tuple[float, float]]:
+        """Image-point rate at state x with inputs u (a row of U) (normalised/s):
+        (rotational, translational)."""
+        xn, yn, rho, vE, vN, vU = x
+        wx, wy, wz, c0, c1, c2, *r = u
+        dE, dN, dU = vE - c0, vN - c1, vU - c2
         ux = r[0] * dE + r[1] * dN + r[2] * dU
         uy = r[3] * dE + r[4] * dN + r[5] * dU
         uz = r[6] * dE + r[7] * dN + r[8] * dU
@@ -684,15 +975,16 @@ class DelayedKalmanFilter:
 
     def estimate(self) -> ImageEstimate | None:
         """Current estimate (at the last prediction time), or None before the first detection."""
-        if not self._initialised or not self._buf or self._buf[-1].x is None:
+        head = self._tracked()
+        if head is None:
             return None
-        e = self._buf[-1]
+        _, t, x, u = head
         f = self._f
-        rot, tr = self._flow(e)
-        since = e.t - self._last_accepted_s
+        rot, tr = self._flow(x, u)
+        since = t - self._last_accepted_s
         return ImageEstimate(
-            time_s=e.t,
-            e_px=(float(e.x[0]) * f, float(e.x[1]) * f),
+            time_s=t,
+            e_px=(x[0] * f, x[1] * f),
             e_rate_px_s=((rot[0] + tr[0]) * f, (rot[1] + tr[1]) * f),
             time_since_detection_s=since,
             lost=since > self.config.lost_timeout_s,
@@ -702,18 +994,17 @@ class DelayedKalmanFilter:
         """The current estimate as (e_x, e_y, r_x, r_y) in px and px/s, r being the image rate
         the camera's rotation does not explain, and the diagonal of its covariance (r's
         variance through the Jacobian of the translational flow)."""
-        if not self._initialised or not self._buf or self._buf[-1].x is None:
+        head = self._tracked()
+        if head is None or self._covariance(head[0]) is None:
             return None
-        if self._covariance(len(self._buf) - 1) is None:
-            return None
-        e = self._buf[-1]
+        i, _, x, u = head
         f = self._f
-        _, tr = self._flow(e)
+        _, tr = self._flow(x, u)
         # in floats (numpy's per-call cost on these small arrays is most of the work): J is
         # the Jacobian of the translational flow rho (u_xy - s_xy u_z), u = R_CW (v_t - v_c)
-        xn, yn, rho, vE, vN, vU = e.x
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = e.R_CW
-        dE, dN, dU = vE - e.v_c[0], vN - e.v_c[1], vU - e.v_c[2]
+        xn, yn, rho, vE, vN, vU = x
+        _, _, _, c0, c1, c2, r0, r1, r2, r3, r4, r5, r6, r7, r8 = u
+        dE, dN, dU = vE - c0, vN - c1, vU - c2
         u0 = r0 * dE + r1 * dN + r2 * dU
         u1 = r3 * dE + r4 * dN + r5 * dU
         u2 = r6 * dE + r7 * dN + r8 * dU
@@ -734,7 +1025,7 @@ class DelayedKalmanFilter:
             rho * (r4 - yn * r7),
             rho * (r5 - yn * r8),
         )
-        P = e.P.tolist()
+        P = self._P[i].tolist()
         var_r = (_quadratic_form(P, jx), _quadratic_form(P, jy))
         state = np.array([xn * f, yn * f, tr[0] * f, tr[1] * f])
         cov = np.array([P[0][0] * f * f, P[1][1] * f * f, var_r[0] * f * f, var_r[1] * f * f])
@@ -743,38 +1034,55 @@ class DelayedKalmanFilter:
     def range_m(self) -> float | None:
         """Current range along the line of sight (m) from the mean alone (no covariance), or
         None without a track."""
-        if not self._initialised or not self._buf or self._buf[-1].x is None:
+        head = self._tracked()
+        if head is None:
             return None
-        xn, yn, rho = self._buf[-1].x[:3]
+        xn, yn, rho = head[2][:3]
         return math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
 
     def image_std_px(self) -> tuple[float, float] | None:
         """The 1-sigma of the current image point (px, x and y), or None without a track
         (propagates the covariance if it is still lazy)."""
-        if not self._initialised or not self._buf or self._buf[-1].x is None:
+        head = self._tracked()
+        if head is None:
             return None
-        if self._covariance(len(self._buf) - 1) is None:
+        P = self._covariance(head[0])
+        if P is None:
             return None
-        P = self._buf[-1].P
         f = self._f
         return math.sqrt(max(float(P[0, 0]), 0.0)) * f, math.sqrt(max(float(P[1, 1]), 0.0)) * f
 
     def depth_velocity(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         """Current range along the line of sight (m), the target's velocity (ENU, m/s) and the
         full 6x6 covariance of the internal state, or None without a track."""
-        if not self._initialised or not self._buf or self._buf[-1].x is None:
+        head = self._tracked()
+        if head is None:
             return None
-        if self._covariance(len(self._buf) - 1) is None:
+        P = self._covariance(head[0])
+        if P is None:
             return None
-        e = self._buf[-1]
-        xn, yn, rho = e.x[:3]
-        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, np.array(e.x[3:]), e.P.copy()
+        xn, yn, rho = head[2][:3]
+        return math.sqrt(1.0 + xn * xn + yn * yn) / rho, np.array(head[2][3:]), P.copy()
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
-        for e in reversed(self._buf):
-            if abs(e.t - time_s) < _TIME_EPS_S:
-                return None if e.x is None else (float(e.x[0]) * self._f, float(e.x[1]) * self._f)
-            if e.t < time_s:
+        h = self._head()
+        if not h:
+            return None
+        i, T, HX, X, _ = h
+        for n in range(len(T) - 1, -1, -1):  # the newest rows first, as floats
+            t = T[n]
+            if abs(t - time_s) < _TIME_EPS_S:
+                return (X[n][0] * self._f, X[n][1] * self._f) if HX[n] else None
+            if t < time_s:
+                return None
+        for k in range(i - len(T), self._lo - 1, -1):
+            t = float(self._T[k])
+            if abs(t - time_s) < _TIME_EPS_S:
+                if not self._HX[k]:
+                    return None
+                x0, x1 = self._X[k, :2].tolist()
+                return x0 * self._f, x1 * self._f
+            if t < time_s:
                 break
         return None
