@@ -407,3 +407,42 @@ def test_a_stall_takes_back_at_most_one_command_s_turn():
     assert MAX_LATE_CARRY == 1.0
     assert dy1 == pytest.approx(raw_y - dy0, rel=1e-9, abs=1e-15)
     assert dz1 == pytest.approx(raw_z - dz0, rel=1e-9, abs=1e-15)
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, False), ("on", True), ("off", False)])
+def test_onboard_run_early_tick_flag_reaches_the_runtime(monkeypatch, flag, expected):
+    """``onboard run --early-tick on|off`` (default: RuntimeConfig's, off) sets the config."""
+    import signal
+
+    import onboard.runtime.runner as runner_mod
+    from onboard.cli import main
+
+    seen = []
+
+    class Captured:
+        def __init__(self, config, log=None) -> None:
+            seen.append(config)
+
+        def stop(self) -> None:
+            pass
+
+        def run(self, duration_s=None) -> int:
+            return 0
+
+    monkeypatch.setattr(runner_mod, "OnboardRuntime", Captured)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)
+    argv = ["run", "--camera", "0", "--gcs", ""]
+    if flag is not None:
+        argv += ["--early-tick", flag]
+    assert main(argv) == 0
+    assert [c.early_tick for c in seen] == [expected]
+    assert runner_mod.RuntimeConfig.early_tick is False
+
+
+def test_onboard_run_refuses_a_bad_early_tick_value(capsys):
+    from onboard.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--camera", "0", "--early-tick", "yes"])
+    assert exc.value.code == 2
+    assert "--early-tick" in capsys.readouterr().err
