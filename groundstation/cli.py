@@ -316,6 +316,11 @@ def _build_parser() -> argparse.ArgumentParser:
         help="--sitl: onboard run --realtime PRIO, and the SITL under SCHED_FIFO too",
     )
     b.add_argument(
+        "--early-tick",
+        choices=("on", "off"),
+        help="--sitl: onboard run --early-tick on|off (default: the runtime's, off)",
+    )
+    b.add_argument(
         "--video",
         action="store_true",
         help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
@@ -581,6 +586,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     realtime_priority=args.realtime,
                     video=args.video,
                     foxglove=args.foxglove_client,
+                    early_tick=None if args.early_tick is None else args.early_tick == "on",
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

@@ -76,6 +76,7 @@ def _run(args) -> int:
             realtime_priority=args.realtime,
             video=video,
             foxglove=args.foxglove,
+            early_tick=args.early_tick == "on",
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -96,6 +97,7 @@ def _run(args) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from .link.px4 import DEFAULT_GCS_URL, DEFAULT_ONBOARD_FC_URL
+    from .runtime.runner import RuntimeConfig
 
     parser = argparse.ArgumentParser(prog="onboard", description="Peregrine onboard loop")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -150,6 +152,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="PRIO",
         help="run the control and camera threads under SCHED_FIFO at this priority (1-99; "
         "needs CAP_SYS_NICE, else a warning and normal scheduling)",
+    )
+    r.add_argument(
+        "--early-tick",
+        choices=("on", "off"),
+        default="on" if RuntimeConfig.early_tick else "off",
+        help="tick as soon as the camera thread has fused a detection, not at the next "
+        "deadline (default %(default)s)",
     )
     r.add_argument(
         "--log",

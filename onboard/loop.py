@@ -53,6 +53,7 @@ from .geometry import propagate_rotation, quat_to_rotmat
 
 _NAN2 = (math.nan, math.nan)
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
+MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 
 
 class InterceptionLoop:
@@ -242,11 +243,13 @@ class InterceptionLoop:
 
     def _dq_unflown(self, elapsed_s: float) -> tuple[float, float] | None:
         """The part of the last command's LOS change (dq_y, dq_z, rad) not flown because it
-        was held ``elapsed_s`` instead of its hold, or None."""
+        was held ``elapsed_s`` instead of its hold: positive (the rest) when this tick came
+        early, negative (the excess, turned too far) when it came late, at most one whole
+        hold's worth (a stall's over-turn is not all undone at once); None without one."""
         last = self._dq_flown
-        if last is None or not elapsed_s < last[2]:
+        if last is None or elapsed_s == last[2]:
             return None
-        rest = 1.0 - elapsed_s / last[2]
+        rest = max(1.0 - elapsed_s / last[2], -MAX_LATE_CARRY)
         return last[0] * rest, last[1] * rest
 
     # ------------------------------------------------------------------ the tick
@@ -260,10 +263,11 @@ class InterceptionLoop:
         and the per-command terms (speed ramp, pursuit, midcourse) take the hold; the DKF's
         prediction and the LOS low-pass take the time elapsed since the last tick. A tick
         sooner than the last command's hold cut that command short: the part of its LOS
-        change not flown (the fraction of its hold left) is added to this one's, so the turn
-        summed over the commands stays K times the LOS change (with the low-pass on, the LOS
-        change is filtered as a rate instead, over the elapsed time, per hold). None: the
-        hold is the elapsed time, as on a fixed grid (the simulator: nothing else changes).
+        change not flown (the fraction of its hold left) is added to this one's; a tick later
+        than the hold let it turn too far: the excess (the fraction beyond the hold, at most
+        one hold's worth) is taken off this one's, so the turn summed over the commands stays
+        K times the LOS change (with the low-pass on, the LOS change is filtered as a rate
+        instead, over the elapsed time, per hold). None: the hold is the elapsed time, as on a fixed grid (the simulator: nothing else changes).
         The runtime passes its period: an early tick re-anchors its grid, so its command is
         held a whole period."""
         t = state.time_s
@@ -384,8 +388,9 @@ class InterceptionLoop:
                 dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
                 self._dq_filt = (dq_y, dq_z)
             elif hold_s is not None:
-                # the last command's LOS change not flown: this tick cut its hold short (an
-                # early tick), so the turn summed over the commands stays K times the LOS's
+                # the last command's LOS change not flown (this tick cut its hold short: an
+                # early tick) or flown too far (held past its hold: a late tick), so the turn
+                # summed over the commands stays K times the LOS's
                 carry = self._dq_unflown(dt)
                 if carry is not None:
                     dq_y += carry[0]

@@ -3,6 +3,7 @@ this test process as the ground (or a real ground station), for the SITL tests."
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -37,6 +38,31 @@ def free_ports(*kinds) -> list[int]:
 
 
 STARTUP_TIMEOUT_S = 120.0
+# the vehicle's side (the SITL standing in for PX4 on its own processor, and the onboard
+# runtime's control thread, as flown with --realtime) under SCHED_FIFO at this priority where
+# the system allows it, so other programs on a loaded machine do not starve it; 1, the lowest:
+# under any real-time benchmark. 0: both at normal priority.
+VEHICLE_FIFO_PRIORITY = int(os.environ.get("PEREGRINE_RIG_FIFO", "1"))
+
+
+def fifo_allowed(priority: int) -> bool:
+    """May this process's children run under SCHED_FIFO at ``priority``?"""
+    if priority <= 0 or not hasattr(os, "sched_setscheduler"):
+        return False
+    import resource
+
+    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
+
+
+def _fifo(priority: int):
+    """A ``preexec_fn`` putting the child (all its threads) under SCHED_FIFO (refused after
+    all, a container without CAP_SYS_NICE: it runs at normal priority)."""
+
+    def set_policy() -> None:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+
+    return set_policy
 
 
 class Rig:
@@ -59,6 +85,10 @@ class Rig:
         onb_gcs = f"udp{'in' if onboard_gcs_listens else 'out'}:127.0.0.1:{self.gcs_port}"
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         py = sys.executable
+        prio = VEHICLE_FIFO_PRIORITY
+        self.realtime = fifo_allowed(prio)
+        fifo = _fifo(prio) if self.realtime else None
+        realtime = ("--realtime", str(prio)) if self.realtime else ()
         self.sitl_out = tmp / "sitl.log"
         self.onboard_out = tmp / "onboard.log"
         self.stats = tmp / "stats.json"
@@ -67,6 +97,7 @@ class Rig:
             [py, "-m", "groundstation", "sitl", scenario, "--mavlink", fc,
              "--camera-port", str(self.cam_port), *sitl_args],
             stdout=self.sitl_out.open("w"), stderr=subprocess.STDOUT, env=env, cwd=tmp,
+            preexec_fn=fifo,
         )  # fmt: skip
         self.ground = None
         if ground:
@@ -75,7 +106,7 @@ class Rig:
         self.onboard = subprocess.Popen(
             [py, "-m", "onboard", "run", "--mavlink", onb_fc,
              "--camera", f"sitl://127.0.0.1:{self.cam_port}", "--gcs", onb_gcs,
-             "--params", str(self.params), "--stats", str(self.stats), *onboard_args],
+             "--params", str(self.params), "--stats", str(self.stats), *realtime, *onboard_args],
             stdout=self.onboard_out.open("w"), stderr=subprocess.STDOUT, env=env, cwd=tmp,
         )  # fmt: skip
         self.texts: list[tuple[float, str]] = []  # (receipt time, STATUSTEXT)

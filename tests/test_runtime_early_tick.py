@@ -346,3 +346,103 @@ def test_a_request_arriving_as_the_control_thread_goes_to_sleep_is_not_slept_thr
     sched._block_saw_request = True
     sched._block_until_request(0.001)
     assert slept == [0.001]
+
+
+def _carried(ticks: list[tuple[float, float]]):
+    """Tick a tracking loop at ``ticks`` (time, hold); per command the LOS change it asked the
+    law for (d_los_elev, d_los_azim, rad), its hold, and the LOS angles of each tick."""
+    loop = _tracking_loop()
+    asked: list[tuple[float, float, float]] = []
+    law = loop._law
+
+    def recording_law(inp, gains):
+        asked.append((inp.d_los_elev_rad, inp.d_los_azim_rad, inp.dt_s))
+        return law(inp, gains)
+
+    loop._law = recording_law
+    q = []
+    for t, hold in ticks:
+        tel = loop.tick(_state(t), hold_s=hold)
+        q.append((tel.los_elev_rad, tel.los_azim_rad))
+    return asked, q
+
+
+@pytest.mark.parametrize(
+    "times",
+    [
+        [0.005, 0.0115, 0.0165, 0.0235, 0.0285, 0.0335],  # late by 1.5 ms, then 2 ms
+        [0.005, 0.006, 0.011, 0.0175, 0.0185, 0.0235, 0.0295],  # early and late mixed
+        [0.005, 0.010, 0.015, 0.020],  # on time: nothing carried
+    ],
+)
+def test_the_turn_summed_over_commands_is_k_times_the_los_change_early_and_late(times):
+    """Each command turns the velocity by K x its LOS change per hold for as long as it is
+    held (until the next tick); with the carry, the LOS changes flown (each command's for the
+    time it was held, the last one for its whole hold) add up to the LOS change between the
+    first and the last tick, whether the ticks came early (cut short) or late (held longer)."""
+    asked, q = _carried([(t, P) for t in times])
+    assert len(asked) == len(times)
+    assert all(hold == P for _, _, hold in asked)  # eq. 17's dt: the hold, early or late
+    held = [*np.diff(times).tolist(), P]
+    flown_y = sum(dy * h / hold for (dy, _, hold), h in zip(asked, held, strict=True))
+    flown_z = sum(dz * h / hold for (_, dz, hold), h in zip(asked, held, strict=True))
+    # the first command carries nothing: its LOS change is since the tick before the list's
+    los_y = asked[0][0] + q[-1][0] - q[0][0]
+    los_z = asked[0][1] + q[-1][1] - q[0][1]
+    assert abs(los_y) + abs(los_z) > 1e-4  # the LOS does move
+    assert flown_y == pytest.approx(los_y, rel=1e-9, abs=1e-15)
+    assert flown_z == pytest.approx(los_z, rel=1e-9, abs=1e-15)
+    if times == [0.005, 0.010, 0.015, 0.020]:  # on the grid: each command its own LOS change
+        assert [a[0] for a in asked[1:]] == pytest.approx(np.diff([p[0] for p in q]).tolist())
+
+
+def test_a_stall_takes_back_at_most_one_command_s_turn():
+    """A tick four holds late (a stall): the excess would be three whole commands; at most one
+    (MAX_LATE_CARRY) is taken off the next command, which is not flung the other way."""
+    from onboard.loop import MAX_LATE_CARRY
+
+    asked, q = _carried([(0.005, P), (0.010, P), (0.030, P)])
+    (_, _, _), (dy0, dz0, _), (dy1, dz1, _) = asked
+    raw_y, raw_z = q[2][0] - q[1][0], q[2][1] - q[1][1]
+    assert MAX_LATE_CARRY == 1.0
+    assert dy1 == pytest.approx(raw_y - dy0, rel=1e-9, abs=1e-15)
+    assert dz1 == pytest.approx(raw_z - dz0, rel=1e-9, abs=1e-15)
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, None), ("on", True), ("off", False)])
+def test_onboard_run_early_tick_flag_reaches_the_runtime(monkeypatch, flag, expected):
+    """``onboard run --early-tick on|off`` (default: RuntimeConfig's) sets the config."""
+    import signal
+
+    import onboard.runtime.runner as runner_mod
+    from onboard.cli import main
+
+    seen = []
+
+    class Captured:
+        def __init__(self, config, log=None) -> None:
+            seen.append(config)
+
+        def stop(self) -> None:
+            pass
+
+        def run(self, duration_s=None) -> int:
+            return 0
+
+    monkeypatch.setattr(runner_mod, "OnboardRuntime", Captured)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)
+    argv = ["run", "--camera", "0", "--gcs", ""]
+    if flag is not None:
+        argv += ["--early-tick", flag]
+    assert main(argv) == 0
+    default = runner_mod.RuntimeConfig.early_tick
+    assert [c.early_tick for c in seen] == [default if expected is None else expected]
+
+
+def test_onboard_run_refuses_a_bad_early_tick_value(capsys):
+    from onboard.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--camera", "0", "--early-tick", "yes"])
+    assert exc.value.code == 2
+    assert "--early-tick" in capsys.readouterr().err

@@ -46,6 +46,7 @@ def run_sitl_bench(
     realtime_priority: int | None = None,
     video: bool = False,
     foxglove: bool = False,
+    early_tick: bool | None = None,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -57,7 +58,8 @@ def run_sitl_bench(
     receiver here (:mod:`groundstation.app.video`): glass-to-glass latency, from the SITL
     camera's capture to the decoded frame. ``foxglove``: the onboard process also publishes
     its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
-    them: what that costs the control tick."""
+    them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
+    or ``off`` (None: the runtime's default)."""
     import socket
     import subprocess
     import sys
@@ -101,6 +103,7 @@ def run_sitl_bench(
              "--camera", f"sitl://127.0.0.1:{cam}", "--gcs", f"udpout:127.0.0.1:{gcs}",
              "--sitl-auto-start", "--duration", str(seconds), "--stats", str(stats_path),
              *rt_args,
+             *([] if early_tick is None else ["--early-tick", "on" if early_tick else "off"]),
              *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else []),
              *(["--foxglove", f"127.0.0.1:{fox_port}"] if fox_port else [])],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -140,6 +143,7 @@ def run_sitl_bench(
         "seconds": seconds,
         "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],
         "realtime_priority": realtime_priority,
+        "early_tick": stats.get("early_tick"),
         "scheduler_stalls": stats.get("scheduler_stalls"),
         "loop_rate_hz": stats.get("rate_hz"),
         "jitter_p99_ms": stats.get("jitter_p99_ms"),
@@ -188,6 +192,7 @@ def run_sitl_bench(
 
     la = figures["load_average_1min_before_after"]
     rt = "" if realtime_priority is None else f", SCHED_FIFO {realtime_priority}"
+    rt += {True: ", early tick on", False: ", early tick off"}.get(figures["early_tick"], "")
     print(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
