@@ -29,13 +29,34 @@ from onboard.runtime.fc_state import vehicle_state_at
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
 from .estimate import Normals, StateEstimateModel
+from .physics import (
+    C_CLOSE_REL,
+    C_CLOSE_VEL,
+    C_HIT_R,
+    C_MISS,
+    C_OUTCOME,
+    C_REL,
+    C_SIZE,
+    C_SPEED,
+    C_TIME,
+    C_TWO,
+    OUTCOME_CRASHED,
+    OUTCOME_DIVERGED,
+    OUTCOME_HIT,
+    OUTCOME_MISS,
+    physics_steps,
+)
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
 
-PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
-DIVERGED_SPEED_M_S = 60.0
-_DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
+_OUTCOMES = {
+    OUTCOME_HIT: Outcome.HIT,
+    OUTCOME_MISS: Outcome.MISS,
+    OUTCOME_DIVERGED: Outcome.DIVERGED,
+    OUTCOME_CRASHED: Outcome.CRASHED,
+}
+_NO_NORMALS = np.zeros((0, 3))  # the gusts' draws of a wind without gusts
 
 
 @dataclass(frozen=True)
@@ -130,7 +151,6 @@ class Simulation:
             else TrackTarget(scenario.target, *target_track)
         )
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
-        self._target_moves = self.target.moves
         self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
@@ -150,13 +170,15 @@ class Simulation:
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
         tp, vp = self.target.p, self.vehicle.p
-        self._rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
-        self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
-        self.miss_m = self.initial_range_m
-        self.closest_time_s = 0.0
-        self.closest_speed_m_s = 0.0
-        self.closest_rel_m = tuple(self._rel)  # target minus vehicle at closest approach
-        self.closest_vel_m_s = tuple(self.vehicle.v)
+        rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
+        self.initial_range_m = math.sqrt(sum(c * c for c in rel))
+        # the closest approach and outcome as the physics kernel keeps them (C_* layout)
+        self.closest = np.zeros(C_SIZE)
+        cs = self.closest
+        cs[C_REL : C_REL + 3] = cs[C_CLOSE_REL : C_CLOSE_REL + 3] = rel
+        cs[C_MISS] = self.initial_range_m
+        cs[C_CLOSE_VEL : C_CLOSE_VEL + 3] = self.vehicle.v
+        cs[C_HIT_R], cs[C_TWO] = self.hit_radius_m, 2.0
         self.max_normal_accel_m_s2 = 0.0
         self.normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
@@ -171,6 +193,30 @@ class Simulation:
     @property
     def time_s(self) -> float:
         return self.step_index * self.dt_s
+
+    @property
+    def miss_m(self) -> float:
+        """Closest approach so far (m)."""
+        return float(self.closest[C_MISS])
+
+    @property
+    def closest_time_s(self) -> float:
+        return float(self.closest[C_TIME])
+
+    @property
+    def closest_speed_m_s(self) -> float:
+        """The vehicle's speed at the closest approach (m/s)."""
+        return float(self.closest[C_SPEED])
+
+    @property
+    def closest_rel_m(self) -> tuple[float, float, float]:
+        """Target minus vehicle at the closest approach (m, ENU)."""
+        return tuple(self.closest[C_CLOSE_REL : C_CLOSE_REL + 3].tolist())
+
+    @property
+    def closest_vel_m_s(self) -> tuple[float, float, float]:
+        """The vehicle's velocity at the closest approach (m/s, ENU)."""
+        return tuple(self.closest[C_CLOSE_VEL : C_CLOSE_VEL + 3].tolist())
 
     @property
     def done(self) -> bool:
@@ -248,81 +294,36 @@ class Simulation:
     def _physics_steps(self, k0: int, n: int) -> None:
         """Integrate vehicle, target and wind from step k0 over ``n`` steps (no camera frame
         or control tick due in between), checking the outcome after each and stopping at
-        one. One vehicle generator (:meth:`Multicopter.integrate`) and the outcome check in
-        locals: this is the simulator's hot path."""
+        one: :func:`.physics.physics_steps`, one call per stretch between command
+        arrivals."""
         dt = self.dt_s
         cmds = self._commands
-        wind = self.wind  # evaluated where each body is
-        uniform, gusty = wind.uniform, wind.gusty
-        target, moves = self.target, self._target_moves
-        veh = self.vehicle
-        tp = target.p
-        hit_r = self.hit_radius_m
-        miss = self.miss_m
-        r0x, r0y, r0z = self._rel
-        vp = veh.p  # where the vehicle is at the start of a step (for the wind there)
-        steps = veh.integrate(dt)
-        steps.send(None)
-        k = k0
-        try:
-            for k in range(k0, k0 + n):
-                t = k * dt
-                while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
-                    _, rates, thrust = cmds.popleft()
-                    veh.command(rates, thrust)
-                if uniform:  # the same everywhere: no lookups
-                    w = wind.velocity_m_s
-                    px, py, pz, vx, vy, vz, fin = steps.send(w)
-                    if moves:
-                        target.advance(t + dt, dt, w)
-                        tp = target.p
-                else:
-                    px, py, pz, vx, vy, vz, fin = steps.send(wind.at(vp))
-                    target.advance(t + dt, dt, wind.at(tp))
-                    tp = target.p
-                    vp = (px, py, pz)
-                if gusty:
-                    wind.step(dt)
-                # closest approach inside the step just taken (as closest_in_step, inlined),
-                # then hit/miss, divergence and ground contact
-                r1x, r1y, r1z = tp[0] - px, tp[1] - py, tp[2] - pz
-                d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
-                dd = d0 * d0 + d1 * d1 + d2 * d2
-                r0d = r0x * d0 + r0y * d1 + r0z * d2
-                if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0) without the calls
-                    s = -r0d / dd
-                    if s < 0.0:
-                        s = 0.0
-                    elif s > 1.0:
-                        s = 1.0
-                else:
-                    s = 0.0
-                c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
-                dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-                r0x, r0y, r0z = r1x, r1y, r1z
-                if dist < miss:
-                    miss = dist
-                    self.miss_m = dist
-                    self.closest_time_s = t + s * dt
-                    self.closest_speed_m_s = math.sqrt(vx**2 + vy**2 + vz**2)
-                    self.closest_rel_m = (c0, c1, c2)
-                    self.closest_vel_m_s = (vx, vy, vz)
-                if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
-                    # closing at the start of the step, opening at its end, near: it is over
-                    self.outcome = Outcome.HIT if miss <= hit_r else Outcome.MISS
-                elif (
-                    not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))
-                    or vx * vx + vy * vy + vz * vz > _DIVERGED_SPEED2
-                ):
-                    self.outcome = Outcome.DIVERGED
-                elif pz <= 0.0:
-                    self.outcome = Outcome.CRASHED
-                if self.outcome is not None:
-                    break
-        finally:
-            steps.close()
-            self._rel = (r0x, r0y, r0z)
-            self.step_index = k + 1
+        veh, target, wind = self.vehicle, self.target, self.wind
+        lag = veh.lag(dt)
+        cs = self.closest
+        gusty = wind.gusty
+        normals, ni = _NO_NORMALS, 0
+        k, end = k0, k0 + n
+        while True:
+            while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
+                _, rates, thrust = cmds.popleft()
+                veh.command(rates, thrust)
+            m = cmds[0][0] - k if cmds and cmds[0][0] < end else end - k
+            if gusty:
+                normals, ni = wind.prepare(dt, m)
+            taken = physics_steps(
+                k, m, dt, veh.x, lag, target.kind, target.params, target.track, target.x,
+                wind.x, wind.params, normals, ni, cs,
+            )  # fmt: skip
+            if gusty:
+                wind.used(taken)
+            k += taken
+            if cs[C_OUTCOME] != 0.0:
+                self.outcome = _OUTCOMES[int(cs[C_OUTCOME])]
+                break
+            if k >= end:
+                break
+        self.step_index = k
 
     def _as_the_runtime_hands_it(self, t: float, truth: tuple, gyro: np.ndarray) -> VehicleState:
         """The estimated state of ``truth`` (position, velocity, attitude, rates as tuples) at
