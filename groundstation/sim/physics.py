@@ -16,6 +16,7 @@ would be folded into ``x * x``, which rounds differently in about 0.1 % of cases
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -89,6 +90,35 @@ def vehicle_step(
     x[13], x[14], x[15] = ax, ay, az
     x[16] = thrust_n
     return px + py + pz + vx + vy + vz + qw + qx + qy + qz + w0 + w1 + w2
+
+
+@kernel("void(f8[::1], f8, f8, f8, f8, f8, f8)")
+def vehicle_command(
+    x: np.ndarray, max_rate: float, max_thrust_n: float, c0: float, c1: float, c2: float, t: float
+) -> None:
+    """Command body rates (c0, c1, c2) (rad/s FLU, clamped to ``max_rate`` per axis) and
+    normalised thrust ``t`` (clamped to [0, 1], times ``max_thrust_n``) into the state ``x``:
+    they take effect at the next step. A NaN stays NaN."""
+    lim = max_rate
+    # min(max(c, -lim), lim) per axis, written out
+    if c0 < -lim:
+        c0 = -lim
+    if c0 > lim:
+        c0 = lim
+    if c1 < -lim:
+        c1 = -lim
+    if c1 > lim:
+        c1 = lim
+    if c2 < -lim:
+        c2 = -lim
+    if c2 > lim:
+        c2 = lim
+    if t < 0.0:  # min(max(t, 0.0), 1.0)
+        t = 0.0
+    if t > 1.0:
+        t = 1.0
+    x[17], x[18], x[19] = c0, c1, c2
+    x[20] = t * max_thrust_n
 
 
 # motions as the kernel knows them
@@ -317,32 +347,69 @@ C_SIZE = 15
 OUTCOME_NONE, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_DIVERGED, OUTCOME_CRASHED = 0, 1, 2, 3, 4
 
 
-@kernel(
-    "i8(i8, i8, f8, f8[::1], f8[::1], i8, f8[::1], f8[:, ::1], f8[::1],"
-    " f8[::1], f8[::1], f8[:, ::1], i8, f8[::1])"
-)
+# One sortie's physics in one array (so that a kernel call passes one array, not a dozen):
+# the vehicle's state and constants, the target's constants and state, the wind's state and
+# constants, the closest approach and outcome, the command on its way to the actuators (the
+# step it arrives at, -1 for none; body rates rad/s FLU, normalised thrust; the rate limit
+# rad/s and the maximum thrust N), the target's kind and the step (s). The objects' arrays
+# become views into it (:func:`sortie_buffer`).
+S_VX = 0
+S_LAG = S_VX + X_SIZE
+S_TC = S_LAG + 4
+S_TX = S_TC + T_SIZE
+S_WX = S_TX + 6
+S_WC = S_WX + 6
+S_CS = S_WC + W_SIZE
+S_CMD = S_CS + C_SIZE
+S_KIND = S_CMD + 7
+S_DT = S_KIND + 1
+S_SIZE = S_DT + 1
+
+
+def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray:
+    """The S_* array for one sortie of ``vehicle`` (:class:`~.vehicle.Multicopter`),
+    ``target`` (:class:`~.targets.Target`) and ``wind`` (:class:`~.wind.Wind`) in steps of
+    ``dt`` (s): their state and constant arrays are copied in and replaced by views into it,
+    so they read and write the same numbers :func:`physics_steps` does. The closest-approach
+    part starts zero (the caller fills it)."""
+    buf = np.zeros(S_SIZE)
+    for obj, name, at, size in (
+        (vehicle, "x", S_VX, X_SIZE),
+        (target, "params", S_TC, T_SIZE),
+        (target, "x", S_TX, 6),
+        (wind, "x", S_WX, 6),
+        (wind, "params", S_WC, W_SIZE),
+    ):
+        view = buf[at : at + size]
+        view[:] = getattr(obj, name)
+        setattr(obj, name, view)
+    buf[S_LAG : S_LAG + 4] = vehicle.lag(dt)
+    buf[S_CMD] = -1.0
+    buf[S_CMD + 5], buf[S_CMD + 6] = vehicle.max_rate_rad_s, vehicle.params.max_thrust_n
+    buf[S_KIND], buf[S_DT] = target.kind, dt
+    return buf
+
+
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], i8)")
 def physics_steps(
-    k0: int,
-    n: int,
-    dt: float,
-    vx: np.ndarray,
-    lag: np.ndarray,
-    kind: int,
-    tc: np.ndarray,
-    track: np.ndarray,
-    tx: np.ndarray,
-    wx: np.ndarray,
-    wc: np.ndarray,
-    normals: np.ndarray,
-    ni: int,
-    cs: np.ndarray,
+    k0: int, n: int, buf: np.ndarray, track: np.ndarray, normals: np.ndarray, ni: int
 ) -> int:
-    """Integrate vehicle (state ``vx``, constants ``lag``), target (``kind``, ``tc``,
-    ``track``, state ``tx``) and wind (``wx``, ``wc``; gusts drawn from ``normals`` rows
-    from ``ni``) from step ``k0`` (time k0 dt, s) over ``n`` steps of ``dt``, finding the
-    closest approach in continuous time inside each step (relative motion linear over it)
-    and the outcome after it, in ``cs`` (C_* layout); stop at an outcome. Return the number
-    of steps taken. Each body feels the wind where it is at the start of the step."""
+    """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
+    recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps, the gusts
+    drawing rows of standard ``normals`` from ``ni``; the command in ``buf`` reaches the
+    vehicle at the start of its step. Each body feels the wind where it is at the start of
+    the step. After each step, the closest approach inside it in continuous time (relative
+    motion linear over the step) and the outcome; stop at an outcome. Return the number of
+    steps taken."""
+    vx = buf[S_VX : S_VX + X_SIZE]
+    lag = buf[S_LAG : S_LAG + 4]
+    tc = buf[S_TC : S_TC + T_SIZE]
+    tx = buf[S_TX : S_TX + 6]
+    wx = buf[S_WX : S_WX + 6]
+    wc = buf[S_WC : S_WC + W_SIZE]
+    cs = buf[S_CS : S_CS + C_SIZE]
+    dt = buf[S_DT]
+    kind = int(buf[S_KIND])
     two = cs[14]
     hit_r = cs[13]
     miss = cs[3]
@@ -350,6 +417,13 @@ def physics_steps(
     gusty = wc[3] > 0.0
     for k in range(k0, k0 + n):
         t = k * dt
+        due = buf[S_CMD]
+        if due >= 0.0 and due <= k:  # the command reaches the actuators
+            c = S_CMD
+            vehicle_command(
+                vx, buf[c + 5], buf[c + 6], buf[c + 1], buf[c + 2], buf[c + 3], buf[c + 4]
+            )
+            buf[S_CMD] = -1.0
         w0, w1, w2 = wind_at(wx, wc, vx[0], vx[1], vx[2])
         fin = vehicle_step(vx, lag, dt, w0, w1, w2)
         px, py, pz = vx[0], vx[1], vx[2]

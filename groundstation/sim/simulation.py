@@ -44,7 +44,10 @@ from .physics import (
     OUTCOME_DIVERGED,
     OUTCOME_HIT,
     OUTCOME_MISS,
+    S_CMD,
+    S_CS,
     physics_steps,
+    sortie_buffer,
 )
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
@@ -172,9 +175,9 @@ class Simulation:
         tp, vp = self.target.p, self.vehicle.p
         rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
         self.initial_range_m = math.sqrt(sum(c * c for c in rel))
-        # the closest approach and outcome as the physics kernel keeps them (C_* layout)
-        self.closest = np.zeros(C_SIZE)
-        cs = self.closest
+        # vehicle, target, wind, closest approach and outcome in one array for the kernel
+        self._physics = sortie_buffer(self.vehicle, self.target, self.wind, self.dt_s)
+        self.closest = cs = self._physics[S_CS : S_CS + C_SIZE]  # C_* layout
         cs[C_REL : C_REL + 3] = cs[C_CLOSE_REL : C_CLOSE_REL + 3] = rel
         cs[C_MISS] = self.initial_range_m
         cs[C_CLOSE_VEL : C_CLOSE_VEL + 3] = self.vehicle.v
@@ -294,32 +297,35 @@ class Simulation:
     def _physics_steps(self, k0: int, n: int) -> None:
         """Integrate vehicle, target and wind from step k0 over ``n`` steps (no camera frame
         or control tick due in between), checking the outcome after each and stopping at
-        one: :func:`.physics.physics_steps`, one call per stretch between command
-        arrivals."""
-        dt = self.dt_s
+        one: :func:`.physics.physics_steps`, one call unless two commands arrive within
+        the ``n`` steps."""
         cmds = self._commands
-        veh, target, wind = self.vehicle, self.target, self.wind
-        lag = veh.lag(dt)
-        cs = self.closest
-        gusty = wind.gusty
+        buf = self._physics
+        wind = self.wind
+        track = self.target.track
         normals, ni = _NO_NORMALS, 0
         k, end = k0, k0 + n
         while True:
-            while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
-                _, rates, thrust = cmds.popleft()
-                veh.command(rates, thrust)
+            # commands reach the actuators after their latency: the latest one due now, else
+            # the next one due within these steps, goes to the kernel
+            cmd = None
+            while cmds and cmds[0][0] <= k:
+                cmd = cmds.popleft()
+            if cmd is None and cmds and cmds[0][0] < end:
+                cmd = cmds.popleft()
+            if cmd is not None:
+                due, rates, thrust = cmd
+                buf[S_CMD : S_CMD + 5] = (max(due, k), rates[0], rates[1], rates[2], thrust)
             m = cmds[0][0] - k if cmds and cmds[0][0] < end else end - k
-            if gusty:
-                normals, ni = wind.prepare(dt, m)
-            taken = physics_steps(
-                k, m, dt, veh.x, lag, target.kind, target.params, target.track, target.x,
-                wind.x, wind.params, normals, ni, cs,
-            )  # fmt: skip
-            if gusty:
+            if wind.gusty:
+                normals, ni = wind.prepare(self.dt_s, m)
+            taken = physics_steps(k, m, buf, track, normals, ni)
+            if wind.gusty:
                 wind.used(taken)
             k += taken
-            if cs[C_OUTCOME] != 0.0:
-                self.outcome = _OUTCOMES[int(cs[C_OUTCOME])]
+            code = buf[S_CS + C_OUTCOME]
+            if code != 0.0:
+                self.outcome = _OUTCOMES[int(code)]
                 break
             if k >= end:
                 break

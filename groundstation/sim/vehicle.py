@@ -29,6 +29,7 @@ from .physics import (
     X_THRUST,
     X_V,
     X_W,
+    vehicle_command,
     vehicle_step,
 )
 
@@ -80,7 +81,7 @@ class Multicopter:
         q0 = rotmat_to_quat(attitude_from_yaw_pitch_roll(math.radians(spec.yaw_deg)))
         self.q = [float(c) for c in q0]
         self.thrust_n = self.cmd_thrust_n = spec.mass_kg * GRAVITY_M_S2
-        self._max_rate = math.radians(spec.max_rate_deg_s)
+        self.max_rate_rad_s = math.radians(spec.max_rate_deg_s)
         self._lag_dt = -1.0
         self._lag = np.zeros(4)
 
@@ -102,32 +103,18 @@ class Multicopter:
 
     def command(self, body_rates_flu_rad_s: np.ndarray, thrust_normalised: float) -> None:
         """Body rates (rad/s FLU, clamped to the rate limit per axis) and normalised thrust
-        (clamped to [0, 1]): they take effect at the next step."""
-        lim = self._max_rate
-        w = (
-            body_rates_flu_rad_s.tolist()
-            if isinstance(body_rates_flu_rad_s, np.ndarray)
-            else body_rates_flu_rad_s
+        (clamped to [0, 1]): they take effect at the next step
+        (:func:`.physics.vehicle_command`)."""
+        w = body_rates_flu_rad_s
+        vehicle_command(
+            self.x,
+            self.max_rate_rad_s,
+            self.params.max_thrust_n,
+            float(w[0]),
+            float(w[1]),
+            float(w[2]),
+            float(thrust_normalised),
         )
-        c0, c1, c2 = w
-        c0, c1, c2 = float(c0), float(c1), float(c2)
-        # min(max(c, -lim), lim) per axis, written out (a NaN stays NaN either way)
-        if c0 < -lim:
-            c0 = -lim
-        if c0 > lim:
-            c0 = lim
-        if c1 < -lim:
-            c1 = -lim
-        if c1 > lim:
-            c1 = lim
-        if c2 < -lim:
-            c2 = -lim
-        if c2 > lim:
-            c2 = lim
-        t = min(max(float(thrust_normalised), 0.0), 1.0)
-        x = self.x
-        x[X_CMD_W], x[X_CMD_W + 1], x[X_CMD_W + 2] = c0, c1, c2
-        x[X_CMD_THRUST] = t * self.params.max_thrust_n
 
     def step(self, dt: float, wind: tuple[float, float, float]) -> None:
         """Advance one step of ``dt`` (s) in ``wind`` (m/s, ENU): :func:`vehicle_step`."""
