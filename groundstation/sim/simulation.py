@@ -315,7 +315,9 @@ class Simulation:
                 cmd = cmds.popleft()
             if cmd is not None:
                 due, rates, thrust = cmd
-                buf[S_CMD : S_CMD + 5] = (max(due, k), rates[0], rates[1], rates[2], thrust)
+                buf[S_CMD] = max(due, k)
+                buf[S_CMD + 1], buf[S_CMD + 2], buf[S_CMD + 3] = rates[0], rates[1], rates[2]
+                buf[S_CMD + 4] = thrust
             m = cmds[0][0] - k if cmds and cmds[0][0] < end else end - k
             if wind.gusty:
                 normals, ni = wind.prepare(self.dt_s, m)
