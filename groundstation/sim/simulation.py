@@ -202,6 +202,10 @@ class Simulation:
         """Closest approach so far (m)."""
         return float(self.closest[C_MISS])
 
+    @miss_m.setter
+    def miss_m(self, value: float) -> None:
+        self.closest[C_MISS] = value
+
     @property
     def closest_time_s(self) -> float:
         return float(self.closest[C_TIME])
