@@ -126,3 +126,12 @@ def test_physics_steps_on_sortie_states(name):
         sim.step_control_period()  # on along the sortie
         if sim.done:
             break
+
+
+def test_closest_approach():
+    rng = np.random.default_rng(6)
+    for i in range(CASES):
+        r = rng.normal(0.0, 2.0, 6)
+        if i % 10 == 0:
+            r[3:] = r[:3]  # no relative motion over the step
+        assert same(ph.closest_approach(*r), ph.closest_approach.py_func(*r)), i

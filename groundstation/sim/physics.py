@@ -328,6 +328,31 @@ def gust_step(x: np.ndarray, c: np.ndarray, n0: float, n1: float, n2: float) -> 
     x[0], x[1], x[2] = c[0] + g0, c[1] + g1, c[2] + g2
 
 
+@kernel("UniTuple(f8, 7)(f8, f8, f8, f8, f8, f8)")
+def closest_approach(
+    r0x: float, r0y: float, r0z: float, r1x: float, r1y: float, r1z: float
+) -> tuple:
+    """Closest approach within one physics step, the relative position moving linearly from
+    r0 to r1 (target minus vehicle, m): (distance, fraction of the step, the relative
+    position there (3), r0 . (r1 - r0), r1 . (r1 - r0)); the range was closing at the start
+    iff the first dot product is negative and is opening at the end iff the second is
+    positive."""
+    d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    r0d = r0x * d0 + r0y * d1 + r0z * d2
+    if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0)
+        s = -r0d / dd
+        if s < 0.0:
+            s = 0.0
+        elif s > 1.0:
+            s = 1.0
+    else:
+        s = 0.0
+    c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
+    dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    return dist, s, c0, c1, c2, r0d, r1x * d0 + r1y * d1 + r1z * d2
+
+
 # the simulator's outcome state Simulation.closest: relative position (target minus vehicle,
 # m) at the end of the last step, closest approach so far (m), its time (s), the vehicle's
 # speed then (m/s), the relative position and the vehicle's velocity then, the outcome code
@@ -436,19 +461,7 @@ def physics_steps(
             ni += 1
         # closest approach inside the step just taken, then hit/miss, divergence and ground
         r1x, r1y, r1z = tx[0] - px, tx[1] - py, tx[2] - pz
-        d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        r0d = r0x * d0 + r0y * d1 + r0z * d2
-        if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0)
-            s = -r0d / dd
-            if s < 0.0:
-                s = 0.0
-            elif s > 1.0:
-                s = 1.0
-        else:
-            s = 0.0
-        c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
-        dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        dist, s, c0, c1, c2, r0d, r1d = closest_approach(r0x, r0y, r0z, r1x, r1y, r1z)
         r0x, r0y, r0z = r1x, r1y, r1z
         cs[0], cs[1], cs[2] = r1x, r1y, r1z
         if dist < miss:
@@ -459,7 +472,7 @@ def physics_steps(
             cs[6], cs[7], cs[8] = c0, c1, c2
             cs[9], cs[10], cs[11] = vvx, vvy, vvz
         outcome = OUTCOME_NONE
-        if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
+        if dist < PASS_RADIUS_M and r0d < 0.0 and r1d > 0.0:
             # closing at the start of the step, opening at its end, near: it is over
             outcome = OUTCOME_HIT if miss <= hit_r else OUTCOME_MISS
         elif (

@@ -46,6 +46,7 @@ from .physics import (
     OUTCOME_MISS,
     S_CMD,
     S_CS,
+    closest_approach,
     physics_steps,
     sortie_buffer,
 )
@@ -90,15 +91,12 @@ class SortieResult:
 def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool]:
     """Closest approach within one physics step, the relative position moving linearly from
     ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
-    position there, whether the range was closing at the start and is opening at the end."""
-    d0, d1, d2 = r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]
-    dd = d0 * d0 + d1 * d1 + d2 * d2
-    r0d = r0[0] * d0 + r0[1] * d1 + r0[2] * d2
-    s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
-    c = (r0[0] + s * d0, r0[1] + s * d1, r0[2] + s * d2)
-    dist = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-    opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
-    return dist, s, c, r0d < 0.0, opening_now
+    position there, whether the range was closing at the start and is opening at the end
+    (:func:`.physics.closest_approach`, the kernel's own check)."""
+    dist, s, c0, c1, c2, r0d, r1d = closest_approach(
+        float(r0[0]), float(r0[1]), float(r0[2]), float(r1[0]), float(r1[1]), float(r1[2])
+    )
+    return dist, s, (c0, c1, c2), r0d < 0.0, r1d > 0.0
 
 
 class Simulation:
