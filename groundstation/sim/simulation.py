@@ -29,13 +29,38 @@ from onboard.runtime.fc_state import vehicle_state_at
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
 from .estimate import Normals, StateEstimateModel
+from .physics import (
+    C_CLOSE_REL,
+    C_CLOSE_VEL,
+    C_HIT_R,
+    C_MISS,
+    C_OUTCOME,
+    C_REL,
+    C_SIZE,
+    C_SPEED,
+    C_TIME,
+    C_TWO,
+    OUTCOME_CRASHED,
+    OUTCOME_DIVERGED,
+    OUTCOME_HIT,
+    OUTCOME_MISS,
+    S_CMD,
+    S_CS,
+    closest_approach,
+    physics_steps,
+    sortie_buffer,
+)
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
 
-PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
-DIVERGED_SPEED_M_S = 60.0
-_DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
+_OUTCOMES = {
+    OUTCOME_HIT: Outcome.HIT,
+    OUTCOME_MISS: Outcome.MISS,
+    OUTCOME_DIVERGED: Outcome.DIVERGED,
+    OUTCOME_CRASHED: Outcome.CRASHED,
+}
+_NO_NORMALS = np.zeros((0, 3))  # the gusts' draws of a wind without gusts
 
 
 @dataclass(frozen=True)
@@ -66,15 +91,12 @@ class SortieResult:
 def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool]:
     """Closest approach within one physics step, the relative position moving linearly from
     ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
-    position there, whether the range was closing at the start and is opening at the end."""
-    d0, d1, d2 = r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]
-    dd = d0 * d0 + d1 * d1 + d2 * d2
-    r0d = r0[0] * d0 + r0[1] * d1 + r0[2] * d2
-    s = min(max(-r0d / dd, 0.0), 1.0) if dd > 0.0 else 0.0
-    c = (r0[0] + s * d0, r0[1] + s * d1, r0[2] + s * d2)
-    dist = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-    opening_now = (r1[0] * d0 + r1[1] * d1 + r1[2] * d2) > 0.0
-    return dist, s, c, r0d < 0.0, opening_now
+    position there, whether the range was closing at the start and is opening at the end
+    (:func:`.physics.closest_approach`, the kernel's own check)."""
+    dist, s, c0, c1, c2, r0d, r1d = closest_approach(
+        float(r0[0]), float(r0[1]), float(r0[2]), float(r1[0]), float(r1[1]), float(r1[2])
+    )
+    return dist, s, (c0, c1, c2), r0d < 0.0, r1d > 0.0
 
 
 class Simulation:
@@ -130,7 +152,6 @@ class Simulation:
             else TrackTarget(scenario.target, *target_track)
         )
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
-        self._target_moves = self.target.moves
         self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
         self.loop = InterceptionLoop(
@@ -150,13 +171,15 @@ class Simulation:
         self.last_telemetry: ControlTelemetry | None = None
         self.last_detection: Detection | None = None  # latest delivered (delayed) detection
         tp, vp = self.target.p, self.vehicle.p
-        self._rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
-        self.initial_range_m = math.sqrt(sum(c * c for c in self._rel))
-        self.miss_m = self.initial_range_m
-        self.closest_time_s = 0.0
-        self.closest_speed_m_s = 0.0
-        self.closest_rel_m = tuple(self._rel)  # target minus vehicle at closest approach
-        self.closest_vel_m_s = tuple(self.vehicle.v)
+        rel = (tp[0] - vp[0], tp[1] - vp[1], tp[2] - vp[2])
+        self.initial_range_m = math.sqrt(sum(c * c for c in rel))
+        # vehicle, target, wind, closest approach and outcome in one array for the kernel
+        self._physics = sortie_buffer(self.vehicle, self.target, self.wind, self.dt_s)
+        self.closest = cs = self._physics[S_CS : S_CS + C_SIZE]  # C_* layout
+        cs[C_REL : C_REL + 3] = cs[C_CLOSE_REL : C_CLOSE_REL + 3] = rel
+        cs[C_MISS] = self.initial_range_m
+        cs[C_CLOSE_VEL : C_CLOSE_VEL + 3] = self.vehicle.v
+        cs[C_HIT_R], cs[C_TWO] = self.hit_radius_m, 2.0
         self.max_normal_accel_m_s2 = 0.0
         self.normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
@@ -171,6 +194,34 @@ class Simulation:
     @property
     def time_s(self) -> float:
         return self.step_index * self.dt_s
+
+    @property
+    def miss_m(self) -> float:
+        """Closest approach so far (m)."""
+        return float(self.closest[C_MISS])
+
+    @miss_m.setter
+    def miss_m(self, value: float) -> None:
+        self.closest[C_MISS] = value
+
+    @property
+    def closest_time_s(self) -> float:
+        return float(self.closest[C_TIME])
+
+    @property
+    def closest_speed_m_s(self) -> float:
+        """The vehicle's speed at the closest approach (m/s)."""
+        return float(self.closest[C_SPEED])
+
+    @property
+    def closest_rel_m(self) -> tuple[float, float, float]:
+        """Target minus vehicle at the closest approach (m, ENU)."""
+        return tuple(self.closest[C_CLOSE_REL : C_CLOSE_REL + 3].tolist())
+
+    @property
+    def closest_vel_m_s(self) -> tuple[float, float, float]:
+        """The vehicle's velocity at the closest approach (m/s, ENU)."""
+        return tuple(self.closest[C_CLOSE_VEL : C_CLOSE_VEL + 3].tolist())
 
     @property
     def done(self) -> bool:
@@ -248,81 +299,41 @@ class Simulation:
     def _physics_steps(self, k0: int, n: int) -> None:
         """Integrate vehicle, target and wind from step k0 over ``n`` steps (no camera frame
         or control tick due in between), checking the outcome after each and stopping at
-        one. One vehicle generator (:meth:`Multicopter.integrate`) and the outcome check in
-        locals: this is the simulator's hot path."""
-        dt = self.dt_s
+        one: :func:`.physics.physics_steps`, one call unless two commands arrive within
+        the ``n`` steps."""
         cmds = self._commands
-        wind = self.wind  # evaluated where each body is
-        uniform, gusty = wind.uniform, wind.gusty
-        target, moves = self.target, self._target_moves
-        veh = self.vehicle
-        tp = target.p
-        hit_r = self.hit_radius_m
-        miss = self.miss_m
-        r0x, r0y, r0z = self._rel
-        vp = veh.p  # where the vehicle is at the start of a step (for the wind there)
-        steps = veh.integrate(dt)
-        steps.send(None)
-        k = k0
-        try:
-            for k in range(k0, k0 + n):
-                t = k * dt
-                while cmds and cmds[0][0] <= k:  # commands reach the actuators after their latency
-                    _, rates, thrust = cmds.popleft()
-                    veh.command(rates, thrust)
-                if uniform:  # the same everywhere: no lookups
-                    w = wind.velocity_m_s
-                    px, py, pz, vx, vy, vz, fin = steps.send(w)
-                    if moves:
-                        target.advance(t + dt, dt, w)
-                        tp = target.p
-                else:
-                    px, py, pz, vx, vy, vz, fin = steps.send(wind.at(vp))
-                    target.advance(t + dt, dt, wind.at(tp))
-                    tp = target.p
-                    vp = (px, py, pz)
-                if gusty:
-                    wind.step(dt)
-                # closest approach inside the step just taken (as closest_in_step, inlined),
-                # then hit/miss, divergence and ground contact
-                r1x, r1y, r1z = tp[0] - px, tp[1] - py, tp[2] - pz
-                d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
-                dd = d0 * d0 + d1 * d1 + d2 * d2
-                r0d = r0x * d0 + r0y * d1 + r0z * d2
-                if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0) without the calls
-                    s = -r0d / dd
-                    if s < 0.0:
-                        s = 0.0
-                    elif s > 1.0:
-                        s = 1.0
-                else:
-                    s = 0.0
-                c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
-                dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-                r0x, r0y, r0z = r1x, r1y, r1z
-                if dist < miss:
-                    miss = dist
-                    self.miss_m = dist
-                    self.closest_time_s = t + s * dt
-                    self.closest_speed_m_s = math.sqrt(vx**2 + vy**2 + vz**2)
-                    self.closest_rel_m = (c0, c1, c2)
-                    self.closest_vel_m_s = (vx, vy, vz)
-                if dist < PASS_RADIUS_M and r0d < 0.0 and (r1x * d0 + r1y * d1 + r1z * d2) > 0.0:
-                    # closing at the start of the step, opening at its end, near: it is over
-                    self.outcome = Outcome.HIT if miss <= hit_r else Outcome.MISS
-                elif (
-                    not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))
-                    or vx * vx + vy * vy + vz * vz > _DIVERGED_SPEED2
-                ):
-                    self.outcome = Outcome.DIVERGED
-                elif pz <= 0.0:
-                    self.outcome = Outcome.CRASHED
-                if self.outcome is not None:
-                    break
-        finally:
-            steps.close()
-            self._rel = (r0x, r0y, r0z)
-            self.step_index = k + 1
+        buf = self._physics
+        wind = self.wind
+        track = self.target.track
+        normals, ni = _NO_NORMALS, 0
+        k, end = k0, k0 + n
+        while True:
+            # commands reach the actuators after their latency: the latest one due now, else
+            # the next one due within these steps, goes to the kernel
+            cmd = None
+            while cmds and cmds[0][0] <= k:
+                cmd = cmds.popleft()
+            if cmd is None and cmds and cmds[0][0] < end:
+                cmd = cmds.popleft()
+            if cmd is not None:
+                due, rates, thrust = cmd
+                buf[S_CMD] = max(due, k)
+                buf[S_CMD + 1], buf[S_CMD + 2], buf[S_CMD + 3] = rates[0], rates[1], rates[2]
+                buf[S_CMD + 4] = thrust
+            m = cmds[0][0] - k if cmds and cmds[0][0] < end else end - k
+            if wind.gusty:
+                normals, ni = wind.prepare(self.dt_s, m)
+            taken = physics_steps(k, m, buf, track, normals, ni)
+            if wind.gusty:
+                wind.used(taken)
+            k += taken
+            code = buf[S_CS + C_OUTCOME]
+            if code != 0.0:
+                self.outcome = _OUTCOMES[int(code)]
+                break
+            if k >= end:
+                break
+        self.step_index = k
 
     def _as_the_runtime_hands_it(self, t: float, truth: tuple, gyro: np.ndarray) -> VehicleState:
         """The estimated state of ``truth`` (position, velocity, attitude, rates as tuples) at

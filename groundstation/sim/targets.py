@@ -21,20 +21,71 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from ..scenario import TargetSpec
 from ..scenario.physics import AIR_DENSITY_KG_M3, balloon_lift_and_mass
+from .physics import (
+    KIND_TRACK,
+    MOTIONS,
+    T_A0,
+    T_AMP,
+    T_ANCHOR,
+    T_CENTER,
+    T_CIRCLE_W,
+    T_DRAG_K,
+    T_LIFT,
+    T_MASS,
+    T_MAX_SPEED,
+    T_P0,
+    T_RADIUS,
+    T_ROPE,
+    T_SIN_W,
+    T_SIZE,
+    T_START,
+    T_TWO,
+    T_V0,
+    target_step,
+)
+
+
+def _slot(i: int) -> property:
+    """A list view of x[i:i+3] (a copy: assign the whole vector to change it)."""
+
+    def get(self: Target) -> list[float]:
+        return self.x[i : i + 3].tolist()
+
+    def put(self: Target, value) -> None:
+        self.x[i : i + 3] = value
+
+    return property(get, put)
 
 
 class Target:
+    """A target: position ``p`` and velocity ``v`` (lists, m and m/s ENU) over the state
+    array :attr:`x`, moved by :func:`.physics.target_step` with :attr:`kind` and
+    :attr:`params`."""
+
+    p = _slot(0)
+    v = _slot(3)
+
     def __init__(self, spec: TargetSpec) -> None:
         self.spec = spec
-        self.p = list(spec.position_m)
-        self.v = (
-            [0.0, 0.0, 0.0] if spec.motion in ("static", "takeoff") else list(spec.velocity_m_s)
-        )
-        self.radius_m = spec.diameter_m / 2.0
-        self.moves = spec.motion != "static"  # False: advance() never changes it
         s = spec
+        self.kind = MOTIONS.index(s.motion)
+        self.x = np.zeros(6)
+        self.track = np.zeros((0, 4))  # (time s, x, y, z m) rows of a recorded track
+        self.p = list(s.position_m)
+        self.v = [0.0, 0.0, 0.0] if s.motion in ("static", "takeoff") else list(s.velocity_m_s)
+        self.radius_m = s.diameter_m / 2.0
+        self.moves = s.motion != "static"  # False: advance() never changes it
+        c = np.zeros(T_SIZE)
+        c[T_P0 : T_P0 + 3] = s.position_m
+        c[T_V0 : T_V0 + 3] = s.velocity_m_s
+        c[T_A0 : T_A0 + 3] = s.acceleration_m_s2
+        c[T_MAX_SPEED] = s.max_speed_m_s
+        c[T_START] = s.start_s
+        c[T_TWO] = 2.0
         if s.motion == "circle":
             self._center = (s.position_m[0] - s.radius_m, s.position_m[1], s.position_m[2])
             self._omega = 2.0 * math.pi / s.period_s
@@ -42,13 +93,21 @@ class Target:
                 v + d
                 for v, d in zip(s.velocity_m_s, (0.0, s.radius_m * self._omega, 0.0), strict=True)
             ]
+            c[T_CENTER : T_CENTER + 3] = self._center
+            c[T_RADIUS], c[T_CIRCLE_W] = s.radius_m, self._omega
         if s.motion == "sinusoid":
             w = 2.0 * math.pi / s.period_s
             self.v = [v + a * w for v, a in zip(s.velocity_m_s, s.amplitude_m, strict=True)]
+            c[T_AMP : T_AMP + 3] = s.amplitude_m
+            c[T_SIN_W] = w
         if s.motion == "tethered":
             self._anchor = (s.position_m[0], s.position_m[1], s.position_m[2] - s.tether_length_m)
             self._drag_k = 0.5 * AIR_DENSITY_KG_M3 * s.drag_coefficient * math.pi * self.radius_m**2
             self.net_lift_n, self.mass_kg = balloon_lift_and_mass(s)
+            c[T_ANCHOR : T_ANCHOR + 3] = self._anchor
+            c[T_DRAG_K], c[T_LIFT], c[T_MASS] = self._drag_k, self.net_lift_n, self.mass_kg
+            c[T_ROPE] = s.tether_length_m
+        self.params = c
 
     def settle_in_wind(self, wind_at: Callable[[list[float]], Sequence[float]]) -> None:
         """Tethered: start leaning at rest in the mean wind (rope along lift + drag), as a
@@ -70,69 +129,10 @@ class Target:
         self.p = p
         self.v = [0.0, 0.0, 0.0]
 
-    def advance(self, t: float, dt: float, wind: tuple[float, float, float]) -> None:
-        s = self.spec
-        m = s.motion
-        if m == "static":
-            return
-        # written out per component: this runs at every physics step
-        p0, v0, a0 = s.position_m, s.velocity_m_s, s.acceleration_m_s2
-        if m == "cv":
-            self.p = [p0[0] + v0[0] * t, p0[1] + v0[1] * t, p0[2] + v0[2] * t]
-        elif m == "ca":
-            self.p = [
-                p0[0] + v0[0] * t + 0.5 * a0[0] * t * t,
-                p0[1] + v0[1] * t + 0.5 * a0[1] * t * t,
-                p0[2] + v0[2] * t + 0.5 * a0[2] * t * t,
-            ]
-            self.v = [v0[0] + a0[0] * t, v0[1] + a0[1] * t, v0[2] + a0[2] * t]
-        elif m == "sinusoid":
-            w = 2.0 * math.pi / s.period_s
-            sn, cs = math.sin(w * t), math.cos(w * t)
-            amp = s.amplitude_m
-            self.p = [
-                p0[0] + v0[0] * t + amp[0] * sn,
-                p0[1] + v0[1] * t + amp[1] * sn,
-                p0[2] + v0[2] * t + amp[2] * sn,
-            ]
-            self.v = [v0[0] + amp[0] * w * cs, v0[1] + amp[1] * w * cs, v0[2] + amp[2] * w * cs]
-        elif m == "circle":
-            c, r, w = self._center, s.radius_m, self._omega
-            cs, sn = math.cos(w * t), math.sin(w * t)
-            self.p = [c[0] + r * cs + v0[0] * t, c[1] + r * sn + v0[1] * t, c[2] + v0[2] * t]
-            self.v = [-r * w * sn + v0[0], r * w * cs + v0[1], v0[2]]
-        elif m == "takeoff":
-            tc = max(t - s.start_s, 0.0)
-            self.p = [p0[i] + v0[i] * tc for i in range(3)]
-            self.v = list(v0) if t > s.start_s else [0.0, 0.0, 0.0]
-        elif m == "escape":
-            v = [self.v[i] + a0[i] * dt for i in range(3)]
-            speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-            if speed > s.max_speed_m_s:
-                v = [c * s.max_speed_m_s / speed for c in v]
-            self.v = v
-            self.p = [self.p[i] + v[i] * dt for i in range(3)]
-        elif m == "tethered":
-            self._tether_step(dt, wind)
-
-    def _tether_step(self, dt: float, wind: tuple[float, float, float]) -> None:
-        s = self.spec
-        rel = [wind[i] - self.v[i] for i in range(3)]
-        speed = math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
-        f = [self._drag_k * speed * rel[i] for i in range(3)]
-        f[2] += self.net_lift_n
-        v = [self.v[i] + f[i] / self.mass_kg * dt for i in range(3)]
-        p = [self.p[i] + v[i] * dt for i in range(3)]
-        # the rope: project back onto the sphere and drop the outward radial velocity
-        d = [p[i] - self._anchor[i] for i in range(3)]
-        dist = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-        if dist > s.tether_length_m:
-            u = [c / dist for c in d]
-            p = [self._anchor[i] + u[i] * s.tether_length_m for i in range(3)]
-            vr = v[0] * u[0] + v[1] * u[1] + v[2] * u[2]
-            if vr > 0.0:
-                v = [v[i] - vr * u[i] for i in range(3)]
-        self.p, self.v = p, v
+    def advance(self, t: float, dt: float, wind: Sequence[float]) -> None:
+        """Move to time ``t`` (s), ``dt`` after the last call, in ``wind`` (m/s ENU, where
+        the target is): :func:`.physics.target_step`."""
+        target_step(self.kind, self.params, self.track, self.x, t, dt, wind[0], wind[1], wind[2])
 
 
 class TrackTarget(Target):
@@ -143,21 +143,11 @@ class TrackTarget(Target):
         super().__init__(spec)
         if len(times_s) < 2 or len(times_s) != len(positions_m):
             raise ValueError("a target track needs at least two (time, position) samples")
-        self._t = list(times_s)
-        self._p = [tuple(map(float, p)) for p in positions_m]
+        self.kind = KIND_TRACK
+        self.track = np.array(
+            [(float(t), *map(float, p)) for t, p in zip(times_s, positions_m, strict=True)]
+        )
         self.moves = True
-        self.p = list(self._p[0])
-        self.v = self._velocity(0)
-
-    def _velocity(self, i: int) -> list[float]:
-        i = min(max(i, 0), len(self._t) - 2)
-        dt = self._t[i + 1] - self._t[i]
-        return [(b - a) / dt for a, b in zip(self._p[i], self._p[i + 1], strict=True)]
-
-    def advance(self, t: float, dt: float, wind) -> None:
-        import bisect
-
-        i = min(max(bisect.bisect_right(self._t, t) - 1, 0), len(self._t) - 2)
-        v = self._velocity(i)
-        self.v = v
-        self.p = [a + vi * (t - self._t[i]) for a, vi in zip(self._p[i], v, strict=True)]
+        t0 = self.track[0, 0]
+        self.advance(t0, 0.0, (0.0, 0.0, 0.0))  # the first segment's velocity
+        self.p = self.track[0, 1:].tolist()

@@ -41,36 +41,53 @@ import math
 import numpy as np
 
 from ..scenario import WindSpec
-from .estimate import Normals
+from .physics import (
+    JET_DECAY_B,
+    JET_SPREAD_S,
+    W_A,
+    W_B,
+    W_DIA,
+    W_JET,
+    W_MEAN,
+    W_REF,
+    W_SIGMA,
+    W_SIZE,
+    W_SOURCE,
+    gust_step,
+    jet_factor,
+    wind_at,
+)
 
-JET_DECAY_B = 5.8  # U_c / U_0 = B D / x (Hussein et al. 1994; Pope Table 5.1)
-JET_SPREAD_S = 0.094  # r_1/2 = S x
+__all__ = ["JET_DECAY_B", "JET_SPREAD_S", "VERTICAL_GUST_RATIO", "Wind", "jet_profile"]
+
 VERTICAL_GUST_RATIO = 0.3
-_LN2 = math.log(2.0)
+_BLOCK = 256  # standard normals drawn per call
 
 
 def jet_profile(spec: WindSpec, p: tuple[float, float, float], on_axis: bool = False) -> float:
     """U(x, r) / U_0 of the fan jet at ``p`` (m, ENU), or with ``on_axis`` U_c(x) / U_0 at
-    p's distance along the axis; 0 behind the fan or without a mean."""
-    m = spec.mean_m_s
-    speed = math.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
-    if speed <= 0.0:
-        return 0.0
-    s = spec.jet_source_m
-    d = (p[0] - s[0], p[1] - s[1], p[2] - s[2])
-    x = (d[0] * m[0] + d[1] * m[1] + d[2] * m[2]) / speed
-    if x <= 0.0:
-        return 0.0
-    if on_axis:
-        return min(1.0, JET_DECAY_B * spec.jet_diameter_m / x)
-    r2 = max(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - x * x, 0.0)
-    dia = spec.jet_diameter_m
-    r_half = max(0.5 * dia, JET_SPREAD_S * x)
-    return min(1.0, JET_DECAY_B * dia / x) * math.exp(-_LN2 * r2 / (r_half * r_half))
+    p's distance along the axis; 0 behind the fan or without a mean
+    (:func:`.physics.jet_factor`)."""
+    m, s = spec.mean_m_s, spec.jet_source_m
+    return jet_factor(
+        float(m[0]),
+        float(m[1]),
+        float(m[2]),
+        float(s[0]),
+        float(s[1]),
+        float(s[2]),
+        float(spec.jet_diameter_m),
+        float(p[0]),
+        float(p[1]),
+        float(p[2]),
+        bool(on_axis),
+    )
 
 
 class Wind:
-    """``at(p)``: the wind (m/s, ENU) at a point now; ``step(dt)`` advances the gusts."""
+    """``at(p)``: the wind (m/s, ENU) at a point now; ``step(dt)`` advances the gusts. The
+    state (mean + gust now, the gust) is the array :attr:`x`, the constants :attr:`params`
+    (:mod:`.physics`' W_* layout); the gusts' standard normals come from :meth:`normals`."""
 
     def __init__(
         self,
@@ -80,7 +97,6 @@ class Wind:
     ) -> None:
         self.spec = spec
         self._rng = rng
-        self._gust = [0.0, 0.0, 0.0]
         g = spec.gust_m_s
         self._sigma = (g, g, VERTICAL_GUST_RATIO * g)
         self._jet = spec.model == "jet"
@@ -89,20 +105,32 @@ class Wind:
         self._ref_profile = jet_profile(spec, reference_m, on_axis=True) if self._jet else 1.0
         if self._jet and not self._ref_profile > 0.0:
             raise ValueError("the fan jet does not reach the reference point")
-        self.velocity_m_s = tuple(spec.mean_m_s)  # mean + gust at the reference point
+        c = np.zeros(W_SIZE)
+        c[W_MEAN : W_MEAN + 3] = spec.mean_m_s
+        c[W_SIGMA : W_SIGMA + 3] = self._sigma
+        c[W_JET] = 1.0 if self._jet else 0.0
+        c[W_REF] = self._ref_profile
+        c[W_SOURCE : W_SOURCE + 3] = spec.jet_source_m
+        c[W_DIA] = spec.jet_diameter_m
+        self.params = c
+        self.x = np.zeros(6)
+        self.x[0:3] = spec.mean_m_s  # mean + gust at the reference point
         if g > 0.0:
             # start in the stationary distribution, not at zero
-            self._gust = [
-                s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3), strict=True)
-            ]
-            self._update_total()
-        self._normals = Normals(rng, 3)  # the gusts' draws, the stream continued
+            m = spec.mean_m_s
+            gust = [s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3), strict=True)]
+            self.x[3:6] = gust
+            self.x[0:3] = (m[0] + gust[0], m[1] + gust[1], m[2] + gust[2])
+        # the gusts' draws, the stream continued a block at a time (the sequence does not
+        # depend on the block)
+        self._normals = np.zeros((0, 3))
+        self._next = 0  # the row of _normals the next step uses
         self._dt_s = -1.0
-        self._a = self._b = 0.0
 
-    def _update_total(self) -> None:
-        m = self.spec.mean_m_s
-        self.velocity_m_s = (m[0] + self._gust[0], m[1] + self._gust[1], m[2] + self._gust[2])
+    @property
+    def velocity_m_s(self) -> tuple[float, float, float]:
+        """Mean + gust at the reference point (m/s ENU)."""
+        return tuple(self.x[0:3].tolist())
 
     def scale_at(self, p) -> float:
         """The profile factor at ``p``: 1 for uniform wind, U(p) / U(reference) for the jet."""
@@ -112,11 +140,9 @@ class Wind:
 
     def at(self, p) -> tuple[float, float, float]:
         """The wind now at ``p`` (m, ENU)."""
-        w = self.velocity_m_s
         if not self._jet:
-            return w
-        f = self.scale_at(p)
-        return (f * w[0], f * w[1], f * w[2])
+            return self.velocity_m_s
+        return wind_at(self.x, self.params, float(p[0]), float(p[1]), float(p[2]))
 
     def mean_at(self, p) -> tuple[float, float, float]:
         """The mean wind (no gust) at ``p``."""
@@ -124,19 +150,28 @@ class Wind:
         m = self.spec.mean_m_s
         return (f * m[0], f * m[1], f * m[2])
 
+    def prepare(self, dt: float, n: int) -> tuple[np.ndarray, int]:
+        """Make ready ``n`` gust steps of ``dt`` (s): the factors for the step size, and
+        standard normals for ``n`` steps from the returned row of the returned array (call
+        :meth:`used` with the steps taken)."""
+        if dt != self._dt_s:  # the factors, once per step size
+            self._dt_s = dt
+            a = math.exp(-dt / self.spec.gust_time_constant_s)
+            self.params[W_A], self.params[W_B] = a, math.sqrt(1.0 - a * a)
+        i = self._next
+        if i + n > len(self._normals):
+            more = self._rng.standard_normal((max(_BLOCK, n), 3))
+            self._normals = np.concatenate((self._normals[i:], more))
+            self._next = i = 0
+        return self._normals, i
+
+    def used(self, n: int) -> None:
+        """``n`` of the prepared steps were taken."""
+        self._next += n
+
     def step(self, dt: float) -> None:
         if not self.gusty:
             return
-        if dt != self._dt_s:  # the factors, once per step size
-            self._dt_s = dt
-            self._a = math.exp(-dt / self.spec.gust_time_constant_s)
-            self._b = math.sqrt(1.0 - self._a * self._a)
-        a, b = self._a, self._b
-        n = self._normals.next()
-        g, s = self._gust, self._sigma
-        self._gust = [
-            a * g[0] + b * s[0] * n[0],
-            a * g[1] + b * s[1] * n[1],
-            a * g[2] + b * s[2] * n[2],
-        ]
-        self._update_total()
+        normals, i = self.prepare(dt, 1)
+        gust_step(self.x, self.params, normals[i, 0], normals[i, 1], normals[i, 2])
+        self._next = i + 1

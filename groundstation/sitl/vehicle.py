@@ -67,8 +67,9 @@ from onboard.link.px4 import MODE_HOLD, MODE_OFFBOARD, MavLink, mavlink, px4_mod
 from ..scenario import EstimateSpec, Scenario
 from ..sim.camera import DetectorFaults, apparent_radius_px
 from ..sim.estimate import StateEstimateModel
+from ..sim.physics import PASS_RADIUS_M
 from ..sim.render import FrameRenderer
-from ..sim.simulation import PASS_RADIUS_M, closest_in_step
+from ..sim.simulation import closest_in_step
 from ..sim.targets import Target
 from ..sim.vehicle import Multicopter
 from ..sim.wind import Wind
@@ -148,7 +149,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         self._nav_goal: list[float] | None = None  # TAKEOFF / LAND / RTL target (ENU)
         self._rtl_phase = ""
         if self.landed:
-            self.vehicle.p[2] = 0.0
+            self.vehicle.p = [*self.vehicle.p[:2], 0.0]
         self.target = Target(scenario.target)
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
         self.target.settle_in_wind(self.wind.mean_at)
@@ -298,7 +299,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         ):
             self.landed, self._landed_at_s = False, None
             return False
-        veh.v, veh.w, veh.p[2] = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.0
+        veh.v, veh.w, veh.p = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [*veh.p[:2], 0.0]
         veh.thrust_n = veh.cmd_thrust_n = 0.0
         delay = self.params["COM_DISARM_LAND"]
         if self.armed and self._landed_at_s is not None and 0 <= delay <= t - self._landed_at_s:
@@ -309,7 +310,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
 
     def _touchdown(self, t: float) -> None:
         veh = self.vehicle
-        veh.p[2], veh.v = 0.0, [0.0, 0.0, 0.0]
+        veh.p, veh.v = [*veh.p[:2], 0.0], [0.0, 0.0, 0.0]
         self.landed, self._landed_at_s = True, t
         if self.custom_mode in (MODE_LAND, MODE_RTL):
             self.custom_mode, self._nav_goal = MODE_HOLD, None

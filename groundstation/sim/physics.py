@@ -1,0 +1,488 @@
+"""The simulator's physics as compiled kernels (:mod:`onboard.jit`): the multicopter's step,
+the target's motions, the wind (gusts, the fan jet's profile) and :func:`physics_steps`, which
+runs every physics step between two events (camera frame, control tick, command arrival) in
+one call: vehicle, target and wind, then the closest approach inside the step and the
+outcome. The Python classes (:class:`~.vehicle.Multicopter`, :class:`~.targets.Target`,
+:class:`~.wind.Wind`) keep their state in float64 arrays these kernels update in place.
+
+All of them live in this one module: numba's on-disk cache is keyed on the source file of the
+function it compiled, so a kernel that calls another must be cached from the same file or an
+edit to the callee would leave a stale compiled caller. The arithmetic is the Python code's,
+operation for operation (no fast-math): ``x ** 2`` is libm's ``pow`` in Python, so the
+kernels call ``math.pow(x, two)`` with ``two`` = 2.0 passed in at run time (a constant 2
+would be folded into ``x * x``, which rounds differently in about 0.1 % of cases).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from onboard.datatypes import GRAVITY_M_S2
+from onboard.jit import kernel
+
+PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
+DIVERGED_SPEED_M_S = 60.0
+_DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
+
+# the state array Multicopter.x: position, velocity (m, m/s ENU), attitude (w, x, y, z body
+# -> world), body rates (rad/s FLU), kinematic acceleration of the last step (m/s^2),
+# achieved thrust (N), commanded rates and thrust, body rates summed since the last gyro read
+# and how many steps that sum holds
+X_P, X_V, X_Q, X_W, X_ACC, X_THRUST = 0, 3, 6, 10, 13, 16
+X_CMD_W, X_CMD_THRUST, X_RATE_SUM, X_RATE_N = 17, 20, 21, 24
+X_SIZE = 25
+# the per-step-size constants Multicopter.lag(dt): rate lag, thrust lag, drag / mass (1/s), mass
+L_RATE, L_THRUST, L_DRAG, L_MASS = 0, 1, 2, 3
+
+
+@kernel("f8(f8[::1], f8[::1], f8, f8, f8, f8)")
+def vehicle_step(
+    x: np.ndarray, lag: np.ndarray, dt: float, wx: float, wy: float, wz: float
+) -> float:
+    """Advance the state ``x`` (X_* layout) one step of ``dt`` (s) in the wind (wx, wy, wz)
+    (m/s ENU, where the vehicle is at the start of the step), in place; return the sum of
+    position, velocity, attitude and body rates after it (finite iff they all are)."""
+    aw, at, kd, mass = lag[0], lag[1], lag[2], lag[3]
+    w0, w1, w2 = x[10], x[11], x[12]
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    vx, vy, vz = x[3], x[4], x[5]
+    px, py, pz = x[0], x[1], x[2]
+    thrust_n = x[16]
+    w0 += (x[17] - w0) * aw
+    w1 += (x[18] - w1) * aw
+    w2 += (x[19] - w2) * aw
+    x[21] += w0
+    x[22] += w1
+    x[23] += w2
+    x[24] += 1.0
+    thrust_n += (x[20] - thrust_n) * at
+    # attitude: q <- q (x) exp(w dt / 2)
+    rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    ang = rate * dt
+    if ang > 1e-12:
+        h = 0.5 * ang
+        sh = math.sin(h) / (ang / dt)
+        dw, dx, dy, dz = math.cos(h), w0 * sh, w1 * sh, w2 * sh
+        qw, qx, qy, qz = (
+            qw * dw - qx * dx - qy * dy - qz * dz,
+            qw * dx + qx * dw + qy * dz - qz * dy,
+            qw * dy - qx * dz + qy * dw + qz * dx,
+            qw * dz + qx * dy - qy * dx + qz * dw,
+        )
+        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        qw, qx, qy, qz = qw * n, qx * n, qy * n, qz * n
+    # thrust axis z_B in the world
+    ft = thrust_n / mass
+    ax = ft * (2.0 * (qx * qz + qw * qy)) - kd * (vx - wx)
+    ay = ft * (2.0 * (qy * qz - qw * qx)) - kd * (vy - wy)
+    az = ft * (1.0 - 2.0 * (qx * qx + qy * qy)) - kd * (vz - wz) - GRAVITY_M_S2
+    vx += ax * dt
+    vy += ay * dt
+    vz += az * dt
+    px, py, pz = px + vx * dt, py + vy * dt, pz + vz * dt
+    x[0], x[1], x[2] = px, py, pz
+    x[3], x[4], x[5] = vx, vy, vz
+    x[6], x[7], x[8], x[9] = qw, qx, qy, qz
+    x[10], x[11], x[12] = w0, w1, w2
+    x[13], x[14], x[15] = ax, ay, az
+    x[16] = thrust_n
+    return px + py + pz + vx + vy + vz + qw + qx + qy + qz + w0 + w1 + w2
+
+
+@kernel("void(f8[::1], f8, f8, f8, f8, f8, f8)")
+def vehicle_command(
+    x: np.ndarray, max_rate: float, max_thrust_n: float, c0: float, c1: float, c2: float, t: float
+) -> None:
+    """Command body rates (c0, c1, c2) (rad/s FLU, clamped to ``max_rate`` per axis) and
+    normalised thrust ``t`` (clamped to [0, 1], times ``max_thrust_n``) into the state ``x``:
+    they take effect at the next step. A NaN stays NaN."""
+    lim = max_rate
+    # min(max(c, -lim), lim) per axis, written out
+    if c0 < -lim:
+        c0 = -lim
+    if c0 > lim:
+        c0 = lim
+    if c1 < -lim:
+        c1 = -lim
+    if c1 > lim:
+        c1 = lim
+    if c2 < -lim:
+        c2 = -lim
+    if c2 > lim:
+        c2 = lim
+    if t < 0.0:  # min(max(t, 0.0), 1.0)
+        t = 0.0
+    if t > 1.0:
+        t = 1.0
+    x[17], x[18], x[19] = c0, c1, c2
+    x[20] = t * max_thrust_n
+
+
+# motions as the kernel knows them
+MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "takeoff", "escape", "tethered", "track")
+KIND_TRACK = MOTIONS.index("track")
+# the parameter array Target.params: start position, velocity, acceleration (m, m/s, m/s^2),
+# sinusoid amplitude (m) and angular rate (rad/s), circle centre (m), radius (m) and angular
+# rate, takeoff start (s), escape top speed (m/s), tether anchor (m), drag factor
+# 0.5 rho C_d A (kg/m), net lift (N), mass with added air mass (kg), rope length (m), and the
+# exponent 2.0 of Python's ``x ** 2`` (libm's pow, as the Python code squares: a constant 2
+# would be folded into x * x, which rounds differently in about 0.1 % of cases)
+T_P0, T_V0, T_A0, T_AMP, T_SIN_W, T_CENTER, T_RADIUS, T_CIRCLE_W = 0, 3, 6, 9, 12, 13, 16, 17
+T_START, T_MAX_SPEED, T_ANCHOR, T_DRAG_K, T_LIFT, T_MASS, T_ROPE, T_TWO = (
+    18,
+    19,
+    20,
+    23,
+    24,
+    25,
+    26,
+    27,
+)
+T_SIZE = 28
+
+
+@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)")
+def target_step(
+    kind: int,
+    c: np.ndarray,
+    track: np.ndarray,
+    x: np.ndarray,
+    t: float,
+    dt: float,
+    wx: float,
+    wy: float,
+    wz: float,
+) -> None:
+    """Move the target of motion ``MOTIONS[kind]`` (parameters ``c``, T_* layout; ``track``
+    rows (time s, x, y, z m) for a recorded track) to time ``t`` (s), a step of ``dt`` after
+    the last, in the wind (wx, wy, wz) (m/s ENU, where it is): its position and velocity
+    ``x`` (m, m/s ENU) in place."""
+    if kind == 0:  # static
+        return
+    if kind == 1:  # cv: p0 + v t
+        x[0] = c[0] + c[3] * t
+        x[1] = c[1] + c[4] * t
+        x[2] = c[2] + c[5] * t
+    elif kind == 2:  # ca: p0 + v t + a t^2 / 2
+        x[0] = c[0] + c[3] * t + 0.5 * c[6] * t * t
+        x[1] = c[1] + c[4] * t + 0.5 * c[7] * t * t
+        x[2] = c[2] + c[5] * t + 0.5 * c[8] * t * t
+        x[3] = c[3] + c[6] * t
+        x[4] = c[4] + c[7] * t
+        x[5] = c[5] + c[8] * t
+    elif kind == 3:  # sinusoid: p0 + v t + amplitude sin(w t)
+        w = c[12]
+        sn, cs = math.sin(w * t), math.cos(w * t)
+        x[0] = c[0] + c[3] * t + c[9] * sn
+        x[1] = c[1] + c[4] * t + c[10] * sn
+        x[2] = c[2] + c[5] * t + c[11] * sn
+        x[3] = c[3] + c[9] * w * cs
+        x[4] = c[4] + c[10] * w * cs
+        x[5] = c[5] + c[11] * w * cs
+    elif kind == 4:  # circle about the centre plus a drift
+        r, w = c[16], c[17]
+        cs, sn = math.cos(w * t), math.sin(w * t)
+        x[0] = c[13] + r * cs + c[3] * t
+        x[1] = c[14] + r * sn + c[4] * t
+        x[2] = c[15] + c[5] * t
+        x[3] = -r * w * sn + c[3]
+        x[4] = r * w * cs + c[4]
+        x[5] = c[5]
+    elif kind == 5:  # takeoff: rests until start_s, then climbs at v
+        tc = t - c[18]
+        if tc < 0.0:  # max(t - start_s, 0.0)
+            tc = 0.0
+        x[0] = c[0] + c[3] * tc
+        x[1] = c[1] + c[4] * tc
+        x[2] = c[2] + c[5] * tc
+        if t > c[18]:
+            x[3], x[4], x[5] = c[3], c[4], c[5]
+        else:
+            x[3], x[4], x[5] = 0.0, 0.0, 0.0
+    elif kind == 6:  # escape: accelerates up to its top speed
+        v0, v1, v2 = x[3] + c[6] * dt, x[4] + c[7] * dt, x[5] + c[8] * dt
+        two = c[27]
+        speed = math.sqrt(math.pow(v0, two) + math.pow(v1, two) + math.pow(v2, two))
+        top = c[19]
+        if speed > top:
+            v0, v1, v2 = v0 * top / speed, v1 * top / speed, v2 * top / speed
+        x[3], x[4], x[5] = v0, v1, v2
+        x[0], x[1], x[2] = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
+    elif kind == 7:  # tethered balloon: lift, quadratic drag of the wind, the rope
+        two = c[27]
+        r0, r1, r2 = wx - x[3], wy - x[4], wz - x[5]
+        speed = math.sqrt(math.pow(r0, two) + math.pow(r1, two) + math.pow(r2, two))
+        k = c[23]
+        f0, f1, f2 = k * speed * r0, k * speed * r1, k * speed * r2
+        f2 += c[24]
+        m = c[25]
+        v0, v1, v2 = x[3] + f0 / m * dt, x[4] + f1 / m * dt, x[5] + f2 / m * dt
+        p0, p1, p2 = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
+        # the rope: project back onto the sphere and drop the outward radial velocity
+        d0, d1, d2 = p0 - c[20], p1 - c[21], p2 - c[22]
+        dist = math.sqrt(math.pow(d0, two) + math.pow(d1, two) + math.pow(d2, two))
+        rope = c[26]
+        if dist > rope:
+            u0, u1, u2 = d0 / dist, d1 / dist, d2 / dist
+            p0, p1, p2 = c[20] + u0 * rope, c[21] + u1 * rope, c[22] + u2 * rope
+            vr = v0 * u0 + v1 * u1 + v2 * u2
+            if vr > 0.0:
+                v0, v1, v2 = v0 - vr * u0, v1 - vr * u1, v2 - vr * u2
+        x[0], x[1], x[2] = p0, p1, p2
+        x[3], x[4], x[5] = v0, v1, v2
+    elif kind == 8:  # a recorded track, linear between samples, continued at its last velocity
+        n = track.shape[0]
+        lo, hi = 0, n  # bisect_right over the times
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if t < track[mid, 0]:
+                hi = mid
+            else:
+                lo = mid + 1
+        i = lo - 1
+        if i < 0:
+            i = 0
+        if i > n - 2:
+            i = n - 2
+        span = track[i + 1, 0] - track[i, 0]
+        v0 = (track[i + 1, 1] - track[i, 1]) / span
+        v1 = (track[i + 1, 2] - track[i, 2]) / span
+        v2 = (track[i + 1, 3] - track[i, 3]) / span
+        x[3], x[4], x[5] = v0, v1, v2
+        x[0] = track[i, 1] + v0 * (t - track[i, 0])
+        x[1] = track[i, 2] + v1 * (t - track[i, 0])
+        x[2] = track[i, 3] + v2 * (t - track[i, 0])
+
+
+# the wind's state array Wind.x: mean + gust now (m/s ENU), the gust; its parameter array
+# Wind.params: the mean (m/s), the gusts' sigmas (m/s), the gust step's factors a and b for
+# the current step size, 1.0 for the fan jet (0.0 uniform), the jet's profile at the
+# reference point, the fan's outlet centre (m) and diameter (m)
+W_MEAN, W_SIGMA, W_A, W_B, W_JET, W_REF, W_SOURCE, W_DIA = 0, 3, 6, 7, 8, 9, 10, 13
+W_SIZE = 14
+JET_DECAY_B = 5.8  # U_c / U_0 = B D / x (Hussein et al. 1994; Pope Table 5.1)
+JET_SPREAD_S = 0.094  # r_1/2 = S x
+_LN2 = math.log(2.0)
+
+
+@kernel("f8(f8, f8, f8, f8, f8, f8, f8, f8, f8, f8, b1)")
+def jet_factor(
+    m0: float,
+    m1: float,
+    m2: float,
+    s0: float,
+    s1: float,
+    s2: float,
+    dia: float,
+    px: float,
+    py: float,
+    pz: float,
+    on_axis: bool,
+) -> float:
+    """U(x, r) / U_0 of the fan jet of mean (m0, m1, m2) (m/s) from the outlet (s0, s1, s2)
+    of diameter ``dia`` (m) at (px, py, pz) (m, ENU), or with ``on_axis`` U_c(x) / U_0 at
+    p's distance along the axis; 0 behind the fan or without a mean (wind.py's model)."""
+    speed = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    if speed <= 0.0:
+        return 0.0
+    d0, d1, d2 = px - s0, py - s1, pz - s2
+    x = (d0 * m0 + d1 * m1 + d2 * m2) / speed
+    if x <= 0.0:
+        return 0.0
+    core = JET_DECAY_B * dia / x
+    if not core < 1.0:  # min(1.0, core)
+        core = 1.0
+    if on_axis:
+        return core
+    r2 = d0 * d0 + d1 * d1 + d2 * d2 - x * x
+    if r2 < 0.0:  # max(r2, 0.0)
+        r2 = 0.0
+    r_half = 0.5 * dia
+    if JET_SPREAD_S * x > r_half:  # max(0.5 D, S x)
+        r_half = JET_SPREAD_S * x
+    return core * math.exp(-_LN2 * r2 / (r_half * r_half))
+
+
+@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8)")
+def wind_at(x: np.ndarray, c: np.ndarray, px: float, py: float, pz: float) -> tuple:
+    """The wind now (m/s ENU) at (px, py, pz) (m): the state ``x`` times the jet's profile
+    relative to the reference point (uniform: ``x`` itself)."""
+    if c[8] == 0.0:
+        return x[0], x[1], x[2]
+    f = jet_factor(c[0], c[1], c[2], c[10], c[11], c[12], c[13], px, py, pz, False) / c[9]
+    return f * x[0], f * x[1], f * x[2]
+
+
+@kernel("void(f8[::1], f8[::1], f8, f8, f8)")
+def gust_step(x: np.ndarray, c: np.ndarray, n0: float, n1: float, n2: float) -> None:
+    """One step of the gusts' Gauss-Markov process (g <- a g + b sigma n for the standard
+    normals n; a, b in ``c`` for the step size) and the total mean + gust, in ``x``."""
+    a, b = c[6], c[7]
+    g0 = a * x[3] + b * c[3] * n0
+    g1 = a * x[4] + b * c[4] * n1
+    g2 = a * x[5] + b * c[5] * n2
+    x[3], x[4], x[5] = g0, g1, g2
+    x[0], x[1], x[2] = c[0] + g0, c[1] + g1, c[2] + g2
+
+
+@kernel("UniTuple(f8, 7)(f8, f8, f8, f8, f8, f8)")
+def closest_approach(
+    r0x: float, r0y: float, r0z: float, r1x: float, r1y: float, r1z: float
+) -> tuple:
+    """Closest approach within one physics step, the relative position moving linearly from
+    r0 to r1 (target minus vehicle, m): (distance, fraction of the step, the relative
+    position there (3), r0 . (r1 - r0), r1 . (r1 - r0)); the range was closing at the start
+    iff the first dot product is negative and is opening at the end iff the second is
+    positive."""
+    d0, d1, d2 = r1x - r0x, r1y - r0y, r1z - r0z
+    dd = d0 * d0 + d1 * d1 + d2 * d2
+    r0d = r0x * d0 + r0y * d1 + r0z * d2
+    if dd > 0.0:  # min(max(-r0d / dd, 0.0), 1.0)
+        s = -r0d / dd
+        if s < 0.0:
+            s = 0.0
+        elif s > 1.0:
+            s = 1.0
+    else:
+        s = 0.0
+    c0, c1, c2 = r0x + s * d0, r0y + s * d1, r0z + s * d2
+    dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    return dist, s, c0, c1, c2, r0d, r1x * d0 + r1y * d1 + r1z * d2
+
+
+# the simulator's outcome state Simulation.closest: relative position (target minus vehicle,
+# m) at the end of the last step, closest approach so far (m), its time (s), the vehicle's
+# speed then (m/s), the relative position and the vehicle's velocity then, the outcome code
+# (OUTCOME_* below), the hit radius (m) and the exponent 2.0 (see the module's docstring)
+C_REL, C_MISS, C_TIME, C_SPEED, C_CLOSE_REL, C_CLOSE_VEL, C_OUTCOME, C_HIT_R, C_TWO = (
+    0,
+    3,
+    4,
+    5,
+    6,
+    9,
+    12,
+    13,
+    14,
+)
+C_SIZE = 15
+OUTCOME_NONE, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_DIVERGED, OUTCOME_CRASHED = 0, 1, 2, 3, 4
+
+
+# One sortie's physics in one array (so that a kernel call passes one array, not a dozen):
+# the vehicle's state and constants, the target's constants and state, the wind's state and
+# constants, the closest approach and outcome, the command on its way to the actuators (the
+# step it arrives at, -1 for none; body rates rad/s FLU, normalised thrust; the rate limit
+# rad/s and the maximum thrust N), the target's kind and the step (s). The objects' arrays
+# become views into it (:func:`sortie_buffer`).
+S_VX = 0
+S_LAG = S_VX + X_SIZE
+S_TC = S_LAG + 4
+S_TX = S_TC + T_SIZE
+S_WX = S_TX + 6
+S_WC = S_WX + 6
+S_CS = S_WC + W_SIZE
+S_CMD = S_CS + C_SIZE
+S_KIND = S_CMD + 7
+S_DT = S_KIND + 1
+S_SIZE = S_DT + 1
+
+
+def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray:
+    """The S_* array for one sortie of ``vehicle`` (:class:`~.vehicle.Multicopter`),
+    ``target`` (:class:`~.targets.Target`) and ``wind`` (:class:`~.wind.Wind`) in steps of
+    ``dt`` (s): their state and constant arrays are copied in and replaced by views into it,
+    so they read and write the same numbers :func:`physics_steps` does. The closest-approach
+    part starts zero (the caller fills it)."""
+    buf = np.zeros(S_SIZE)
+    for obj, name, at, size in (
+        (vehicle, "x", S_VX, X_SIZE),
+        (target, "params", S_TC, T_SIZE),
+        (target, "x", S_TX, 6),
+        (wind, "x", S_WX, 6),
+        (wind, "params", S_WC, W_SIZE),
+    ):
+        view = buf[at : at + size]
+        view[:] = getattr(obj, name)
+        setattr(obj, name, view)
+    buf[S_LAG : S_LAG + 4] = vehicle.lag(dt)
+    buf[S_CMD] = -1.0
+    buf[S_CMD + 5], buf[S_CMD + 6] = vehicle.max_rate_rad_s, vehicle.params.max_thrust_n
+    buf[S_KIND], buf[S_DT] = target.kind, dt
+    return buf
+
+
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], i8)")
+def physics_steps(
+    k0: int, n: int, buf: np.ndarray, track: np.ndarray, normals: np.ndarray, ni: int
+) -> int:
+    """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
+    recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps, the gusts
+    drawing rows of standard ``normals`` from ``ni``; the command in ``buf`` reaches the
+    vehicle at the start of its step. Each body feels the wind where it is at the start of
+    the step. After each step, the closest approach inside it in continuous time (relative
+    motion linear over the step) and the outcome; stop at an outcome. Return the number of
+    steps taken."""
+    vx = buf[S_VX : S_VX + X_SIZE]
+    lag = buf[S_LAG : S_LAG + 4]
+    tc = buf[S_TC : S_TC + T_SIZE]
+    tx = buf[S_TX : S_TX + 6]
+    wx = buf[S_WX : S_WX + 6]
+    wc = buf[S_WC : S_WC + W_SIZE]
+    cs = buf[S_CS : S_CS + C_SIZE]
+    dt = buf[S_DT]
+    kind = int(buf[S_KIND])
+    two = cs[14]
+    hit_r = cs[13]
+    miss = cs[3]
+    r0x, r0y, r0z = cs[0], cs[1], cs[2]
+    gusty = wc[3] > 0.0
+    for k in range(k0, k0 + n):
+        t = k * dt
+        due = buf[S_CMD]
+        if due >= 0.0 and due <= k:  # the command reaches the actuators
+            c = S_CMD
+            vehicle_command(
+                vx, buf[c + 5], buf[c + 6], buf[c + 1], buf[c + 2], buf[c + 3], buf[c + 4]
+            )
+            buf[S_CMD] = -1.0
+        w0, w1, w2 = wind_at(wx, wc, vx[0], vx[1], vx[2])
+        fin = vehicle_step(vx, lag, dt, w0, w1, w2)
+        px, py, pz = vx[0], vx[1], vx[2]
+        vvx, vvy, vvz = vx[3], vx[4], vx[5]
+        if kind != 0:
+            w0, w1, w2 = wind_at(wx, wc, tx[0], tx[1], tx[2])
+            target_step(kind, tc, track, tx, t + dt, dt, w0, w1, w2)
+        if gusty:
+            gust_step(wx, wc, normals[ni, 0], normals[ni, 1], normals[ni, 2])
+            ni += 1
+        # closest approach inside the step just taken, then hit/miss, divergence and ground
+        r1x, r1y, r1z = tx[0] - px, tx[1] - py, tx[2] - pz
+        dist, s, c0, c1, c2, r0d, r1d = closest_approach(r0x, r0y, r0z, r1x, r1y, r1z)
+        r0x, r0y, r0z = r1x, r1y, r1z
+        cs[0], cs[1], cs[2] = r1x, r1y, r1z
+        if dist < miss:
+            miss = dist
+            cs[3] = dist
+            cs[4] = t + s * dt
+            cs[5] = math.sqrt(math.pow(vvx, two) + math.pow(vvy, two) + math.pow(vvz, two))
+            cs[6], cs[7], cs[8] = c0, c1, c2
+            cs[9], cs[10], cs[11] = vvx, vvy, vvz
+        outcome = OUTCOME_NONE
+        if dist < PASS_RADIUS_M and r0d < 0.0 and r1d > 0.0:
+            # closing at the start of the step, opening at its end, near: it is over
+            outcome = OUTCOME_HIT if miss <= hit_r else OUTCOME_MISS
+        elif (
+            not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))
+            or vvx * vvx + vvy * vvy + vvz * vvz > _DIVERGED_SPEED2
+        ):
+            outcome = OUTCOME_DIVERGED
+        elif pz <= 0.0:
+            outcome = OUTCOME_CRASHED
+        if outcome != OUTCOME_NONE:
+            cs[12] = outcome
+            return k - k0 + 1
+    return n

@@ -1,0 +1,137 @@
+"""Each physics kernel (groundstation/sim/physics.py) compiled computes bit for bit what its own
+Python source (``k.py_func``) computes, on seeded random inputs: states, parameters, every
+target motion, both wind models, the command clamp (NaN included) and whole stretches of a
+sortie's physics from real scenarios."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from groundstation.scenario import load_scenario
+from groundstation.sim import physics as ph
+from groundstation.sim.simulation import Simulation
+from onboard import jit
+
+pytestmark = pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing compiled")
+
+CASES = 200
+
+
+def same(a, b) -> bool:
+    """Bit for bit (NaNs and the sign of zero included)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def both(k, arrays: tuple, *args):
+    """Run the compiled kernel and its Python source on copies of ``arrays`` (mutated in
+    place) followed by ``args``; return (compiled result, arrays), (Python result, arrays)."""
+    out = []
+    for f in (k, k.py_func):
+        copies = tuple(a.copy() for a in arrays)
+        out.append((f(*copies, *args), copies))
+    return out
+
+
+def test_vehicle_step():
+    rng = np.random.default_rng(1)
+    for i in range(CASES):
+        x = rng.normal(0.0, 3.0, ph.X_SIZE)
+        q = rng.normal(size=4)
+        x[ph.X_Q : ph.X_Q + 4] = q / np.linalg.norm(q)
+        x[ph.X_THRUST] = x[ph.X_CMD_THRUST] = abs(x[ph.X_THRUST]) * 5.0
+        if i % 10 == 0:
+            x[ph.X_W : ph.X_W + 3] = x[ph.X_CMD_W : ph.X_CMD_W + 3] = 0.0  # no rotation
+        lag = np.array([rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0, 2), 0.6])
+        (r1, a1), (r2, a2) = both(ph.vehicle_step, (x, lag), 1.0 / 600.0, *rng.normal(size=3))
+        assert same(r1, r2) and same(a1[0], a2[0]), i
+
+
+def test_vehicle_command_clamps_like_python():
+    rng = np.random.default_rng(2)
+    for i in range(CASES):
+        c = rng.normal(0.0, 6.0, 4)
+        if i % 7 == 0:
+            c[i % 4] = np.nan
+        t = float(rng.uniform(-0.5, 1.5)) if i % 9 else float("nan")
+        (_, a1), (_, a2) = both(ph.vehicle_command, (np.zeros(ph.X_SIZE),), 3.5, 29.4, *c[:3], t)
+        assert same(a1[0], a2[0]), i
+
+
+@pytest.mark.parametrize("kind", range(len(ph.MOTIONS)), ids=ph.MOTIONS)
+def test_target_step_every_motion(kind):
+    rng = np.random.default_rng(10 + kind)
+    for i in range(CASES // 2):
+        c = rng.normal(0.0, 3.0, ph.T_SIZE)
+        c[ph.T_MAX_SPEED] = abs(c[ph.T_MAX_SPEED]) + 0.5
+        c[ph.T_DRAG_K], c[ph.T_MASS] = 0.01, abs(c[ph.T_MASS]) * 0.01 + 0.005
+        c[ph.T_ROPE] = abs(c[ph.T_ROPE]) + 0.1
+        c[ph.T_TWO] = 2.0
+        times = np.cumsum(rng.uniform(0.1, 1.0, 6))
+        track = np.column_stack([times, rng.normal(0.0, 5.0, (6, 3))])
+        x = rng.normal(0.0, 2.0, 6)
+        t = float(rng.uniform(-1.0, 8.0))
+        wind = rng.normal(size=3)
+        out = []
+        for f in (ph.target_step, ph.target_step.py_func):
+            xc = x.copy()
+            f(kind, c, track, xc, t, 1.0 / 600.0, *wind)
+            out.append(xc)
+        assert same(out[0], out[1]), (kind, i)
+
+
+def test_jet_factor_and_wind_at():
+    rng = np.random.default_rng(3)
+    for i in range(CASES):
+        m, s, p = rng.normal(0.0, 3.0, 3), rng.normal(0.0, 2.0, 3), rng.normal(0.0, 4.0, 3)
+        dia = float(rng.uniform(0.1, 1.0))
+        for on_axis in (False, True):
+            args = (*m, *s, dia, *p, on_axis)
+            assert same(ph.jet_factor(*args), ph.jet_factor.py_func(*args)), i
+        c = np.zeros(ph.W_SIZE)
+        c[ph.W_MEAN : ph.W_MEAN + 3], c[ph.W_SOURCE : ph.W_SOURCE + 3] = m, s
+        c[ph.W_DIA], c[ph.W_JET], c[ph.W_REF] = dia, float(i % 2), rng.uniform(0.2, 1.0)
+        x = rng.normal(0.0, 3.0, 6)
+        assert same(ph.wind_at(x, c, *p), ph.wind_at.py_func(x, c, *p)), i
+
+
+def test_gust_step():
+    rng = np.random.default_rng(4)
+    for i in range(CASES):
+        c = rng.normal(0.0, 2.0, ph.W_SIZE)
+        (_, a1), (_, a2) = both(ph.gust_step, (rng.normal(size=6), c), *rng.normal(size=3))
+        assert same(a1[0], a2[0]), i
+
+
+@pytest.mark.parametrize(
+    "name", ["cv-top-to-bottom", "indoor-tethered-wind-4", "outdoor-escape", "outdoor-circle"]
+)
+def test_physics_steps_on_sortie_states(name):
+    """Stretches of 1..20 steps from a real sortie's state, perturbed, with a command on its
+    way: the compiled kernel and its Python source leave the same array and step count."""
+    rng = np.random.default_rng(5)
+    sim = Simulation(load_scenario(name), "png", 1, keep_records=False)
+    for i in range(20):
+        buf = sim._physics.copy()
+        buf[ph.S_VX : ph.S_VX + 6] += rng.normal(0.0, 0.5, 6)
+        buf[ph.S_CMD : ph.S_CMD + 5] = (i % 4, *rng.normal(0.0, 2.0, 3), rng.uniform(0, 1))
+        n, ni = int(rng.integers(1, 21)), int(rng.integers(0, 5))
+        normals = rng.standard_normal((30, 3))
+        out = []
+        for f in (ph.physics_steps, ph.physics_steps.py_func):
+            b = buf.copy()
+            out.append((f(i, n, b, sim.target.track, normals, ni), b))
+        assert out[0][0] == out[1][0] and same(out[0][1], out[1][1]), (name, i)
+        sim.step_control_period()  # on along the sortie
+        if sim.done:
+            break
+
+
+def test_closest_approach():
+    rng = np.random.default_rng(6)
+    for i in range(CASES):
+        r = rng.normal(0.0, 2.0, 6)
+        if i % 10 == 0:
+            r[3:] = r[:3]  # no relative motion over the step
+        assert same(ph.closest_approach(*r), ph.closest_approach.py_func(*r)), i
