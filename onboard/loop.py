@@ -267,9 +267,9 @@ class InterceptionLoop:
         than the hold let it turn too far: the excess (the fraction beyond the hold, at most
         one hold's worth) is taken off this one's, so the turn summed over the commands stays
         K times the LOS change (with the low-pass on, the LOS change is filtered as a rate
-        instead, over the elapsed time, per hold). None: the hold is the elapsed time, as on a fixed grid (the simulator: nothing else changes).
-        The runtime passes its period: an early tick re-anchors its grid, so its command is
-        held a whole period."""
+        instead, over the elapsed time, per hold). None: the hold is the elapsed time, as on a
+        fixed grid (the simulator: nothing else changes). The runtime passes its period: an
+        early tick re-anchors its grid, so its command is held a whole period."""
         t = state.time_s
         if self._pending_gains is not None:
             self.gains, self._pending_gains = self._pending_gains, None
