@@ -12,6 +12,8 @@ There is one implementation of each kernel either way.
 from __future__ import annotations
 
 import os
+import sys
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -20,6 +22,24 @@ F = TypeVar("F", bound=Callable[..., Any])
 ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
 
 KERNELS: list[Callable[..., Any]] = []  # every kernel defined so far, compiled or not
+
+# a kernel loaded from numba's cache takes milliseconds; one compiled takes seconds
+_SLOW_COMPILE_S = 0.5
+_told_compiling = False
+
+
+def _tell_compiling(name: str) -> None:
+    """Say once per process why it is slow to start: the kernels are being compiled (the
+    first run after an install or an upgrade; cached on disk afterwards)."""
+    global _told_compiling
+    if not _told_compiling:
+        _told_compiling = True
+        print(
+            f"peregrine: compiling the numba kernels ({name}, ...): once after an install or "
+            "upgrade, about half a minute; cached on disk afterwards",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def kernel(signature: str | None = None) -> Callable[[F], F]:
@@ -37,7 +57,10 @@ def kernel(signature: str | None = None) -> Callable[[F], F]:
         if signature is None:
             compiled = numba.njit(**options)(fn)
         else:
+            t0 = time.perf_counter()
             compiled = numba.njit(signature, **options)(fn)
+            if time.perf_counter() - t0 > _SLOW_COMPILE_S:
+                _tell_compiling(fn.__qualname__)
         KERNELS.append(compiled)
         return compiled
 

@@ -45,6 +45,7 @@ def test_disabled_kernel_is_the_function_itself(monkeypatch):
 @pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
 def test_compiled_kernel_equals_its_source_bit_for_bit(monkeypatch):
     monkeypatch.setattr(jit, "KERNELS", [])
+
     # a sum that depends on the order of its operations: no reassociation, no FMA
     def dot_then_scale(a: np.ndarray, b: np.ndarray, k: float) -> float:
         s = 0.0
