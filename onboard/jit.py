@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -23,8 +22,6 @@ ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
 
 KERNELS: list[Callable[..., Any]] = []  # every kernel defined so far, compiled or not
 
-# a kernel loaded from numba's cache takes milliseconds; one compiled takes seconds
-_SLOW_COMPILE_S = 0.5
 _told_compiling = False
 
 
@@ -57,9 +54,9 @@ def kernel(signature: str | None = None) -> Callable[[F], F]:
         if signature is None:
             compiled = numba.njit(**options)(fn)
         else:
-            t0 = time.perf_counter()
             compiled = numba.njit(signature, **options)(fn)
-            if time.perf_counter() - t0 > _SLOW_COMPILE_S:
+            stats = getattr(compiled, "stats", None)  # a cache miss: it was compiled
+            if stats is not None and sum(stats.cache_misses.values()):
                 _tell_compiling(fn.__qualname__)
         KERNELS.append(compiled)
         return compiled

@@ -82,3 +82,22 @@ def test_sorties_fly_the_same_compiled_and_as_python():
     assert [len(getattr(k, "signatures", ())) for k in jit.KERNELS] == signatures_before
     for k in jit.KERNELS:
         assert len(k.signatures) >= 1, k
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_a_cold_cache_says_it_is_compiling_once_and_a_warm_one_is_silent(tmp_path):
+    (tmp_path / "tiny_kernels.py").write_text(
+        "from onboard.jit import kernel\n"
+        "@kernel('float64(float64)')\n"
+        "def twice(x):\n    return 2.0 * x\n"
+        "@kernel('float64(float64)')\n"
+        "def thrice(x):\n    return 3.0 * x\n"
+    )
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    run = [sys.executable, "-c", "import tiny_kernels as k; print(k.twice(2.0) + k.thrice(1.0))"]
+    cold = subprocess.run(run, env=env, capture_output=True, text=True, check=True, timeout=300)
+    warm = subprocess.run(run, env=env, capture_output=True, text=True, check=True, timeout=300)
+    assert cold.stdout.strip() == warm.stdout.strip() == "7.0"
+    assert cold.stderr.count("compiling the numba kernels") == 1, cold.stderr
+    assert "compiling" not in warm.stderr, warm.stderr
