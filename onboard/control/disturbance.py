@@ -320,23 +320,33 @@ def feedforward_accel(
     disturbance_enu_m_s2: np.ndarray, velocity_enu_m_s: np.ndarray, v_min_m_s: float
 ) -> np.ndarray:
     """The acceleration to add to a_d (m/s^2, ENU): -d^ normal to the velocity, and its
-    along-track part only near hover, fading out from |v| = v_min to 2 v_min.
+    along-track part only near hover, fading out from |v| = v_min to 2 v_min
+    (:func:`feedforward_floats`)."""
+    d0, d1, d2 = _floats(disturbance_enu_m_s2)
+    v0, v1, v2 = _floats(velocity_enu_m_s)
+    return np.array(feedforward_floats(d0, d1, d2, v0, v1, v2, float(v_min_m_s)))
+
+
+@kernel("UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64, float64)")
+def feedforward_floats(
+    d0: float, d1: float, d2: float, v0: float, v1: float, v2: float, v_min_m_s: float
+) -> tuple[float, float, float]:
+    """:func:`feedforward_accel` of d^ = (d0, d1, d2) and v = (v0, v1, v2) in floats
+    (compiled).
 
     In flight the speed ramp (eq. 14) owns the tangential channel with its own speed feedback;
     cancelling the along-track drag as well would add up to k_drag v of pitch-down during the
     ramp, which moves the target up the image (measured: 2 of 12 static targets lost off the
     top with full feed-forward). The normal part is what bends the path and makes the miss."""
-    d0, d1, d2 = _floats(disturbance_enu_m_s2)
     d0, d1, d2 = -d0, -d1, -d2
-    v0, v1, v2 = _floats(velocity_enu_m_s)
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     keep_tangential = min(max(2.0 - speed / v_min_m_s, 0.0), 1.0) if v_min_m_s > 0.0 else 0.0
     if keep_tangential >= 1.0 or speed < 1e-9:
-        return np.array([d0, d1, d2])
+        return d0, d1, d2
     u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
     a = d0 * u0 + d1 * u1 + d2 * u2
     g = 1.0 - keep_tangential
-    return np.array([d0 - g * (a * u0), d1 - g * (a * u1), d2 - g * (a * u2)])
+    return d0 - g * (a * u0), d1 - g * (a * u1), d2 - g * (a * u2)
 
 
 def _floats(x) -> list[float]:

@@ -16,6 +16,7 @@ from ..datatypes import GRAVITY_M_S2
 from ..enums import GuidanceLaw as Law
 from ..gains import Gains
 from ..geometry import wrap_pi
+from ..jit import kernel
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
@@ -94,8 +95,12 @@ def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: fl
 
 def normal_component(accel: np.ndarray, velocity: np.ndarray) -> float:
     """Magnitude of the part of ``accel`` normal to ``velocity`` (m/s^2)."""
-    a0, a1, a2 = _f3(accel)
-    v0, v1, v2 = _f3(velocity)
+    return normal_floats(*_f3(accel), *_f3(velocity))
+
+
+@kernel("float64(float64, float64, float64, float64, float64, float64)")
+def normal_floats(a0: float, a1: float, a2: float, v0: float, v1: float, v2: float) -> float:
+    """:func:`normal_component` in floats (compiled)."""
     vv = v0 * v0 + v1 * v1 + v2 * v2
     if vv < 1e-12:
         return math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
