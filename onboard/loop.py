@@ -11,11 +11,11 @@ from collections import deque
 import numpy as np
 
 from .camera_model import CameraModel
-from .control.attitude import attitude_command
+from .control.attitude import attitude_floats
 from .control.disturbance import (
     DisturbanceObserver,
     DisturbanceObserverConfig,
-    feedforward_accel,
+    feedforward_floats,
 )
 from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
@@ -24,7 +24,7 @@ from .control.guidance import (
     direction_angles,
     line_of_sight,
     los_change,
-    normal_component,
+    normal_floats,
     saturate_norm,
     smooth_los_change,
 )
@@ -294,22 +294,23 @@ class InterceptionLoop:
         if gains.t_att_lag > 0.0:
             R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
         R_WC = R_WB @ self.camera.R_BC
-        thrust_axis = R_WB[:, 2]  # body z in ENU
+        z0, z1, z2 = R_WB[0, 2], R_WB[1, 2], R_WB[2, 2]  # the thrust axis, body z in ENU
         v_est = state.velocity_enu_m_s
         v = v_est
+        v0, v1, v2 = v_est.tolist()
+        vf = (v0, v1, v2)  # v as floats
         lag = gains.t_vel_lag
         if lag > 0.0:
             # the velocity estimate is t_vel_lag old: add the acceleration since, from the
             # thrust last commanded along the thrust axis, gravity and the observer's d^ (in
             # floats: numpy's elementwise operations, in the same order, to the bit)
             k = self._thrust_n / self.vehicle.mass_kg
-            z0, z1, z2 = thrust_axis.tolist()
             a0, a1, a2 = z0 * k, z1 * k, z2 * k - GRAVITY_M_S2
             if self.disturbance.enabled:
                 d0, d1, d2 = self.disturbance.estimate_floats
                 a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
-            v0, v1, v2 = v_est.tolist()
-            v = np.array((v0 + lag * a0, v1 + lag * a1, v2 + lag * a2))
+            vf = (v0 + lag * a0, v1 + lag * a1, v2 + lag * a2)
+            v = np.array(vf)
         self._last_velocity = v
         if self._first_tick_s is None:
             self._first_tick_s = t
@@ -329,7 +330,13 @@ class InterceptionLoop:
             for det in dets:
                 self.last_fusion.append(self.dkf.fuse(det))
 
-        d_hat = self.disturbance.update(t, v_est, thrust_axis)
+        dob = self.disturbance
+        z0, z1, z2 = float(z0), float(z1), float(z2)
+        finite = math.isfinite  # the observer's input check (DisturbanceObserver.update)
+        if finite(v0) and finite(v1) and finite(v2) and finite(z0) and finite(z1) and finite(z2):
+            d_hat = dob.update_floats(t, (v0, v1, v2), (z0, z1, z2))
+        else:
+            d_hat = dob.estimate_floats
         est = self.dkf.estimate()
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
@@ -429,15 +436,21 @@ class InterceptionLoop:
 
         # disturbance feed-forward: the attitude loop flies a_d - d^ (normal to v in flight;
         # the guidance limit a_max applies to a_d, |d^| is clamped to a_max by the observer)
-        a_cmd = a_d + feedforward_accel(d_hat, v, gains.v_min) if self.disturbance.enabled else a_d
-        omega, thrust = attitude_command(a_cmd, R_WB, yaw_rate, gains, self.vehicle)
-        w0, w1, w2 = omega.tolist()
+        ad0, ad1, ad2 = a_d.tolist()
+        c0, c1, c2 = ad0, ad1, ad2
+        if dob.enabled:
+            f0, f1, f2 = feedforward_floats(*d_hat, *vf, gains.v_min)
+            c0, c1, c2 = c0 + f0, c1 + f1, c2 + f2
+        veh = self.vehicle
+        w0, w1, w2, thrust = attitude_floats(
+            c0, c1, c2, R_WB, yaw_rate, gains.k_R, gains.omega_max, veh.mass_kg, veh.max_thrust_n
+        )
         finite = math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
         guard = not (finite and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
         if guard:
             # never hand a non-finite or out-of-range command on: level hover instead
             self.guard_trips += 1
-            omega = np.zeros(3)
+            w0 = w1 = w2 = 0.0
             thrust = self.vehicle.hover_thrust_normalised
         self.disturbance.commanded(float(thrust))
         self._thrust_n = float(thrust) * self.vehicle.max_thrust_n
@@ -454,9 +467,9 @@ class InterceptionLoop:
             vel_elev_rad=s_y,
             vel_azim_rad=s_z,
             accel_desired_enu_m_s2=a_d,
-            accel_normal_desired_m_s2=normal_component(a_d, v),
+            accel_normal_desired_m_s2=normal_floats(ad0, ad1, ad2, *vf),
             yaw_rate_cmd_rad_s=yaw_rate,
-            command=RateThrustCommand(t, omega, float(thrust)),
+            command=RateThrustCommand(t, np.array((w0, w1, w2)), float(thrust)),
             dkf_time_since_detection_s=(math.inf if est is None else est.time_since_detection_s),
             dkf_lost=est is None or est.lost,
             guard_tripped=guard,

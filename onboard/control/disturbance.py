@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..datatypes import GRAVITY_M_S2
+from ..jit import kernel
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,7 +121,6 @@ class DisturbanceObserver:
 
     def __init__(self, config: DisturbanceObserverConfig) -> None:
         self.config = config
-        self.estimate_m_s2 = np.zeros(3)
         self._d = (0.0, 0.0, 0.0)  # d^ as floats (estimate_m_s2 is its array)
         self._v_hat: tuple[float, float, float] | None = None
         self._z_prev: tuple[float, float, float] | None = None
@@ -129,6 +129,11 @@ class DisturbanceObserver:
         self._thrust_n = config.mass_kg * GRAVITY_M_S2  # modelled achieved thrust
         self._thrust_cmd_n: float | None = None  # in force since the previous update
         self.resets = 0
+
+    @property
+    def estimate_m_s2(self) -> np.ndarray:
+        """d^ (m/s^2, ENU), a new array."""
+        return np.array(self._d)
 
     @property
     def estimate_floats(self) -> tuple[float, float, float]:
@@ -151,7 +156,6 @@ class DisturbanceObserver:
             drag_per_mass_1_s=drag_per_mass_1_s,
         )
         if not self.enabled:
-            self.estimate_m_s2 = np.zeros(3)
             self._d = (0.0, 0.0, 0.0)
             self._v_hat = None
 
@@ -169,94 +173,180 @@ class DisturbanceObserver:
         (unit); returns d^ (m/s^2, ENU). Bad or out-of-order input holds the estimate."""
         v = _finite3(velocity_enu_m_s)
         z = _finite3(thrust_axis_enu)
-        if v is None or z is None or not math.isfinite(time_s):
-            return self.estimate_m_s2
-        z0, z1, z2 = z
+        if v is not None and z is not None:
+            self.update_floats(time_s, v, z)
+        return np.array(self._d)
+
+    def update_floats(
+        self,
+        time_s: float,
+        velocity_enu_m_s: tuple[float, float, float],
+        thrust_axis_enu: tuple[float, float, float],
+    ) -> tuple[float, float, float]:
+        """:meth:`update` with finite floats (the loop's own; not checked again); returns d^
+        as :attr:`estimate_floats`."""
+        v = velocity_enu_m_s
+        z0, z1, z2 = thrust_axis_enu
+        if not math.isfinite(time_s):
+            return self._d
         zn = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
         if not zn > 0.5:
-            return self.estimate_m_s2
+            return self._d
         z = (z0 / zn, z1 / zn, z2 / zn)
         c = self.config
-        if not self.enabled:
+        if not c.bandwidth_rad_s > 0.0:
             self._t_prev, self._z_prev = time_s, z
-            return self.estimate_m_s2
+            return self._d
         if self._v_hat is None or self._t_prev is None or self._z_prev is None:
             self._v_hat, self._t_prev, self._z_prev = v, time_s, z
             self._elapsed_s = 0.0
-            return self.estimate_m_s2
+            return self._d
         dt = time_s - self._t_prev
         if not dt > 0.0:
-            return self.estimate_m_s2
-        # achieved thrust over the interval: first-order lag toward the command, averaged
+            return self._d
         t0 = self._thrust_n
         t_cmd = t0 if self._thrust_cmd_n is None else self._thrust_cmd_n
-        tau = c.thrust_time_constant_s
-        if tau > 0.0:
-            decay = math.exp(-dt / tau)
-            t_mean = t_cmd + (t0 - t_cmd) * tau / dt * (1.0 - decay)
-            self._thrust_n = t_cmd + (t0 - t_cmd) * decay
-        else:
-            t_mean = self._thrust_n = t_cmd
-        # f_model = (T / m) z_mean - g e_z - c v^ (the airframe's own drag in still air)
         zp = self._z_prev
-        k = t_mean / c.mass_kg
-        kd = c.drag_per_mass_1_s
-        h0, h1, h2 = self._v_hat
-        f0 = k * (0.5 * (zp[0] + z[0])) - kd * h0
-        f1 = k * (0.5 * (zp[1] + z[1])) - kd * h1
-        f2 = (k * (0.5 * (zp[2] + z[2])) - GRAVITY_M_S2) - kd * h2
-        e0, e1, e2 = self._d
-        p0, p1, p2 = h0 + (f0 + e0) * dt, h1 + (f1 + e1) * dt, h2 + (f2 + e2) * dt  # v_pred
-        r0, r1, r2 = v[0] - p0, v[1] - p1, v[2] - p2
         self._t_prev, self._z_prev = time_s, z
-        if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > c.max_innovation_m_s:
+        out = observer_step(
+            dt,
+            t0,
+            t_cmd,
+            c.thrust_time_constant_s,
+            c.mass_kg,
+            c.drag_per_mass_1_s,
+            *zp,
+            *z,
+            *self._v_hat,
+            *self._d,
+            *v,
+            c.max_innovation_m_s,
+            c.bandwidth_rad_s,
+            c.start_factor,
+            self._elapsed_s,
+            c.max_m_s2,
+            2.0,
+        )
+        self._thrust_n = out[0]
+        if out[1] < 0.0:
             # a velocity jump no force made: an estimator reset; restart v^, keep d^
             self._v_hat = v
             self.resets += 1
-            return self.estimate_m_s2
-        # gains that put both discrete error poles at exp(-w dt), stable for any dt; from a
-        # cold start the bandwidth starts at start_factor / (time since start) and decays to w
-        # (a growing-memory start, as a Kalman filter with a large initial covariance)
-        self._elapsed_s += dt
-        w = max(c.bandwidth_rad_s, c.start_factor / self._elapsed_s)
-        p = math.exp(-w * dt)
-        g = 1.0 - p * p
-        self._v_hat = (p0 + g * r0, p1 + g * r1, p2 + g * r2)
-        g = (1.0 - p) ** 2 / dt
-        d0, d1, d2 = e0 + g * r0, e1 + g * r1, e2 + g * r2
-        n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if n > c.max_m_s2:
-            if n > 0.0:
-                g = c.max_m_s2 / n
-                d0, d1, d2 = d0 * g, d1 * g, d2 * g
-            else:
-                d0 = d1 = d2 = 0.0
-        self._d = (d0, d1, d2)
-        self.estimate_m_s2 = d = np.array(self._d)
+            return self._d
+        self._elapsed_s = out[1]
+        self._v_hat = (out[2], out[3], out[4])
+        self._d = d = (out[5], out[6], out[7])
         return d
+
+
+@kernel("UniTuple(float64, 8)(" + ", ".join(["float64"] * 27) + ")")
+def observer_step(
+    dt: float,
+    thrust_n: float,
+    thrust_cmd_n: float,
+    tau: float,
+    mass_kg: float,
+    kd: float,
+    zp0: float,
+    zp1: float,
+    zp2: float,
+    z0: float,
+    z1: float,
+    z2: float,
+    h0: float,
+    h1: float,
+    h2: float,
+    e0: float,
+    e1: float,
+    e2: float,
+    v0: float,
+    v1: float,
+    v2: float,
+    max_innovation: float,
+    bandwidth: float,
+    start_factor: float,
+    elapsed_s: float,
+    max_m_s2: float,
+    two: float,
+) -> tuple[float, float, float, float, float, float, float, float]:
+    """One step of the observer over ``dt`` (s) (compiled; see the module doc): from the
+    modelled thrust (N) and its command, the thrust axis at the previous and this update
+    (zp, z: unit, ENU), v^ (h), d^ (e) and the measured velocity (v). Returns the modelled
+    thrust after the step, the time since the start (negative: a velocity jump larger than
+    ``max_innovation``, an estimator reset: nothing else is valid), v^ and d^.
+
+    ``two`` is 2.0, the exponent of (1 - p)^2, passed in so that the compiled code calls the C
+    library's pow as Python does: a literal 2 is compiled to x * x, which rounds differently
+    from pow in about 1 case in 1000."""
+    # achieved thrust over the interval: first-order lag toward the command, averaged
+    t0 = thrust_n
+    t_cmd = thrust_cmd_n
+    if tau > 0.0:
+        decay = math.exp(-dt / tau)
+        t_mean = t_cmd + (t0 - t_cmd) * tau / dt * (1.0 - decay)
+        thrust_n = t_cmd + (t0 - t_cmd) * decay
+    else:
+        t_mean = thrust_n = t_cmd
+    # f_model = (T / m) z_mean - g e_z - c v^ (the airframe's own drag in still air)
+    k = t_mean / mass_kg
+    f0 = k * (0.5 * (zp0 + z0)) - kd * h0
+    f1 = k * (0.5 * (zp1 + z1)) - kd * h1
+    f2 = (k * (0.5 * (zp2 + z2)) - GRAVITY_M_S2) - kd * h2
+    p0, p1, p2 = h0 + (f0 + e0) * dt, h1 + (f1 + e1) * dt, h2 + (f2 + e2) * dt  # v_pred
+    r0, r1, r2 = v0 - p0, v1 - p1, v2 - p2
+    if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > max_innovation:
+        return thrust_n, -1.0, h0, h1, h2, e0, e1, e2
+    # gains that put both discrete error poles at exp(-w dt), stable for any dt; from a
+    # cold start the bandwidth starts at start_factor / (time since start) and decays to w
+    # (a growing-memory start, as a Kalman filter with a large initial covariance)
+    elapsed_s += dt
+    w = max(bandwidth, start_factor / elapsed_s)
+    p = math.exp(-w * dt)
+    g = 1.0 - p * p
+    vh0, vh1, vh2 = p0 + g * r0, p1 + g * r1, p2 + g * r2
+    g = (1.0 - p) ** two / dt
+    d0, d1, d2 = e0 + g * r0, e1 + g * r1, e2 + g * r2
+    n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if n > max_m_s2:
+        if n > 0.0:
+            g = max_m_s2 / n
+            d0, d1, d2 = d0 * g, d1 * g, d2 * g
+        else:
+            d0 = d1 = d2 = 0.0
+    return thrust_n, elapsed_s, vh0, vh1, vh2, d0, d1, d2
 
 
 def feedforward_accel(
     disturbance_enu_m_s2: np.ndarray, velocity_enu_m_s: np.ndarray, v_min_m_s: float
 ) -> np.ndarray:
     """The acceleration to add to a_d (m/s^2, ENU): -d^ normal to the velocity, and its
-    along-track part only near hover, fading out from |v| = v_min to 2 v_min.
+    along-track part only near hover, fading out from |v| = v_min to 2 v_min
+    (:func:`feedforward_floats`)."""
+    d0, d1, d2 = _floats(disturbance_enu_m_s2)
+    v0, v1, v2 = _floats(velocity_enu_m_s)
+    return np.array(feedforward_floats(d0, d1, d2, v0, v1, v2, float(v_min_m_s)))
+
+
+@kernel("UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64, float64)")
+def feedforward_floats(
+    d0: float, d1: float, d2: float, v0: float, v1: float, v2: float, v_min_m_s: float
+) -> tuple[float, float, float]:
+    """:func:`feedforward_accel` of d^ = (d0, d1, d2) and v = (v0, v1, v2) in floats
+    (compiled).
 
     In flight the speed ramp (eq. 14) owns the tangential channel with its own speed feedback;
     cancelling the along-track drag as well would add up to k_drag v of pitch-down during the
     ramp, which moves the target up the image (measured: 2 of 12 static targets lost off the
     top with full feed-forward). The normal part is what bends the path and makes the miss."""
-    d0, d1, d2 = _floats(disturbance_enu_m_s2)
     d0, d1, d2 = -d0, -d1, -d2
-    v0, v1, v2 = _floats(velocity_enu_m_s)
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     keep_tangential = min(max(2.0 - speed / v_min_m_s, 0.0), 1.0) if v_min_m_s > 0.0 else 0.0
     if keep_tangential >= 1.0 or speed < 1e-9:
-        return np.array([d0, d1, d2])
+        return d0, d1, d2
     u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
     a = d0 * u0 + d1 * u1 + d2 * u2
     g = 1.0 - keep_tangential
-    return np.array([d0 - g * (a * u0), d1 - g * (a * u1), d2 - g * (a * u2)])
+    return d0 - g * (a * u0), d1 - g * (a * u1), d2 - g * (a * u2)
 
 
 def _floats(x) -> list[float]:

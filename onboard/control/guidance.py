@@ -16,6 +16,7 @@ from ..datatypes import GRAVITY_M_S2
 from ..enums import GuidanceLaw as Law
 from ..gains import Gains
 from ..geometry import wrap_pi
+from ..jit import kernel
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
@@ -51,8 +52,11 @@ class GuidanceOutput:
 
 def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndarray:
     """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5)."""
-    r = R_WC @ np.array([e_norm_x, e_norm_y, 1.0])
-    return r / math.sqrt(float(r @ r))
+    # numpy's product (its rounding, FMA or not, is the reference's), then floats: the norm's
+    # sum of squares in index order, as ``r @ r`` sums three terms
+    r0, r1, r2 = (R_WC @ np.array((e_norm_x, e_norm_y, 1.0))).tolist()
+    n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    return np.array((r0 / n, r1 / n, r2 / n))
 
 
 def direction_angles(n: np.ndarray) -> tuple[float, float]:
@@ -94,8 +98,12 @@ def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: fl
 
 def normal_component(accel: np.ndarray, velocity: np.ndarray) -> float:
     """Magnitude of the part of ``accel`` normal to ``velocity`` (m/s^2)."""
-    a0, a1, a2 = _f3(accel)
-    v0, v1, v2 = _f3(velocity)
+    return normal_floats(*_f3(accel), *_f3(velocity))
+
+
+@kernel("float64(float64, float64, float64, float64, float64, float64)")
+def normal_floats(a0: float, a1: float, a2: float, v0: float, v1: float, v2: float) -> float:
+    """:func:`normal_component` in floats (compiled)."""
     vv = v0 * v0 + v1 * v1 + v2 * v2
     if vv < 1e-12:
         return math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
