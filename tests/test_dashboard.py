@@ -339,7 +339,10 @@ def test_timeline_zoom_and_recorded_fields(station, page):
     box = page.locator(".plot").first.locator(".u-over").bounding_box()
     page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
     page.mouse.wheel(0, -300)
-    page.wait_for_timeout(200)
+    # the wheel zooms in the page's event handler (later on a loaded machine): wait for it
+    page.wait_for_function(
+        "window.peregrine.plots.some(u => !u.xy && u.scales.x.max - u.scales.x.min < 5.0)"
+    )
     ranges = page.evaluate("window.peregrine.plots.filter(u => !u.xy)"
                            ".map(u => [u.scales.x.min, u.scales.x.max])")  # fmt: skip
     assert all(r == ranges[0] for r in ranges) and ranges[0][1] - ranges[0][0] < 5.0
