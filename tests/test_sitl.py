@@ -212,18 +212,18 @@ def test_detections_stopped_brake_and_hold_within_the_timeout(tmp_path, rig_fact
     # the loop flew its ladder while intercepting: coast, reacquire, search (codes 4, 5, 6)
     modes = {t["loop_mode"] for t in rig.telemetry if t["state"] == 4}
     assert {4, 5, 6} <= modes, modes
-    # The loop brakes at its first tick 1.2 s (the ladder) after the last tick whose track was
-    # live, i.e. whose DKF had fused a detection within 0.5 s (TGT_LOST_S): so every tick
-    # before the brake has been at most 1.7 s since that detection, and the braking tick at
-    # least 1.7 s less the one tick interval that straddles the loss (5 ms; 50 ms allowed for
-    # a loaded machine). Telemetry samples the loop every 20 ms, later under load, so the
-    # rows on either side of the brake bound it, whatever their sampling delay: the last row
-    # before it, and the first braking row. Both read the DKF's own time since the detection
-    # (the ticks' clock; telemetry's floats are 32-bit: 1 ms).
+    # The loop brakes 1.2 s (the ladder) after the last tick whose track was live, i.e. whose
+    # DKF had fused a detection within 0.5 s (TGT_LOST_S): 1.7 s after that detection's
+    # capture, give or take the tick intervals that straddle the loss and the search's start
+    # (5 ms each; 50 ms allowed in all for a loaded machine). Telemetry samples the loop
+    # every 20 ms, later under load, so the rows on either side of the brake bound it,
+    # whatever their sampling delay: the last row before it, and the first braking row.
+    # Both read the DKF's own time since the detection (the ticks' clock; telemetry's floats
+    # are 32-bit).
     before = rig.telemetry[rig.telemetry.index(first) - 1]
     seen = [(r["t_s"], r["state"], r["loop_mode"], r["dkf_since_det_s"]) for r in (before, first)]
     anchor = before["t_s"] - before["dkf_since_det_s"]  # that detection's capture time
-    assert before["t_s"] - anchor < 1.7 + 1e-3, seen
+    assert before["t_s"] - anchor < 1.7 + 0.05, seen
     assert first["t_s"] - anchor >= 1.7 - 0.05, seen
     # it counts from the last detection the camera delivered (telemetry's floats are 32-bit)
     assert abs(first["raw_capture_t_s"] - anchor) < 1e-3, (anchor, first)
