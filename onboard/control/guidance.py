@@ -59,11 +59,88 @@ def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndar
     return np.array((r0 / n, r1 / n, r2 / n))
 
 
+_SPLITTER = 134217729.0  # 2**27 + 1 (Veltkamp): splits a double into two 26-bit halves
+_DBL_MIN = 2.2250738585072014e-308  # the smallest normal double
+
+
+@kernel("float64(float64, float64)")
+def _min(a: float, b: float) -> float:
+    """Python's ``min(a, b)`` to the letter (``a`` unless ``b < a``; so NaN as Python's)."""
+    return b if b < a else a
+
+
+@kernel("float64(float64, float64)")
+def _max(a: float, b: float) -> float:
+    """Python's ``max(a, b)`` to the letter (``a`` unless ``b > a``)."""
+    return b if b > a else a
+
+
+@kernel("UniTuple(float64, 2)(float64)")
+def _exact_square(x: float) -> tuple[float, float]:
+    """x * x as hi + lo with lo the exact rounding error (Dekker's product)."""
+    p = x * x
+    c = _SPLITTER * x
+    xh = c - (c - x)
+    xl = x - xh
+    return p, ((xh * xh - p) + 2.0 * (xh * xl)) + xl * xl
+
+
+@kernel("float64(float64, float64)")
+def hypot2(x: float, y: float) -> float:
+    """sqrt(x^2 + y^2) as CPython's ``math.hypot`` computes it, to the bit (its correctly
+    rounded vector norm: scaled by a power of two, squares and sums carried exactly in two
+    parts, one Newton correction), so a kernel gives the numbers the Python code gave; libm's
+    ``hypot``, which numba calls, differs in the last bit in about 0.2 % of inputs. Checked
+    equal to ``math.hypot`` on millions of seeded inputs (tests/test_guidance_kernels.py);
+    only where both arguments are subnormal (below 2.2e-308) may it differ."""
+    x = abs(x)
+    y = abs(y)
+    if math.isinf(x) or math.isinf(y):
+        return math.inf
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    m = x if x > y else y
+    if m == 0.0:
+        return 0.0
+    post = 1.0
+    e = math.frexp(m)[1]
+    if e < -1023:  # subnormal: scale up to normals first (2^-e would overflow)
+        x, y, post = x / _DBL_MIN, y / _DBL_MIN, _DBL_MIN
+        e = math.frexp(m / _DBL_MIN)[1]
+    scale = math.ldexp(1.0, -e)
+    csum = 1.0
+    frac1 = 0.0
+    frac2 = 0.0
+    hi, lo = _exact_square(x * scale)
+    s = csum + hi
+    frac2 += hi - (s - csum)
+    csum = s
+    frac1 += lo
+    hi, lo = _exact_square(y * scale)
+    s = csum + hi
+    frac2 += hi - (s - csum)
+    csum = s
+    frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _exact_square(h)
+    s = csum - hi
+    frac2 += -hi - (s - csum)
+    csum = s
+    frac1 -= lo
+    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
+    return post * (h / scale)
+
+
+@kernel("UniTuple(float64, 2)(float64, float64, float64)")
+def angles_floats(x: float, y: float, z: float) -> tuple[float, float]:
+    """:func:`direction_angles` of (x, y, z) (compiled)."""
+    return math.atan2(z, hypot2(x, y)), math.atan2(x, y)
+
+
 def direction_angles(n: np.ndarray) -> tuple[float, float]:
     """(elevation, azimuth) of a direction: q_y = atan2(n_z, hypot(n_x, n_y)),
     q_z = atan2(n_x, n_y) (paper eqs. 6-7 with atan2, DESIGN §3 step 3)."""
-    x, y, z = float(n[0]), float(n[1]), float(n[2])
-    return math.atan2(z, math.hypot(x, y)), math.atan2(x, y)
+    return angles_floats(float(n[0]), float(n[1]), float(n[2]))
 
 
 def direction_from_angles(elev_rad: float, azim_rad: float) -> np.ndarray:
@@ -87,8 +164,14 @@ def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
     Asking for v_max outright (eq. 17 divides by dt) would turn centimetres per second of
     overspeed into a saturated brake and then a full k_a again: the vehicle pitches back and
     forth by atan(k_a / g) and its flight path walks off, which PN cannot see from far away."""
-    a_t = min(max(gains.k_brake * (gains.v_max - speed_m_s), -gains.k_a), gains.k_a)
-    return speed_m_s + a_t * dt_s
+    return ramped_speed_floats(speed_m_s, gains.k_brake, gains.v_max, gains.k_a, dt_s)
+
+
+@kernel("float64(float64, float64, float64, float64, float64)")
+def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, dt: float) -> float:
+    """:func:`ramped_speed` in floats (compiled)."""
+    a_t = _min(_max(k_brake * (v_max - speed), -k_a), k_a)
+    return speed + a_t * dt
 
 
 def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
@@ -121,12 +204,13 @@ def _hover_start(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
 _PITCH_LIMIT_RAD = math.radians(60.0)
 
 
+@kernel("float64(float64, float64, float64)")
 def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -> float:
     """Lowest body pitch (nose up +, rad) that keeps a LOS at elevation ``los_elev_rad`` at
     least ``margin_rad`` below the image's top edge, which sits ``top_edge_rad`` above body x
     (clipped to +-60 deg)."""
     lo = los_elev_rad - (top_edge_rad - margin_rad)
-    return min(max(lo, -_PITCH_LIMIT_RAD), _PITCH_LIMIT_RAD)
+    return _min(_max(lo, -_PITCH_LIMIT_RAD), _PITCH_LIMIT_RAD)
 
 
 def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
@@ -144,8 +228,13 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
     image (forcing a nose-down pitch would fight PNG's endgame); the pursuit bias
     (:func:`pursuit_weight`) does the rest. ``fov_margin = 0`` switches it off.
     """
-    out = _fov_guard3(_f3(a_d), inp, gains)
-    return a_d if out is None else np.array(out)
+    a0, a1, a2 = _f3(a_d)
+    R = inp.R_WC
+    out = fov_guard_floats(
+        a0, a1, a2, inp.fov_edges_rad[0], float(R[0, 2]), float(R[1, 2]), inp.los_elev_rad,
+        math.radians(gains.fov_margin), gains.a_max,
+    )  # fmt: skip
+    return a_d if out[0] == 0.0 else np.array(out[1:])
 
 
 def _f3(x) -> tuple[float, float, float]:
@@ -156,8 +245,9 @@ def _f3(x) -> tuple[float, float, float]:
     return float(x[0]), float(x[1]), float(x[2])
 
 
-def _saturate3(x0: float, x1: float, x2: float, limit: float) -> tuple[float, float, float]:
-    """:func:`saturate_norm` in floats (the same operations)."""
+@kernel("UniTuple(float64, 3)(float64, float64, float64, float64)")
+def saturate3(x0: float, x1: float, x2: float, limit: float) -> tuple[float, float, float]:
+    """:func:`saturate_norm` in floats (the same operations; compiled)."""
     n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
     if n > limit > 0.0:
         g = limit / n
@@ -165,54 +255,88 @@ def _saturate3(x0: float, x1: float, x2: float, limit: float) -> tuple[float, fl
     return x0, x1, x2
 
 
-def _fov_guard3(
-    a_d: tuple[float, float, float], inp: GuidanceInput, gains: Gains
-) -> tuple[float, float, float] | None:
-    """:func:`fov_guard` in floats; None where it leaves ``a_d`` untouched."""
-    if gains.fov_margin <= 0.0:
-        return None
-    top = inp.fov_edges_rad[0]
-    if not math.isfinite(top):
-        return None
-    R = inp.R_WC
-    hx, hy = float(R[0, 2]), float(R[1, 2])
-    hn = math.hypot(hx, hy)
+@kernel(
+    "UniTuple(float64, 4)(float64, float64, float64, float64, float64, float64, float64, "
+    "float64, float64)"
+)
+def fov_guard_floats(
+    a0: float,
+    a1: float,
+    a2: float,
+    top_edge_rad: float,
+    heading_x: float,
+    heading_y: float,
+    los_elev_rad: float,
+    margin_rad: float,
+    a_max: float,
+) -> tuple[float, float, float, float]:
+    """:func:`fov_guard` in floats (compiled): (1, guarded a_d) or (0, a_d untouched);
+    ``heading_x/y``: the camera axis's east and north components (R_WC[:2, 2])."""
+    if margin_rad <= 0.0 or not math.isfinite(top_edge_rad):
+        return 0.0, a0, a1, a2
+    hn = hypot2(heading_x, heading_y)
     if hn < 1e-6:  # camera looking straight up or down: no heading to pitch along
-        return None
-    h0, h1 = hx / hn, hy / hn
-    lo = min_pitch_rad(inp.los_elev_rad, top, math.radians(gains.fov_margin))
-    a0, a1, a2 = a_d
+        return 0.0, a0, a1, a2
+    h0, h1 = heading_x / hn, heading_y / hn
+    lo = min_pitch_rad(los_elev_rad, top_edge_rad, margin_rad)
     a_f = a0 * h0 + a1 * h1 + a2 * 0.0
-    gz = max(GRAVITY_M_S2 + a2, 0.1 * GRAVITY_M_S2)
-    a_f_max = max(-gz * math.tan(lo), 0.0)  # limit the pitch-down, never brake
+    gz = _max(GRAVITY_M_S2 + a2, 0.1 * GRAVITY_M_S2)
+    a_f_max = _max(-gz * math.tan(lo), 0.0)  # limit the pitch-down, never brake
     if a_f <= a_f_max:
-        return None
+        return 0.0, a0, a1, a2
     c = a_f_max - a_f
-    return _saturate3(a0 + c * h0, a1 + c * h1, a2 + c * 0.0, gains.a_max)
+    g0, g1, g2 = saturate3(a0 + c * h0, a1 + c * h1, a2 + c * 0.0, a_max)
+    return 1.0, g0, g1, g2
 
 
 def edge_margin_rad(inp: GuidanceInput) -> float:
     """Angle (rad) between the LOS and the nearer of the image's top and bottom edges, with
     the camera's current pitch (its optical axis elevation; a level-rolled camera): negative
     when the LOS is outside the vertical FOV, nan when the FOV edges are unknown."""
-    top, bottom = inp.fov_edges_rad
+    axis = inp.R_WC[:, 2].tolist()
+    return edge_margin_floats(*inp.fov_edges_rad, *axis, inp.los_elev_rad)
+
+
+@kernel("float64(float64, float64, float64, float64, float64, float64)")
+def edge_margin_floats(
+    top: float, bottom: float, ax0: float, ax1: float, ax2: float, los_elev_rad: float
+) -> float:
+    """:func:`edge_margin_rad` in floats (compiled); (ax0, ax1, ax2) the camera axis (ENU)."""
     if not (math.isfinite(top) and math.isfinite(bottom)):
         return math.nan
-    axis = inp.R_WC[:, 2]
-    cam_elev = math.atan2(float(axis[2]), math.hypot(float(axis[0]), float(axis[1])))
+    cam_elev = math.atan2(ax2, hypot2(ax0, ax1))
     half = 0.5 * (top - bottom)
-    return min(cam_elev + half - inp.los_elev_rad, inp.los_elev_rad - (cam_elev - half))
+    return _min(cam_elev + half - los_elev_rad, los_elev_rad - (cam_elev - half))
 
 
 def pursuit_weight(inp: GuidanceInput, gains: Gains) -> float:
     """Weight in [0, 1] of the pursuit bias: 0 while the LOS is more than ``pur_zone`` degrees
     inside the top and bottom edges, rising linearly to 1 at the edge (0 if ``pur_zone`` = 0)."""
-    if gains.pur_zone <= 0.0 or gains.k_pur <= 0.0:
+    axis = inp.R_WC[:, 2].tolist()
+    top, bottom = inp.fov_edges_rad
+    return pursuit_floats(
+        math.radians(gains.pur_zone), gains.k_pur, top, bottom, *axis, inp.los_elev_rad
+    )
+
+
+@kernel("float64(float64, float64, float64, float64, float64, float64, float64, float64)")
+def pursuit_floats(
+    pur_zone_rad: float,
+    k_pur: float,
+    top: float,
+    bottom: float,
+    ax0: float,
+    ax1: float,
+    ax2: float,
+    los_elev_rad: float,
+) -> float:
+    """:func:`pursuit_weight` in floats (compiled)."""
+    if pur_zone_rad <= 0.0 or k_pur <= 0.0:
         return 0.0
-    m = edge_margin_rad(inp)
+    m = edge_margin_floats(top, bottom, ax0, ax1, ax2, los_elev_rad)
     if not math.isfinite(m):
         return 0.0
-    return min(max(1.0 - m / math.radians(gains.pur_zone), 0.0), 1.0)
+    return _min(_max(1.0 - m / pur_zone_rad, 0.0), 1.0)
 
 
 def smooth_los_change(prev_rad: float, dq_rad: float, dt_s: float, tau_s: float) -> float:
@@ -227,9 +351,15 @@ def smooth_los_change(prev_rad: float, dq_rad: float, dt_s: float, tau_s: float)
 def midcourse_weight(range_m: float, gains: Gains) -> float:
     """Weight in [0, 1] of the midcourse ZEM-nulling term: 0 within ``r_mid`` metres, rising
     linearly to 1 at twice ``r_mid`` (0 when ``tau_zem`` = 0 or the range is unknown)."""
-    if gains.tau_zem <= 0.0 or not math.isfinite(range_m):
+    return midcourse_floats(range_m, gains.tau_zem, gains.r_mid)
+
+
+@kernel("float64(float64, float64, float64)")
+def midcourse_floats(range_m: float, tau_zem: float, r_mid: float) -> float:
+    """:func:`midcourse_weight` in floats (compiled)."""
+    if tau_zem <= 0.0 or not math.isfinite(range_m):
         return 0.0
-    return min(max(range_m / gains.r_mid - 1.0, 0.0), 1.0)
+    return _min(_max(range_m / r_mid - 1.0, 0.0), 1.0)
 
 
 def zem_nulling_accel(inp: GuidanceInput, gains: Gains) -> np.ndarray:
@@ -243,62 +373,156 @@ def zem_nulling_accel(inp: GuidanceInput, gains: Gains) -> np.ndarray:
     (R x 0.2 deg of ZEM), not differentiated. The target's velocity is the DKF's, shrunk toward
     zero by its own uncertainty (|v_t|^2 / (|v_t|^2 + tr P_v)): far away it is barely
     observable, and an unobservable estimate must not steer."""
-    return np.array(_zem3(inp, gains))
-
-
-def _zem3(inp: GuidanceInput, gains: Gains) -> tuple[float, float, float]:
-    """:func:`zem_nulling_accel` in floats (the same operations)."""
-    v0, v1, v2 = _f3(inp.velocity_enu_m_s)
     vt = inp.target_vel_enu_m_s
-    if vt is not None:
-        t0, t1, t2 = _f3(vt)
+    t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
+    return np.array(
+        zem_floats(
+            *_f3(inp.velocity_enu_m_s),
+            vt is not None,
+            t0,
+            t1,
+            t2,
+            inp.target_vel_var_m2_s2,
+            *_f3(inp.los_enu),
+            gains.tau_zem,
+        )
+    )
+
+
+@kernel(
+    "UniTuple(float64, 3)(float64, float64, float64, boolean, float64, float64, float64, "
+    "float64, float64, float64, float64, float64)"
+)
+def zem_floats(
+    v0: float,
+    v1: float,
+    v2: float,
+    has_vt: bool,
+    t0: float,
+    t1: float,
+    t2: float,
+    var: float,
+    n0: float,
+    n1: float,
+    n2: float,
+    tau_zem: float,
+) -> tuple[float, float, float]:
+    """:func:`zem_nulling_accel` in floats (compiled): velocity v, the target's t (when
+    ``has_vt``) with its variance, the LOS n."""
+    if has_vt:
         vt2 = t0 * t0 + t1 * t1 + t2 * t2
-        var = inp.target_vel_var_m2_s2
         shrink = vt2 / (vt2 + var) if math.isfinite(var) and vt2 + var > 0.0 else 0.0
         v0, v1, v2 = v0 - shrink * t0, v1 - shrink * t1, v2 - shrink * t2
-    n0, n1, n2 = _f3(inp.los_enu)
     vn = v0 * n0 + v1 * n1 + v2 * n2
-    k = -1.0 / gains.tau_zem
+    k = -1.0 / tau_zem
     return (v0 - vn * n0) * k, (v1 - vn * n1) * k, (v2 - vn * n2) * k
+
+
+# the gains png_floats reads, in this order (angles in radians)
+_PNG_GAINS = ("v_min", "k_a", "a_max", "K_y", "K_z", "tau_zem", "r_mid", "pur_zone", "k_pur",
+              "k_brake", "v_max", "fov_margin")  # fmt: skip
+_PNG_DEGREES = {"pur_zone", "fov_margin"}
+_png_gains_of: tuple[Gains | None, np.ndarray] = (None, np.zeros(len(_PNG_GAINS)))
+
+
+def _png_gains(gains: Gains) -> np.ndarray:
+    """``gains`` as png_floats's array (made again only when the gains object changes)."""
+    global _png_gains_of
+    held, arr = _png_gains_of
+    if held is not gains:
+        arr = np.array(
+            [
+                math.radians(getattr(gains, k)) if k in _PNG_DEGREES else getattr(gains, k)
+                for k in _PNG_GAINS
+            ]
+        )
+        _png_gains_of = (gains, arr)
+    return arr
 
 
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
-    v = inp.velocity_enu_m_s
-    speed = math.sqrt(float(v @ v))
-    if speed < gains.v_min:
-        a_d = fov_guard(_hover_start(inp, gains).accel_desired_enu_m_s2, inp, gains)
-        return GuidanceOutput(a_d, math.nan, math.nan, True)
-    # in floats from here on, each operation the vector form's, in its order (bit-identical)
-    v0, v1, v2 = _f3(v)
+    l0, l1, l2 = _f3(inp.los_enu)
+    v0, v1, v2 = _f3(inp.velocity_enu_m_s)
+    R = inp.R_WC
+    vt = inp.target_vel_enu_m_s
+    t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
+    top, bottom = inp.fov_edges_rad
+    a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
+        inp.dt_s, l0, l1, l2, inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
+        v0, v1, v2, float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom,
+        inp.range_m, vt is not None, t0, t1, t2, inp.target_vel_var_m2_s2, _png_gains(gains),
+    )  # fmt: skip
+    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, hovering != 0.0)
+
+
+@kernel(
+    "UniTuple(float64, 6)(float64, float64, float64, float64, float64, float64, float64, "
+    "float64, float64, float64, float64, float64, float64, float64, float64, float64, boolean, "
+    "float64, float64, float64, float64, float64[::1])"
+)
+def png_floats(
+    dt: float,
+    l0: float,
+    l1: float,
+    l2: float,
+    q_y: float,
+    dq_y: float,
+    dq_z: float,
+    v0: float,
+    v1: float,
+    v2: float,
+    ax0: float,
+    ax1: float,
+    ax2: float,
+    top: float,
+    bottom: float,
+    range_m: float,
+    has_vt: bool,
+    t0: float,
+    t1: float,
+    t2: float,
+    var_v: float,
+    G: np.ndarray,
+) -> tuple[float, float, float, float, float, float]:
+    """:func:`png_law` in floats (compiled): the hold dt (s), the LOS n_t and its elevation
+    q_y, the LOS change (dq_y, dq_z), the velocity v, the camera axis (R_WC[:, 2]), the
+    image's (top, bottom) edges, the DKF's range and target velocity (with its variance) and
+    the gains (``_PNG_GAINS``); returns (a_d, sigma_y, sigma_z, 1 when hovering else 0)."""
+    v_min, k_a, a_max, K_y, K_z, tau_zem, r_mid = G[0], G[1], G[2], G[3], G[4], G[5], G[6]
+    pur_zone, k_pur, k_brake, v_max, fov_margin = G[7], G[8], G[9], G[10], G[11]
+    speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if speed < v_min:
+        # below v_min the velocity angles are undefined: accelerate along the LOS (§3.4)
+        a0, a1, a2 = saturate3(k_a * l0, k_a * l1, k_a * l2, a_max)
+        _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, a_max)
+        return a0, a1, a2, math.nan, math.nan, 1.0
     u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
-    sigma_y, sigma_z = direction_angles((u0, u1, u2))
+    sigma_y, sigma_z = angles_floats(u0, u1, u2)
     # far away PN's LOS-rate term is mostly noise (v/R small): it fades out as the midcourse
     # ZEM-nulling term fades in (README "Range")
-    w_mid = midcourse_weight(inp.range_m, gains)
+    w_mid = midcourse_floats(range_m, tau_zem, r_mid)
     pn = 1.0 - w_mid
-    sigma_yd = sigma_y + pn * gains.K_y * inp.d_los_elev_rad
-    sigma_zd = sigma_z + pn * gains.K_z * inp.d_los_azim_rad
+    sigma_yd = sigma_y + pn * K_y * dq_y
+    sigma_zd = sigma_z + pn * K_z * dq_z
     ce = math.cos(sigma_yd)  # n_d (eq. 9, as direction_from_angles)
     n0, n1, n2 = ce * math.sin(sigma_zd), ce * math.cos(sigma_zd), math.sin(sigma_yd)
-    w = pursuit_weight(inp, gains)
+    w = pursuit_floats(pur_zone, k_pur, top, bottom, ax0, ax1, ax2, q_y)
     if w > 0.0:  # near the image's top or bottom edge: turn toward the LOS (pursuit)
-        k = w * gains.k_pur * inp.dt_s
-        l0, l1, l2 = _f3(inp.los_enu)
+        k = w * k_pur * dt
         n0, n1, n2 = n0 + k * (l0 - u0), n1 + k * (l1 - u1), n2 + k * (l2 - u2)
         nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
-    dt = inp.dt_s
-    sp = ramped_speed(speed, gains, dt)
+    sp = ramped_speed_floats(speed, k_brake, v_max, k_a, dt)
     d0, d1, d2 = sp * n0, sp * n1, sp * n2  # v_d
     if w_mid > 0.0:  # far away: null the ZEM (midcourse), PN's endgame takes over within r_mid
         k = w_mid * dt
-        z0, z1, z2 = _zem3(inp, gains)
+        z0, z1, z2 = zem_floats(v0, v1, v2, has_vt, t0, t1, t2, var_v, l0, l1, l2, tau_zem)
         d0, d1, d2 = d0 + k * z0, d1 + k * z1, d2 + k * z2
     # eq. 17, saturated, then the FOV guard
-    a_d = _saturate3((d0 - v0) / dt, (d1 - v1) / dt, (d2 - v2) / dt, gains.a_max)
-    guarded = _fov_guard3(a_d, inp, gains)
-    return GuidanceOutput(np.array(a_d if guarded is None else guarded), sigma_y, sigma_z, False)
+    a0, a1, a2 = saturate3((d0 - v0) / dt, (d1 - v1) / dt, (d2 - v2) / dt, a_max)
+    _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, a_max)
+    return a0, a1, a2, sigma_y, sigma_z, 0.0
 
 
 def track_velocity_direction(
