@@ -501,7 +501,18 @@ def test_3d_view_presets_are_per_viewer(station, browser):
         while len(_cameras(station)) < 2:
             assert time.monotonic() < deadline, "the viewers did not connect"
             time.sleep(0.1)
+        # a viewer's camera settles on its first fit after it connects (later on a loaded
+        # machine): take "before" once no camera has moved for half a second
         before = _cameras(station)
+        while True:
+            time.sleep(0.5)
+            now = _cameras(station)
+            if now.keys() == before.keys() and all(
+                np.allclose(now[c][0], before[c][0]) for c in now
+            ):
+                break
+            assert time.monotonic() < deadline, "the viewers' cameras did not settle"
+            before = now
         # viewer A picks "top" in its own View control
         frame = pages[0].frame_locator("#viser")
         frame.get_by_label("View", exact=True).click()
