@@ -453,7 +453,9 @@ def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
         v0, v1, v2, float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom,
         inp.range_m, vt is not None, t0, t1, t2, inp.target_vel_var_m2_s2, _png_gains(gains),
     )  # fmt: skip
-    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, hovering != 0.0)
+    if hovering != 0.0:  # the angles are math.nan itself (telemetry compares equal)
+        return GuidanceOutput(np.array((a0, a1, a2)), math.nan, math.nan, True)
+    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, False)
 
 
 @kernel(
