@@ -14,6 +14,8 @@ import struct
 
 import numpy as np
 
+from onboard.enums import GuidanceLaw
+
 from ..scenario import load_scenario
 from ..sim.simulation import Simulation
 
@@ -55,11 +57,11 @@ def sortie_hash(scenario: str, law: str, seed: int) -> str:
 def main() -> None:
     total = hashlib.sha256()
     for scenario in SCENARIOS:
-        for law in ("png", "pg", "ibvs"):
+        for law in GuidanceLaw:
             for seed in (0, 1):
-                digest = sortie_hash(scenario, law, seed)
+                digest = sortie_hash(scenario, law.value, seed)
                 total.update(bytes.fromhex(digest))
-                print(scenario, law, seed, digest[:12], flush=True)
+                print(scenario, law.value, seed, digest[:12], flush=True)
     print("all", total.hexdigest()[:16])
 
 
