@@ -39,6 +39,35 @@ def _tell_compiling(name: str) -> None:
         )
 
 
+_told_no_cache = False
+
+
+def _tell_no_cache(name: str) -> None:
+    """Say once per process that nothing can be cached, so every start compiles."""
+    global _told_no_cache
+    if not _told_no_cache:
+        _told_no_cache = True
+        print(
+            f"peregrine: no writable cache for the numba kernels ({name}, ...): compiling them "
+            "at every start (about half a minute); set NUMBA_CACHE_DIR to a writable directory",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+def _compile(fn: F, signature: str | None, cache: bool) -> F:
+    import numba
+
+    options = {"cache": cache, "nogil": True}
+    if signature is None:
+        return numba.njit(**options)(fn)
+    compiled = numba.njit(signature, **options)(fn)
+    stats = getattr(compiled, "stats", None)  # a cache miss: it was compiled
+    if cache and stats is not None and sum(stats.cache_misses.values()):
+        _tell_compiling(fn.__qualname__)
+    return compiled
+
+
 def kernel(signature: str | None = None) -> Callable[[F], F]:
     """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
     for ``signature`` (eagerly, at import) or lazily on first call without one; with
@@ -48,16 +77,15 @@ def kernel(signature: str | None = None) -> Callable[[F], F]:
         if not ENABLED:
             KERNELS.append(fn)
             return fn
-        import numba
-
-        options = {"cache": True, "nogil": True}
-        if signature is None:
-            compiled = numba.njit(**options)(fn)
-        else:
-            compiled = numba.njit(signature, **options)(fn)
-            stats = getattr(compiled, "stats", None)  # a cache miss: it was compiled
-            if stats is not None and sum(stats.cache_misses.values()):
-                _tell_compiling(fn.__qualname__)
+        try:
+            compiled = _compile(fn, signature, cache=True)
+        except RuntimeError as exc:
+            if "cannot cache" not in str(exc):
+                raise
+            # no writable cache anywhere (the package's __pycache__, numba's per-user cache):
+            # compile at every start rather than not start at all
+            _tell_no_cache(fn.__qualname__)
+            compiled = _compile(fn, signature, cache=False)
         KERNELS.append(compiled)
         return compiled
 

@@ -374,3 +374,51 @@ def test_a_restarted_track_keeps_the_target_velocity_with_grown_covariance(carry
         assert_allclose(v_t, before[0], atol=0.05)  # kept, up to the size/depth update
         assert np.all(np.diag(P)[3:] >= np.diag(before[1])[3:] + 1.0 - 1e-9)
         assert np.all(np.diag(P)[3:] < 9.0)
+
+
+def _stare(dkf: DelayedKalmanFilter, ks: range, bad_after: int | None = None, bad=math.nan):
+    """100 Hz predictions of a still, level vehicle, a detection of a still target at every
+    third; a prediction stamped ``bad`` after tick ``bad_after``."""
+    cam = dkf.camera
+    out = []
+    for k in ks:
+        t = 0.01 * k
+        dkf.predict(t, np.zeros(3), np.zeros(3), cam.R_BC)
+        if k == bad_after:
+            dkf.predict(bad, np.zeros(3), np.zeros(3), cam.R_BC)
+        if k % 3 == 0:
+            dkf.fuse(Detection(t, (330.0, 250.0), (327, 247, 6, 6), 28.0))
+        est = dkf.estimate()
+        out.append(None if est is None else (*est.e_px, *est.e_rate_px_s))
+    return out
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_prediction_at_a_non_finite_time_changes_nothing(bad):
+    # a NaN row would stop the window trimming for ever, an infinite one end every later
+    # prediction: both are refused, and the filter runs on as if never asked
+    clean, hit = DelayedKalmanFilter(CameraModel()), DelayedKalmanFilter(CameraModel())
+    want = _stare(clean, range(1000))
+    got = _stare(hit, range(1000), bad_after=40, bad=bad)
+    assert got == want  # to the bit
+    assert hit._hi - hit._lo == clean._hi - clean._lo < 100
+    assert math.isfinite(hit.time_s) and hit.estimate() is not None
+
+
+def test_a_new_track_stamped_a_rounding_error_before_the_newest_row_is_flown():
+    # the row found by bisecting at t + 1e-9 is the new track's start even where rounding puts
+    # it exactly 1e-9 after t: the next prediction steps the new state, not the dropped one's
+    cam = CameraModel()
+    dkf = DelayedKalmanFilter(cam)
+    for k in range(201):  # a track at (330, 250) px, lost after 0.1 s; the rows to t = 2.0 s
+        t = round(0.01 * k, 10)
+        dkf.predict(t, np.zeros(3), np.zeros(3), cam.R_BC)
+        if k <= 10 and k % 3 == 0:
+            dkf.fuse(Detection(t, (330.0, 250.0), (327, 247, 6, 6), 28.0))
+    assert dkf.lost() and dkf.time_s == 2.0
+    new = Detection(1.999999999, (100.0, 100.0), (97, 97, 6, 6), 28.0)
+    assert dkf.fuse(new) is FusionResult.INITIALISED
+    dkf.predict(2.01, np.zeros(3), np.zeros(3), cam.R_BC)
+    est = dkf.estimate()
+    assert est is not None and not est.lost
+    assert_allclose(est.e_px, cam.error_px(100.0, 100.0), atol=0.5)  # was (10, 10): the old

@@ -101,3 +101,28 @@ def test_a_cold_cache_says_it_is_compiling_once_and_a_warm_one_is_silent(tmp_pat
     assert cold.stdout.strip() == warm.stdout.strip() == "7.0"
     assert cold.stderr.count("compiling the numba kernels") == 1, cold.stderr
     assert "compiling" not in warm.stderr, warm.stderr
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_no_writable_cache_anywhere_compiles_at_every_start_instead_of_failing(tmp_path):
+    # a read-only image: the module's __pycache__ and the per-user cache cannot be made (here
+    # files stand where numba would make directories: as root a chmod would not stop it)
+    pkg = tmp_path / "ro_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "__pycache__").write_text("")
+    (pkg / "kernels.py").write_text(
+        "from onboard.jit import kernel\n"
+        "@kernel('float64(float64)')\n"
+        "def twice(x):\n    return 2.0 * x\n"
+    )
+    home = tmp_path / "home_is_a_file"
+    home.write_text("")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}", HOME=str(home))
+    env.update(XDG_CACHE_HOME=str(home), PYTHONDONTWRITEBYTECODE="1")
+    run = [sys.executable, "-c", "from ro_pkg import kernels as k; print(k.twice(2.5))"]
+    for _ in range(2):  # and again: nothing was cached, it says so again
+        proc = subprocess.run(run, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0 and proc.stdout.strip() == "5.0", proc.stderr
+        assert proc.stderr.count("no writable cache for the numba kernels") == 1, proc.stderr

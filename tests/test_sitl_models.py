@@ -209,3 +209,24 @@ def test_detector_faults_drop_bursts_draw_false_blobs_and_hide_small_balloons():
     veh, _, cam = _vehicle("camera.min_blob_px=3")
     _fly(veh, 0.5)
     assert cam.frames and all(det.detect(img, c) is not None for img, c, _ in cam.frames)
+
+
+@pytest.mark.parametrize("vertex_at_boundary", [True, False])
+def test_a_pass_whose_closest_point_is_between_two_steps_ends_the_sortie(vertex_at_boundary):
+    # the SITL judges the pass as the simulator does (groundstation/sim/physics.py): relative
+    # positions (target minus vehicle) bending at the closest point, 0.25 m to the side
+    veh, _, _ = _vehicle()
+    veh.sortie_start_s = 0.0
+    y = 0.25
+    path = [(1.0, 0.45, 0.0), (0.0, y, 0.0), (-1.0, 0.45, 0.0), (-2.0, 0.65, 0.0)]
+    if not vertex_at_boundary:  # a straight pass: the closest point inside a step
+        path = [(1.5, y, 0.0), (0.5, y, 0.0), (-0.5, y, 0.0), (-1.5, y, 0.0)]
+    veh.vehicle.p = [0.0, 0.0, 10.0]
+    for k, rel in enumerate(path):
+        veh.target.p = [rel[0], rel[1], 10.0 + rel[2]]
+        veh._track_closest(k * veh.dt_s)
+        if k < 2:
+            assert veh.result is None  # still closing
+    assert veh.result is not None and veh.result["outcome"] == "HIT", veh.result
+    assert veh.result["miss_m"] == pytest.approx(y, abs=1e-4)
+    assert veh.miss_m <= veh.hit_radius_m

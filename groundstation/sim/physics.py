@@ -356,7 +356,8 @@ def closest_approach(
 # the simulator's outcome state Simulation.closest: relative position (target minus vehicle,
 # m) at the end of the last step, closest approach so far (m), its time (s), the vehicle's
 # speed then (m/s), the relative position and the vehicle's velocity then, the outcome code
-# (OUTCOME_* below), the hit radius (m) and the exponent 2.0 (see the module's docstring)
+# (OUTCOME_* below), the hit radius (m), the exponent 2.0 (see the module's docstring) and
+# 1.0 when the last step ended closing (the range still falling at its end)
 C_REL, C_MISS, C_TIME, C_SPEED, C_CLOSE_REL, C_CLOSE_VEL, C_OUTCOME, C_HIT_R, C_TWO = (
     0,
     3,
@@ -368,7 +369,8 @@ C_REL, C_MISS, C_TIME, C_SPEED, C_CLOSE_REL, C_CLOSE_VEL, C_OUTCOME, C_HIT_R, C_
     13,
     14,
 )
-C_SIZE = 15
+C_ENDED_CLOSING = 15
+C_SIZE = 16
 OUTCOME_NONE, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_DIVERGED, OUTCOME_CRASHED = 0, 1, 2, 3, 4
 
 
@@ -472,8 +474,11 @@ def physics_steps(
             cs[6], cs[7], cs[8] = c0, c1, c2
             cs[9], cs[10], cs[11] = vvx, vvy, vvz
         outcome = OUTCOME_NONE
-        if dist < PASS_RADIUS_M and r0d < 0.0 and r1d > 0.0:
-            # closing at the start of the step, opening at its end, near: it is over
+        closing = r0d < 0.0 or cs[C_ENDED_CLOSING] != 0.0
+        cs[C_ENDED_CLOSING] = 1.0 if r1d < 0.0 else 0.0
+        if dist < PASS_RADIUS_M and closing and r1d > 0.0:
+            # closing at the start of the step (or at the end of the one before: the closest
+            # point on the step boundary), opening at its end, near: it is over
             outcome = OUTCOME_HIT if miss <= hit_r else OUTCOME_MISS
         elif (
             not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))

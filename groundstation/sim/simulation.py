@@ -88,15 +88,15 @@ class SortieResult:
         return d
 
 
-def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool]:
+def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool, bool]:
     """Closest approach within one physics step, the relative position moving linearly from
     ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
-    position there, whether the range was closing at the start and is opening at the end
-    (:func:`.physics.closest_approach`, the kernel's own check)."""
+    position there, whether the range was closing at the start, is opening at the end, and is
+    still closing at the end (:func:`.physics.closest_approach`, the kernel's own checks)."""
     dist, s, c0, c1, c2, r0d, r1d = closest_approach(
         float(r0[0]), float(r0[1]), float(r0[2]), float(r1[0]), float(r1[1]), float(r1[2])
     )
-    return dist, s, (c0, c1, c2), r0d < 0.0, r1d > 0.0
+    return dist, s, (c0, c1, c2), r0d < 0.0, r1d > 0.0, r1d < 0.0
 
 
 class Simulation:

@@ -137,16 +137,30 @@ class Target:
 
 class TrackTarget(Target):
     """A target that follows a recorded track (times, positions), linearly interpolated and
-    continued at its last velocity after the end: for re-flying a recorded sortie."""
+    continued at its last velocity after the end: for re-flying a recorded sortie. A sample
+    at the time of the one before it (a log may record two at one stamp) is dropped; times that
+    go back, or a sample that is not finite, are refused (ValueError)."""
 
     def __init__(self, spec: TargetSpec, times_s: list[float], positions_m: list) -> None:
         super().__init__(spec)
-        if len(times_s) < 2 or len(times_s) != len(positions_m):
+        if len(times_s) != len(positions_m):
+            raise ValueError("a target track needs one position per time")
+        rows: list[tuple[float, ...]] = []
+        for i, (t, p) in enumerate(zip(times_s, positions_m, strict=True)):
+            row = (float(t), *map(float, p))
+            if len(row) != 4 or not all(math.isfinite(c) for c in row):
+                raise ValueError(f"target track sample {i}: not a finite time and 3-D position")
+            if rows and row[0] <= rows[-1][0]:
+                if row[0] == rows[-1][0]:
+                    continue  # a repeated stamp: the first sample at it stands
+                raise ValueError(
+                    f"target track sample {i}: time {row[0]} s before the previous {rows[-1][0]} s"
+                )
+            rows.append(row)
+        if len(rows) < 2:
             raise ValueError("a target track needs at least two (time, position) samples")
         self.kind = KIND_TRACK
-        self.track = np.array(
-            [(float(t), *map(float, p)) for t, p in zip(times_s, positions_m, strict=True)]
-        )
+        self.track = np.array(rows)
         self.moves = True
         t0 = self.track[0, 0]
         self.advance(t0, 0.0, (0.0, 0.0, 0.0))  # the first segment's velocity

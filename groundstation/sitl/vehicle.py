@@ -168,6 +168,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         self.closest = None
         self.result: dict | None = None
         self._rel = None
+        self._ended_closing = False  # the last step ended with the range still falling
         self._frames: list = []  # (send time, n, capture time, image)
         self._n = 0
         self.rates_hz = dict(RATES_HZ)  # MAV_CMD_SET_MESSAGE_INTERVAL changes these
@@ -360,10 +361,12 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         self.max_speed_m_s = max(self.max_speed_m_s, speed)
         if r0 is None or self.result is not None:
             return
-        dist, s, _, closing, opening = closest_in_step(r0, r1)
+        dist, s, _, closing, opening, ended_closing = closest_in_step(r0, r1)
         if dist < self.miss_m:
             self.miss_m = dist
             self.closest = (ts + s * self.dt_s, speed)
+        # over: opening now, closing at the step's start or at the end of the one before
+        closing, self._ended_closing = closing or self._ended_closing, ended_closing
         if closing and opening and dist < PASS_RADIUS_M:
             hit = self.miss_m <= self.hit_radius_m
             self._finish((Outcome.HIT if hit else Outcome.MISS).value)

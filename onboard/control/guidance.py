@@ -53,7 +53,8 @@ class GuidanceOutput:
 def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndarray:
     """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5)."""
     # numpy's product (its rounding, FMA or not, is the reference's), then floats: the norm's
-    # sum of squares in index order, as ``r @ r`` sums three terms
+    # sum of squares in index order (not numpy's ``r @ r``: its BLAS dot picks a kernel per CPU,
+    # and some sum three terms in another order)
     r0, r1, r2 = (R_WC @ np.array((e_norm_x, e_norm_y, 1.0))).tolist()
     n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     return np.array((r0 / n, r1 / n, r2 / n))

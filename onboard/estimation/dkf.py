@@ -53,7 +53,8 @@ oldest rows leaving), a fusion with its replay, a covariance propagation and the
 each one numba kernel over those arrays, compiled at import. The kernels are the filter's only
 implementation (``PEREGRINE_JIT=0`` runs them as Python). Their scalar arithmetic is Python's,
 operation for operation; their matrix products are numpy's expressions, which numba hands to
-the same OpenBLAS routines numpy calls, so the filter's numbers are numpy's to the bit
+OpenBLAS (scipy's build of it; numpy calls its own build), and on the filter's shapes the two
+give numpy's numbers to the bit
 (tests/test_dkf_kernels.py compares every kernel with its Python source; ``a ** two`` with
 the exponent from the parameter array is libm's pow as Python's ``a ** 2`` is, where a
 literal 2 would compile to a * a, which differs in the last bit for ~1 in 1000 a).
@@ -658,14 +659,18 @@ class DelayedKalmanFilter:
     ) -> None:
         """Advance to ``time_s`` with the body rate, vehicle velocity (ENU) and camera attitude
         (camera -> ENU) held since the previous call. Without velocity and attitude the vehicle
-        is taken as still and level, and the target velocity state absorbs its motion."""
+        is taken as still and level, and the target velocity state absorbs its motion. A time
+        not after the last prediction, or not finite, changes nothing (a NaN row would stop the
+        window from ever trimming; an infinite one would end every later prediction)."""
         lo, hi = self._win.tolist()
-        if hi > lo and time_s <= self._T[hi - 1] + _TIME_EPS_S:
+        if (hi > lo and time_s <= self._T[hi - 1] + _TIME_EPS_S) or not math.isfinite(time_s):
             return
         gyro = _vector3(gyro_rates_flu_rad_s)
         v_c = _NO_INPUT if velocity_enu_m_s is None else _vector3(velocity_enu_m_s)
         R = _NO_MATRIX if R_WC is None else _matrix3(R_WC)
         self._head_cache = None
+        if self._initialised and hi > lo and not self._HX[hi - 1]:
+            self._drop_track()  # no state to step on (the kernel would step a stale row's)
         if hi == self._T.shape[0]:
             self._make_room()
         T = self._T
@@ -751,8 +756,8 @@ class DelayedKalmanFilter:
         # replay from the last buffered state strictly before t_c: an entry at exactly t_c
         # must come out of the replay with this measurement applied
         j = self._index_at_or_before(t_c - 2.0 * _TIME_EPS_S)
-        if T[j] >= t_c - _TIME_EPS_S or not self._HX[j]:
-            return FusionResult.TOO_OLD
+        if T[j] > (t_c - 2.0 * _TIME_EPS_S) + _TIME_EPS_S or not self._HX[j]:
+            return FusionResult.TOO_OLD  # (the bound bisect used: no row before t_c)
         if self._meas and self._meas[-1].t > t_c:
             # out of order: full replay in capture order from just before t_c
             bisect.insort(self._meas, m, key=_meas_time)
@@ -882,7 +887,9 @@ class DelayedKalmanFilter:
         x0 = np.array(x0, dtype=np.float64)
         P0 = np.ascontiguousarray(P0, dtype=np.float64)
         j = self._index_at_or_before(m.t)
-        if abs(self._T[j] - m.t) < _TIME_EPS_S:
+        # row j is at t_c by the same test that found it (T[j] <= t_c + eps): a stamp a rounding
+        # error short of eps before the newest row must still write the new track's state there
+        if m.t - _TIME_EPS_S <= self._T[j] <= m.t + _TIME_EPS_S:
             self._X[j], self._P[j] = x0, P0
             self._HX[j] = self._HP[j] = 1
         self._initialised = True
