@@ -318,7 +318,7 @@ def _build_parser() -> argparse.ArgumentParser:
     b.add_argument(
         "--early-tick",
         choices=("on", "off"),
-        help="--sitl: onboard run --early-tick on|off (default: the runtime's, off)",
+        help="--sitl: onboard run --early-tick on|off (default: the runtime's, on)",
     )
     b.add_argument(
         "--video",

@@ -172,6 +172,21 @@ def rodrigues(axis_unit: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
 
 
+def rotation_vector_between(R0: np.ndarray, R1: np.ndarray) -> tuple[float, float, float]:
+    """The rotation vector (rad, in R0's frame: body axes for attitudes) of R0^T R1, the
+    rotation from attitude R0 to attitude R1 (the log map; angles below pi)."""
+    M = R0.T @ R1
+    x = 0.5 * float(M[2, 1] - M[1, 2])
+    y = 0.5 * float(M[0, 2] - M[2, 0])
+    z = 0.5 * float(M[1, 0] - M[0, 1])
+    s = math.sqrt(x * x + y * y + z * z)  # sin(angle)
+    c = 0.5 * (float(M[0, 0] + M[1, 1] + M[2, 2]) - 1.0)  # cos(angle)
+    if not s > 1e-12:
+        return x, y, z
+    k = math.atan2(s, c) / s
+    return x * k, y * k, z * k
+
+
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b for 3-vectors (np.cross is ~20x slower on tiny arrays)."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])

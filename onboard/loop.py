@@ -49,11 +49,15 @@ from .datatypes import (
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
-from .geometry import propagate_rotation, quat_to_rotmat
+from .geometry import propagate_rotation, quat_to_rotmat, rotation_vector_between
 
 _NAN2 = (math.nan, math.nan)
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
+# an attitude that moved this much more (rad) than the gyro turned it since the last tick was
+# a stale one replaced by a fresh one: measured differences while flying are under ~1 mrad
+# (noise, the gyro's bias, the attitude estimate's slow error; README "Stale attitude")
+ATTITUDE_JUMP_RAD = 0.005
 
 
 class InterceptionLoop:
@@ -87,6 +91,8 @@ class InterceptionLoop:
         self._detections: list[Detection] = []
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
+        self._prev_R_WB: np.ndarray | None = None
+        self.attitude_jumps = 0  # ticks whose attitude jumped (their LOS change re-based)
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
@@ -252,6 +258,17 @@ class InterceptionLoop:
         rest = max(1.0 - elapsed_s / last[2], -MAX_LATE_CARRY)
         return last[0] * rest, last[1] * rest
 
+    def _attitude_jumped(self, R_WB: np.ndarray, gyro: np.ndarray, dt: float) -> bool:
+        """Did the attitude move more than ATTITUDE_JUMP_RAD beyond what the gyro (rad/s FLU,
+        the mean since the last tick) turned it over ``dt`` (s) since the last tick?"""
+        R0 = self._prev_R_WB
+        if R0 is None:
+            return False
+        x, y, z = rotation_vector_between(R0, R_WB)
+        g0, g1, g2 = gyro.tolist()
+        ex, ey, ez = x - g0 * dt, y - g1 * dt, z - g2 * dt
+        return math.sqrt(ex * ex + ey * ey + ez * ez) > ATTITUDE_JUMP_RAD
+
     # ------------------------------------------------------------------ the tick
     def tick(
         self, state: VehicleState, brake: bool = False, hold_s: float | None = None
@@ -378,7 +395,14 @@ class InterceptionLoop:
                 # moves both ends of the difference, so Delta q carries no correction jump.
                 # Unmoved since the last tick (same estimate, same attitude): that tick's angles
                 c = self._los_last
-                if c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:
+                if self._attitude_jumped(R_WB, gyro, dt):
+                    # a stale attitude replaced by a fresh one: the two ticks' attitudes differ
+                    # by the correction, which PNG would turn K times within one command; the
+                    # previous LOS through this attitude turned back by the gyro instead
+                    self.attitude_jumps += 1
+                    R_prev = propagate_rotation(R_WB, gyro, -dt) @ self.camera.R_BC
+                    q_prev = direction_angles(line_of_sight(prev[0] / f, prev[1] / f, R_prev))
+                elif c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:
                     q_prev = c[2]
                 else:
                     q_prev = direction_angles(
@@ -456,6 +480,7 @@ class InterceptionLoop:
         self._thrust_n = float(thrust) * self.vehicle.max_thrust_n
         self._prev_time_s = t
         self._prev_R_WC = R_WC
+        self._prev_R_WB = R_WB
         return ControlTelemetry(
             time_s=t,
             mode=mode,

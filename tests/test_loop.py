@@ -234,3 +234,54 @@ def test_detections_fused_between_ticks_fly_the_same_as_fused_in_the_tick():
     print(f"max |difference|: estimate {de:.4f} px, body rate command {dc:.5f} rad/s")
     assert de < 0.1
     assert dc < 0.01
+
+
+def _yawing_pass(stale: range, jump_rad: float, monkeypatch) -> list[np.ndarray]:
+    """Fly PNG at 3 m/s north toward a still target 20 m ahead while the vehicle yaws at
+    1 rad/s (the gyro says so every tick); on the ticks in ``stale`` the attitude handed to
+    the loop is frozen at the one before them (a starved attitude stream), then fresh again.
+    The commanded accelerations (m/s^2 ENU), tick by tick."""
+    import onboard.loop as loop_module
+
+    monkeypatch.setattr(loop_module, "ATTITUDE_JUMP_RAD", jump_rad)
+    cam = CameraModel()
+    loop = _loop()
+    rate = 1.0
+    target = np.array([0.0, 20.0, 10.0])
+    out, handed = [], None
+    for k in range(60):
+        t = 0.01 * k
+        p = np.array([0.0, 3.0 * t, 10.0])
+        R_WB = attitude_from_yaw_pitch_roll(math.pi / 2 + 0.3 - rate * t)
+        if k % 3 == 0:  # the camera sees the true attitude
+            u, v = cam.project((R_WB @ cam.R_BC).T @ (target - p))
+            loop.on_detection(Detection(t, (u, v), (u - 10, v - 10, 20, 20), 314.0))
+        loop.on_gyro(GyroSample(t, np.array([0.0, 0.0, -rate])))
+        if k not in stale:  # else the last one handed again
+            handed = rotmat_to_quat(R_WB)
+        vel = np.array([0.0, 3.0, 0.0])
+        tel = loop.tick(VehicleState(t, p, vel, handed, np.array([0.0, 0.0, -rate])))
+        assert tel.mode is LoopMode.TRACKING or k == 0
+        out.append(np.array(tel.accel_desired_enu_m_s2))
+    return out
+
+
+def test_a_stale_attitude_replaced_by_a_fresh_one_does_not_jerk_the_command(monkeypatch):
+    # 0.15 s without a fresh attitude while yawing at 1 rad/s: each tick's attitude is 10 mrad
+    # off what the gyro turned, and the fresh one 150 mrad from the last. With two ticks'
+    # attitudes the LOS change carries those and PNG turns K times them in one command;
+    # re-based through this tick's attitude and the gyro it is the target's
+    fresh = _yawing_pass(range(0), 0.005, monkeypatch)
+    guarded = _yawing_pass(range(30, 45), 0.005, monkeypatch)
+    unguarded = _yawing_pass(range(30, 45), math.inf, monkeypatch)
+    dev = [float(np.linalg.norm(a - b)) for a, b in zip(guarded, fresh, strict=True)]
+    dev_off = [float(np.linalg.norm(a - b)) for a, b in zip(unguarded, fresh, strict=True)]
+    print(f"max |a_d - fresh|: guarded {max(dev):.3f}, unguarded {max(dev_off):.3f} m/s^2")
+    # guarded, what is left is the stale attitude's error in the LOS's direction (up to
+    # 150 mrad of it here, through the speed ramp): 0.39 m/s^2. Unguarded the command sat at
+    # a_max (4.9 m/s^2) the whole time and flipped sign when the fresh attitude came
+    assert max(dev) < 0.5
+    assert max(dev_off) > 10 * max(dev)
+    assert (
+        float(np.dot(unguarded[45], unguarded[44])) < 0.0 < float(np.dot(guarded[45], guarded[44]))
+    )

@@ -153,6 +153,7 @@ def run_sitl_bench(
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
+        "attitude_jumps": stats.get("attitude_jumps"),
         "early_ticks": stats.get("early_ticks"),
         "early_gap_median_ms": stats.get("early_gap_median_ms"),
         "ticks": stats.get("ticks"),
@@ -227,6 +228,10 @@ def run_sitl_bench(
     print(
         f"  overruns {figures['overruns']}, stalls re-anchored {figures['scheduler_stalls']}"
         f"  target 0 in {seconds:g} s: {'met' if figures['overruns'] == 0 else 'NOT MET'}"
+    )
+    print(
+        f"    attitude jumps (a stale attitude replaced: the LOS change re-based through the "
+        f"gyro) {figures['attitude_jumps']}"
     )
     print(
         f"  capture-to-command median {f(figures['capture_to_command_median_ms'], 1)} ms, of "

@@ -311,6 +311,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
             "early_tick": self.config.early_tick,
             "gc_runs_in_slack": self.scheduler.gc_runs,
+            # ticks whose attitude jumped beyond the gyro's turn (a stale one replaced)
+            "attitude_jumps": None if self.loop is None else self.loop.attitude_jumps,
+            "guard_trips": None if self.loop is None else self.loop.guard_trips,
             "realtime_priority": self.config.realtime_priority,
             "bad_frames_fc": self.fc.bad_frames,
             "bad_frames_gcs": None if self.gcs is None else self.gcs.bad_frames,
