@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 
+from .jit import kernel
+
 E_Z = np.array([0.0, 0.0, 1.0])
 
 # Camera (x right, y down, z optical axis) -> body (x forward, y left, z up), camera looking
@@ -172,19 +174,27 @@ def rodrigues(axis_unit: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
 
 
-def rotation_vector_between(R0: np.ndarray, R1: np.ndarray) -> tuple[float, float, float]:
-    """The rotation vector (rad, in R0's frame: body axes for attitudes) of R0^T R1, the
-    rotation from attitude R0 to attitude R1 (the log map; angles below pi)."""
-    M = R0.T @ R1
-    x = 0.5 * float(M[2, 1] - M[1, 2])
-    y = 0.5 * float(M[0, 2] - M[2, 0])
-    z = 0.5 * float(M[1, 0] - M[0, 1])
+@kernel("float64(float64[:, :], float64[:, :], float64, float64, float64, float64)")
+def attitude_jump_rad(
+    R0: np.ndarray, R1: np.ndarray, w0: float, w1: float, w2: float, dt_s: float
+) -> float:
+    """How far (rad) attitude R1 is from attitude R0 turned by the body rates (w0, w1, w2)
+    (rad/s FLU) for ``dt_s`` (s): |log(R0^T R1) - w dt|, the rotation vectors' difference (to
+    first order in it; angles below pi). Compared with a threshold only: its rounding is not
+    any flown number's."""
+    m = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            m[i, j] = R0[0, i] * R1[0, j] + R0[1, i] * R1[1, j] + R0[2, i] * R1[2, j]
+    x = 0.5 * (m[2, 1] - m[1, 2])
+    y = 0.5 * (m[0, 2] - m[2, 0])
+    z = 0.5 * (m[1, 0] - m[0, 1])
     s = math.sqrt(x * x + y * y + z * z)  # sin(angle)
-    c = 0.5 * (float(M[0, 0] + M[1, 1] + M[2, 2]) - 1.0)  # cos(angle)
-    if not s > 1e-12:
-        return x, y, z
-    k = math.atan2(s, c) / s
-    return x * k, y * k, z * k
+    if s > 1e-12:
+        k = math.atan2(s, 0.5 * (m[0, 0] + m[1, 1] + m[2, 2] - 1.0)) / s
+        x, y, z = x * k, y * k, z * k
+    ex, ey, ez = x - w0 * dt_s, y - w1 * dt_s, z - w2 * dt_s
+    return math.sqrt(ex * ex + ey * ey + ez * ez)
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:

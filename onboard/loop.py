@@ -49,7 +49,7 @@ from .datatypes import (
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
-from .geometry import propagate_rotation, quat_to_rotmat, rotation_vector_between
+from .geometry import attitude_jump_rad, propagate_rotation, quat_to_rotmat
 
 _NAN2 = (math.nan, math.nan)
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
@@ -264,10 +264,8 @@ class InterceptionLoop:
         R0 = self._prev_R_WB
         if R0 is None:
             return False
-        x, y, z = rotation_vector_between(R0, R_WB)
         g0, g1, g2 = gyro.tolist()
-        ex, ey, ez = x - g0 * dt, y - g1 * dt, z - g2 * dt
-        return math.sqrt(ex * ex + ey * ey + ez * ez) > ATTITUDE_JUMP_RAD
+        return attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD
 
     # ------------------------------------------------------------------ the tick
     def tick(

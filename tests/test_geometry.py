@@ -89,3 +89,23 @@ def test_rotational_flow_matches_finite_difference(R_north):
     e = (uv(R_north) - [cam.cu_px, cam.cv_px]) / cam.f_px
     model = np.array(rotational_flow(e[0], e[1], cam.R_BC.T @ w)) * cam.f_px
     assert_allclose(model, fd, rtol=1e-4)
+
+
+def test_attitude_jump_is_the_rotation_beyond_the_gyros_turn():
+    from onboard.geometry import attitude_jump_rad, propagate_rotation, rodrigues
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        axis = rng.normal(size=3)
+        R0 = rodrigues(axis / np.linalg.norm(axis), float(rng.uniform(0, 3.0)))
+        w = rng.normal(scale=3.0, size=3)  # rad/s
+        dt = float(rng.uniform(0.001, 0.02))
+        R1 = propagate_rotation(R0, w, dt)
+        assert attitude_jump_rad(R0, R1, *w.tolist(), dt) < 1e-9  # turned as the gyro says
+        kick = rng.normal(size=3)
+        kick *= 0.01 / np.linalg.norm(kick)  # then 10 mrad more, about any axis
+        R2 = R1 @ rodrigues(kick / 0.01, 0.01)
+        jump = attitude_jump_rad(R0, R2, *w.tolist(), dt)
+        assert abs(jump - 0.01) < 0.0015  # first order in the rotation vectors' difference
+        as_python = getattr(attitude_jump_rad, "py_func", attitude_jump_rad)
+        assert jump == as_python(R0, R2, *w.tolist(), dt)  # compiled: the same bits
