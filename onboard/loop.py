@@ -54,10 +54,13 @@ from .geometry import attitude_jump_rad, propagate_rotation, quat_to_rotmat
 _NAN2 = (math.nan, math.nan)
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
-# an attitude that moved this much more (rad) than the gyro turned it since the last tick was
-# a stale one replaced by a fresh one: measured differences while flying are under ~1 mrad
-# (noise, the gyro's bias, the attitude estimate's slow error; README "Stale attitude")
+# an attitude that moved this much more (rad) than the gyro turned it since an on-time last
+# tick was a stale one replaced by a fresh one: the simulator's differences while flying stay
+# under 1.7 mrad (noise, the gyro's bias, the attitude estimate's error; README "Stale attitude")
 ATTITUDE_JUMP_RAD = 0.005
+# beyond this many periods since the last tick the mean gyro rate times the interval is no
+# better than the two attitudes (a stall: the rates' samples arrive late or not at all)
+ATTITUDE_JUMP_MAX_PERIODS = 2.0
 
 
 class InterceptionLoop:
@@ -260,11 +263,14 @@ class InterceptionLoop:
 
     def _attitude_jumped(self, R_WB: np.ndarray, gyro: np.ndarray, dt: float) -> bool:
         """Did the attitude move more than ATTITUDE_JUMP_RAD beyond what the gyro (rad/s FLU,
-        the mean since the last tick) turned it over ``dt`` (s) since the last tick?"""
+        the mean since the last tick) turned it over ``dt`` (s) since the last tick? Not judged
+        after a late tick (a stall) or with non-finite rates: then the two attitudes stand."""
         R0 = self._prev_R_WB
-        if R0 is None:
+        if R0 is None or dt > ATTITUDE_JUMP_MAX_PERIODS * self.nominal_dt_s:
             return False
         g0, g1, g2 = gyro.tolist()
+        if not (math.isfinite(g0) and math.isfinite(g1) and math.isfinite(g2)):
+            return False  # no turn to take back (propagate_rotation ignores such rates)
         return attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD
 
     # ------------------------------------------------------------------ the tick

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from groundstation.app.session import SortieConfig
 from groundstation.scenario import load_scenario
@@ -357,9 +358,19 @@ def test_timeline_zoom_and_recorded_fields(station, page):
     page.wait_for_selector("#add-plot-row:not([hidden])", timeout=10000)
     page.select_option("#add-field", "thrust_cmd")
     page.click("#btn-add-plot")
-    page.wait_for_function(
-        "window.peregrine.plots.some(u => u.def && u.def.title === 'thrust_cmd')"
-    )
+    try:
+        page.wait_for_function(
+            "window.peregrine.plots.some(u => u.def && u.def.title === 'thrust_cmd')"
+        )
+    except PlaywrightTimeout:  # (failed once in a loaded CI run: say what the page held)
+        seen = page.evaluate(
+            "({field: document.getElementById('add-field').value,"
+            " fields: document.getElementById('add-field').options.length,"
+            " plots: window.peregrine.plots.map(u => u.def ? u.def.title : 'xy'),"
+            " status: window.peregrine.snap && window.peregrine.snap.status &&"
+            "  [window.peregrine.snap.status.epoch, window.peregrine.snap.status.state]})"
+        )
+        raise AssertionError(f"no thrust_cmd plot after Add plot: {seen}") from None
     thrust = page.evaluate(
         "window.peregrine.plots.find(u => u.def && u.def.title === 'thrust_cmd').data[1]"
     )

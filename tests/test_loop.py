@@ -240,7 +240,7 @@ def _yawing_pass(stale: range, jump_rad: float, monkeypatch) -> list[np.ndarray]
     """Fly PNG at 3 m/s north toward a still target 20 m ahead while the vehicle yaws at
     1 rad/s (the gyro says so every tick); on the ticks in ``stale`` the attitude handed to
     the loop is frozen at the one before them (a starved attitude stream), then fresh again.
-    The commanded accelerations (m/s^2 ENU), tick by tick."""
+    The commanded accelerations (m/s^2 ENU), tick by tick, then the loop's attitude_jumps."""
     import onboard.loop as loop_module
 
     monkeypatch.setattr(loop_module, "ATTITUDE_JUMP_RAD", jump_rad)
@@ -263,6 +263,7 @@ def _yawing_pass(stale: range, jump_rad: float, monkeypatch) -> list[np.ndarray]
         tel = loop.tick(VehicleState(t, p, vel, handed, np.array([0.0, 0.0, -rate])))
         assert tel.mode is LoopMode.TRACKING or k == 0
         out.append(np.array(tel.accel_desired_enu_m_s2))
+    out.append(loop.attitude_jumps)
     return out
 
 
@@ -271,9 +272,10 @@ def test_a_stale_attitude_replaced_by_a_fresh_one_does_not_jerk_the_command(monk
     # off what the gyro turned, and the fresh one 150 mrad from the last. With two ticks'
     # attitudes the LOS change carries those and PNG turns K times them in one command;
     # re-based through this tick's attitude and the gyro it is the target's
-    fresh = _yawing_pass(range(0), 0.005, monkeypatch)
-    guarded = _yawing_pass(range(30, 45), 0.005, monkeypatch)
-    unguarded = _yawing_pass(range(30, 45), math.inf, monkeypatch)
+    *fresh, jumps_fresh = _yawing_pass(range(0), 0.005, monkeypatch)
+    *guarded, jumps = _yawing_pass(range(30, 45), 0.005, monkeypatch)
+    *unguarded, _ = _yawing_pass(range(30, 45), math.inf, monkeypatch)
+    assert jumps_fresh == 0 and jumps == 16  # the 15 stale ticks (10 mrad each), the fresh one
     dev = [float(np.linalg.norm(a - b)) for a, b in zip(guarded, fresh, strict=True)]
     dev_off = [float(np.linalg.norm(a - b)) for a, b in zip(unguarded, fresh, strict=True)]
     print(f"max |a_d - fresh|: guarded {max(dev):.3f}, unguarded {max(dev_off):.3f} m/s^2")
@@ -285,3 +287,18 @@ def test_a_stale_attitude_replaced_by_a_fresh_one_does_not_jerk_the_command(monk
     assert (
         float(np.dot(unguarded[45], unguarded[44])) < 0.0 < float(np.dot(guarded[45], guarded[44]))
     )
+
+
+def test_the_attitude_jump_is_not_judged_after_a_stall_or_with_non_finite_rates():
+    loop = _loop()
+    loop.tick(_state(0.0))
+    R = attitude_from_yaw_pitch_roll(math.pi / 2 + 0.02)  # 20 mrad from the last tick's
+    dt = loop.nominal_dt_s
+    assert loop._attitude_jumped(R, np.zeros(3), dt)
+    # the gyro saw the turn: no jump
+    assert not loop._attitude_jumped(R, np.array([0.0, 0.0, 0.02 / dt]), dt)
+    # a late tick (a stall): the mean rate times the interval is no better than two attitudes
+    assert not loop._attitude_jumped(R, np.zeros(3), 3.0 * dt)
+    # no rates to turn back by (propagate_rotation ignores them): the attitudes stand
+    for bad in (math.inf, math.nan):
+        assert not loop._attitude_jumped(R, np.array([bad, 0.0, 0.0]), dt)
