@@ -25,6 +25,9 @@ class VehicleState:
     velocity_enu_m_s: np.ndarray
     attitude_wxyz: np.ndarray  # body (FLU) -> world (ENU)
     body_rates_flu_rad_s: np.ndarray
+    # the time the attitude is of (s, after any propagation to the tick): older than the tick
+    # when the attitude stream stalled; None: taken to be of the tick
+    attitude_time_s: float | None = None
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer

@@ -61,6 +61,9 @@ ATTITUDE_JUMP_RAD = 0.005
 # beyond this many periods since the last tick the mean gyro rate times the interval is no
 # better than the two attitudes (a stall: the rates' samples arrive late or not at all)
 ATTITUDE_JUMP_MAX_PERIODS = 2.0
+# an attitude the runtime could not carry to the tick (older than fc_state's propagation
+# limit: the stream stalled) is frozen: each tick it falls behind by the body's turn
+ATTITUDE_STALE_S = 1e-6
 
 
 class InterceptionLoop:
@@ -96,6 +99,7 @@ class InterceptionLoop:
         self._prev_R_WC: np.ndarray | None = None
         self._prev_R_WB: np.ndarray | None = None
         self.attitude_jumps = 0  # ticks whose attitude jumped (their LOS change re-based)
+        self.stale_attitude_ticks = 0  # ticks with an attitude not carried to them (likewise)
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
@@ -261,17 +265,29 @@ class InterceptionLoop:
         rest = max(1.0 - elapsed_s / last[2], -MAX_LATE_CARRY)
         return last[0] * rest, last[1] * rest
 
-    def _attitude_jumped(self, R_WB: np.ndarray, gyro: np.ndarray, dt: float) -> bool:
-        """Did the attitude move more than ATTITUDE_JUMP_RAD beyond what the gyro (rad/s FLU,
-        the mean since the last tick) turned it over ``dt`` (s) since the last tick? Not judged
-        after a late tick (a stall) or with non-finite rates: then the two attitudes stand."""
+    def _rebase_los(
+        self, state: VehicleState, R_WB: np.ndarray, gyro: np.ndarray, dt: float
+    ) -> bool:
+        """Take the previous LOS through this tick's attitude turned back by the gyro (rad/s
+        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's? Yes
+        when the attitude is stale (not carried to the tick: frozen while the body turns) or
+        jumped (moved more than ATTITUDE_JUMP_RAD beyond the gyro's turn: a stale one replaced
+        by a fresh one). Not after a late tick (a stall) or with non-finite rates: then the
+        two attitudes stand."""
         R0 = self._prev_R_WB
         if R0 is None or dt > ATTITUDE_JUMP_MAX_PERIODS * self.nominal_dt_s:
             return False
         g0, g1, g2 = gyro.tolist()
         if not (math.isfinite(g0) and math.isfinite(g1) and math.isfinite(g2)):
             return False  # no turn to take back (propagate_rotation ignores such rates)
-        return attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD
+        q_at = state.attitude_time_s
+        if q_at is not None and state.time_s - q_at > ATTITUDE_STALE_S:
+            self.stale_attitude_ticks += 1
+            return True
+        if attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
+            self.attitude_jumps += 1
+            return True
+        return False
 
     # ------------------------------------------------------------------ the tick
     def tick(
@@ -399,11 +415,11 @@ class InterceptionLoop:
                 # moves both ends of the difference, so Delta q carries no correction jump.
                 # Unmoved since the last tick (same estimate, same attitude): that tick's angles
                 c = self._los_last
-                if self._attitude_jumped(R_WB, gyro, dt):
-                    # a stale attitude replaced by a fresh one: the two ticks' attitudes differ
-                    # by the correction, which PNG would turn K times within one command; the
-                    # previous LOS through this attitude turned back by the gyro instead
-                    self.attitude_jumps += 1
+                if self._rebase_los(state, R_WB, gyro, dt):
+                    # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
+                    # differ by the body's turn missed or by the correction, which PNG would
+                    # turn K times within one command; the previous LOS through this attitude
+                    # turned back by the gyro instead
                     R_prev = propagate_rotation(R_WB, gyro, -dt) @ self.camera.R_BC
                     q_prev = direction_angles(line_of_sight(prev[0] / f, prev[1] / f, R_prev))
                 elif c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:

@@ -236,19 +236,22 @@ def test_detections_fused_between_ticks_fly_the_same_as_fused_in_the_tick():
     assert dc < 0.01
 
 
-def _yawing_pass(stale: range, jump_rad: float, monkeypatch) -> list[np.ndarray]:
+def _yawing_pass(
+    stale: range, jump_rad: float, monkeypatch, rate: float = 1.0, stamped: bool = False
+) -> list:
     """Fly PNG at 3 m/s north toward a still target 20 m ahead while the vehicle yaws at
-    1 rad/s (the gyro says so every tick); on the ticks in ``stale`` the attitude handed to
-    the loop is frozen at the one before them (a starved attitude stream), then fresh again.
-    The commanded accelerations (m/s^2 ENU), tick by tick, then the loop's attitude_jumps."""
+    ``rate`` (rad/s; the gyro says so every tick); on the ticks in ``stale`` the attitude
+    handed to the loop is frozen at the one before them (a starved attitude stream), then
+    fresh again; ``stamped``: the state says when its attitude is of (``attitude_time_s``, as
+    the runtime's does). The commanded accelerations (m/s^2 ENU), tick by tick, then the
+    loop's counts of jumped and stale attitudes."""
     import onboard.loop as loop_module
 
     monkeypatch.setattr(loop_module, "ATTITUDE_JUMP_RAD", jump_rad)
     cam = CameraModel()
     loop = _loop()
-    rate = 1.0
     target = np.array([0.0, 20.0, 10.0])
-    out, handed = [], None
+    out, handed, handed_t = [], None, 0.0
     for k in range(60):
         t = 0.01 * k
         p = np.array([0.0, 3.0 * t, 10.0])
@@ -258,13 +261,18 @@ def _yawing_pass(stale: range, jump_rad: float, monkeypatch) -> list[np.ndarray]
             loop.on_detection(Detection(t, (u, v), (u - 10, v - 10, 20, 20), 314.0))
         loop.on_gyro(GyroSample(t, np.array([0.0, 0.0, -rate])))
         if k not in stale:  # else the last one handed again
-            handed = rotmat_to_quat(R_WB)
-        vel = np.array([0.0, 3.0, 0.0])
-        tel = loop.tick(VehicleState(t, p, vel, handed, np.array([0.0, 0.0, -rate])))
+            handed, handed_t = rotmat_to_quat(R_WB), t
+        vel, w = np.array([0.0, 3.0, 0.0]), np.array([0.0, 0.0, -rate])
+        tel = loop.tick(VehicleState(t, p, vel, handed, w, handed_t if stamped else None))
         assert tel.mode is LoopMode.TRACKING or k == 0
         out.append(np.array(tel.accel_desired_enu_m_s2))
-    out.append(loop.attitude_jumps)
+    out.append((loop.attitude_jumps, loop.stale_attitude_ticks))
     return out
+
+
+def _deviation(run: list, fresh: list) -> float:
+    """The largest |a_d - a_d flown with fresh attitudes| over the pass (m/s^2)."""
+    return max(float(np.linalg.norm(a - b)) for a, b in zip(run, fresh, strict=True))
 
 
 def test_a_stale_attitude_replaced_by_a_fresh_one_does_not_jerk_the_command(monkeypatch):
@@ -272,33 +280,51 @@ def test_a_stale_attitude_replaced_by_a_fresh_one_does_not_jerk_the_command(monk
     # off what the gyro turned, and the fresh one 150 mrad from the last. With two ticks'
     # attitudes the LOS change carries those and PNG turns K times them in one command;
     # re-based through this tick's attitude and the gyro it is the target's
-    *fresh, jumps_fresh = _yawing_pass(range(0), 0.005, monkeypatch)
-    *guarded, jumps = _yawing_pass(range(30, 45), 0.005, monkeypatch)
+    *fresh, counts_fresh = _yawing_pass(range(0), 0.005, monkeypatch)
+    *guarded, counts = _yawing_pass(range(30, 45), 0.005, monkeypatch)
     *unguarded, _ = _yawing_pass(range(30, 45), math.inf, monkeypatch)
-    assert jumps_fresh == 0 and jumps == 16  # the 15 stale ticks (10 mrad each), the fresh one
-    dev = [float(np.linalg.norm(a - b)) for a, b in zip(guarded, fresh, strict=True)]
-    dev_off = [float(np.linalg.norm(a - b)) for a, b in zip(unguarded, fresh, strict=True)]
-    print(f"max |a_d - fresh|: guarded {max(dev):.3f}, unguarded {max(dev_off):.3f} m/s^2")
+    assert counts_fresh == (0, 0) and counts == (16, 0)  # 15 stale ticks (10 mrad), the fresh
+    dev, dev_off = _deviation(guarded, fresh), _deviation(unguarded, fresh)
+    print(f"max |a_d - fresh|: guarded {dev:.3f}, unguarded {dev_off:.3f} m/s^2")
     # guarded, what is left is the stale attitude's error in the LOS's direction (up to
     # 150 mrad of it here, through the speed ramp): 0.39 m/s^2. Unguarded the command sat at
     # a_max (4.9 m/s^2) the whole time and flipped sign when the fresh attitude came
-    assert max(dev) < 0.5
-    assert max(dev_off) > 10 * max(dev)
-    assert (
-        float(np.dot(unguarded[45], unguarded[44])) < 0.0 < float(np.dot(guarded[45], guarded[44]))
-    )
+    assert dev < 0.5
+    assert dev_off > 10 * dev
+    flip = [float(np.dot(a[45], a[44])) for a in (unguarded, guarded)]
+    assert flip[0] < 0.0 < flip[1]
 
 
-def test_the_attitude_jump_is_not_judged_after_a_stall_or_with_non_finite_rates():
+def test_a_stale_attitude_turning_slowly_is_known_by_its_age(monkeypatch):
+    # at 0.3 rad/s a frozen attitude falls 3 mrad behind a tick, under the jump threshold:
+    # only its age (the runtime stamps it) tells it is stale; then every stale tick's LOS
+    # change is re-based, and the fresh attitude's arrival is a jump
+    *fresh, _ = _yawing_pass(range(0), 0.005, monkeypatch, rate=0.3, stamped=True)
+    *aged, counts = _yawing_pass(range(30, 45), 0.005, monkeypatch, rate=0.3, stamped=True)
+    *unaged, counts_unaged = _yawing_pass(range(30, 45), 0.005, monkeypatch, rate=0.3)
+    assert counts == (1, 15) and counts_unaged == (1, 0)
+    dev, dev_off = _deviation(aged, fresh), _deviation(unaged, fresh)
+    print(f"max |a_d - fresh|: by age {dev:.3f}, without {dev_off:.3f} m/s^2")
+    assert dev < 0.3
+    assert dev_off > 5 * dev
+
+
+def test_the_attitude_is_not_judged_after_a_stall_or_with_non_finite_rates():
     loop = _loop()
     loop.tick(_state(0.0))
     R = attitude_from_yaw_pitch_roll(math.pi / 2 + 0.02)  # 20 mrad from the last tick's
     dt = loop.nominal_dt_s
-    assert loop._attitude_jumped(R, np.zeros(3), dt)
+    now, stale = _state(dt), _state(dt)
+    stale.attitude_time_s = 0.0  # not carried to the tick
+    assert loop._rebase_los(now, R, np.zeros(3), dt)
+    assert loop._rebase_los(stale, loop._prev_R_WB, np.zeros(3), dt)
     # the gyro saw the turn: no jump
-    assert not loop._attitude_jumped(R, np.array([0.0, 0.0, 0.02 / dt]), dt)
+    assert not loop._rebase_los(now, R, np.array([0.0, 0.0, 0.02 / dt]), dt)
     # a late tick (a stall): the mean rate times the interval is no better than two attitudes
-    assert not loop._attitude_jumped(R, np.zeros(3), 3.0 * dt)
+    assert not loop._rebase_los(now, R, np.zeros(3), 3.0 * dt)
+    assert not loop._rebase_los(stale, R, np.zeros(3), 3.0 * dt)
     # no rates to turn back by (propagate_rotation ignores them): the attitudes stand
     for bad in (math.inf, math.nan):
-        assert not loop._attitude_jumped(R, np.array([bad, 0.0, 0.0]), dt)
+        assert not loop._rebase_los(now, R, np.array([bad, 0.0, 0.0]), dt)
+        assert not loop._rebase_los(stale, R, np.array([bad, 0.0, 0.0]), dt)
+    assert (loop.attitude_jumps, loop.stale_attitude_ticks) == (1, 1)

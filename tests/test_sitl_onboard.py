@@ -120,6 +120,17 @@ def test_state_at_carries_the_attitude_to_the_tick_with_the_latest_gyro():
     assert np.array_equal(state_at(f, 1.004).attitude_wxyz, q0)
 
 
+def test_the_state_says_how_far_its_attitude_was_carried():
+    # the loop re-bases its LOS change on an attitude that is not of the tick (a stall)
+    f = FcState(pos_enu_m=np.zeros(3), vel_enu_m_s=np.zeros(3), q_wxyz=np.array([1.0, 0, 0, 0]))
+    assert state_at(f, 1.0).attitude_time_s is None  # no sample time: taken as the tick's
+    f.q_time_s, f.gyro_flu_rad_s = 1.000, np.array([0.0, 0.0, 1.0])
+    assert state_at(f, 1.004).attitude_time_s == pytest.approx(1.004, abs=1e-12)
+    assert state_at(f, 1.5).attitude_time_s == pytest.approx(1.0 + MAX_PROPAGATION_S, abs=1e-12)
+    f.gyro_flu_rad_s = np.array([0.0, 0.0, 1e6])  # not propagated: of its sample time
+    assert state_at(f, 1.004).attitude_time_s == 1.000
+
+
 def test_the_attitude_paired_with_the_image_estimate_is_the_tick_s():
     """A vehicle yawing and rolling at 2-3 rad/s, PX4's attitude at 200 Hz arriving 1 ms
     after its sample, ticks at 200 Hz out of phase (seeded): the attitude the loop gets was

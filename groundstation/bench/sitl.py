@@ -154,6 +154,7 @@ def run_sitl_bench(
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
         "attitude_jumps": stats.get("attitude_jumps"),
+        "stale_attitude_ticks": stats.get("stale_attitude_ticks"),
         "early_ticks": stats.get("early_ticks"),
         "early_gap_median_ms": stats.get("early_gap_median_ms"),
         "ticks": stats.get("ticks"),
@@ -230,8 +231,9 @@ def run_sitl_bench(
         f"  target 0 in {seconds:g} s: {'met' if figures['overruns'] == 0 else 'NOT MET'}"
     )
     print(
-        f"    attitude jumps (a stale attitude replaced: the LOS change re-based through the "
-        f"gyro) {figures['attitude_jumps']}"
+        f"    LOS changes re-based through the gyro: attitude jumps (a stale attitude replaced) "
+        f"{figures['attitude_jumps']}, ticks with a stale attitude "
+        f"{figures['stale_attitude_ticks']}"
     )
     print(
         f"  capture-to-command median {f(figures['capture_to_command_median_ms'], 1)} ms, of "

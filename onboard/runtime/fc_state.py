@@ -64,16 +64,20 @@ def vehicle_state_at(
     """The vehicle state for a control tick at ``now_s``: the attitude ``q_wxyz`` (sampled at
     ``q_time_s``, onboard clock s) propagated to the tick with the latest gyro rates
     ``gyro_flu_rad_s`` (the attitude's own rates ``rates_flu_rad_s`` before any HIGHRES_IMU),
-    by at most ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale.
+    by at most ``MAX_PROPAGATION_S``, and not at all with rates beyond a gyro's full scale
+    (the state's ``attitude_time_s`` says how far it got).
     The loop pairs it with an image estimate predicted to the tick, so an attitude left a
     stream period old would show as a line-of-sight error of rate x age. The simulator calls
     this directly (no :class:`FcState` to build each tick)."""
     q = q_wxyz
+    q_at = None
     if q_time_s is not None:
         dt = min(max(now_s - q_time_s, 0.0), MAX_PROPAGATION_S)
+        q_at = q_time_s
         rates = rates_flu_rad_s if gyro_flu_rad_s is None else gyro_flu_rad_s
         if math.hypot(*rates.tolist()) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
             q = propagate_attitude(q, rates, dt)
+            q_at = q_time_s + dt
     if q is not None and type(q) is not np.ndarray:  # the simulator's floats
         q = np.array(q, dtype=float)
-    return VehicleState(now_s, pos_enu_m, vel_enu_m_s, q, rates_flu_rad_s)
+    return VehicleState(now_s, pos_enu_m, vel_enu_m_s, q, rates_flu_rad_s, q_at)

@@ -311,8 +311,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
             "early_tick": self.config.early_tick,
             "gc_runs_in_slack": self.scheduler.gc_runs,
-            # ticks whose attitude jumped beyond the gyro's turn (a stale one replaced)
+            # ticks whose LOS change was re-based through the gyro: the attitude jumped beyond
+            # the gyro's turn (a stale one replaced), or was not of the tick (stale)
             "attitude_jumps": None if self.loop is None else self.loop.attitude_jumps,
+            "stale_attitude_ticks": None if self.loop is None else self.loop.stale_attitude_ticks,
             "guard_trips": None if self.loop is None else self.loop.guard_trips,
             "realtime_priority": self.config.realtime_priority,
             "bad_frames_fc": self.fc.bad_frames,
