@@ -422,3 +422,30 @@ def test_a_new_track_stamped_a_rounding_error_before_the_newest_row_is_flown():
     est = dkf.estimate()
     assert est is not None and not est.lost
     assert_allclose(est.e_px, cam.error_px(100.0, 100.0), atol=0.5)  # was (10, 10): the old
+
+
+def test_a_gated_out_of_order_detection_is_not_kept_for_later_replays():
+    # in order, an outlier is gated and forgotten; out of order it was kept in the replay list
+    # and tried again by every later replay: now it is forgotten too, and the filter runs on
+    # exactly as one that never saw it
+    cam = CameraModel()
+
+    def run(outlier: bool):
+        dkf = DelayedKalmanFilter(cam)
+        for k in range(40):
+            t = round(0.01 * k, 10)
+            dkf.predict(t, np.zeros(3), np.zeros(3), cam.R_BC)
+            if k % 3 == 0 and k < 27:
+                dkf.fuse(Detection(t, (330.0, 250.0), (327, 247, 6, 6), 28.0))
+            if k == 30:
+                if outlier:  # out of order (0.24 is fused) and far off: gated
+                    far = Detection(0.235, (600.0, 50.0), (597, 47, 6, 6), 28.0)
+                    assert dkf.fuse(far) is FusionResult.GATED
+                    assert 0.235 not in [m.t for m in dkf._meas]
+                late = Detection(0.232, (331.0, 250.5), (328, 247, 6, 6), 28.0)
+                assert dkf.fuse(late) is FusionResult.ACCEPTED  # its replay passes 0.235
+        return dkf.estimate(), dkf.state_vector()
+
+    (e1, s1), (e0, s0) = run(True), run(False)
+    assert (e1.e_px, e1.e_rate_px_s) == (e0.e_px, e0.e_rate_px_s)
+    assert np.array_equal(s1[0], s0[0]) and np.array_equal(s1[1], s0[1])

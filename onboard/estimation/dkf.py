@@ -762,9 +762,9 @@ class DelayedKalmanFilter:
             # out of order: full replay in capture order from just before t_c
             bisect.insort(self._meas, m, key=_meas_time)
             P = self._covariance(j)
-            if P is None:
-                return FusionResult.GATED
-            accepted = self._replay(j, self._X[j], P, float(T[j]), t_c)
+            accepted = P is not None and self._replay(j, self._X[j], P, float(T[j]), t_c)
+            if not accepted and any(o is m for o in self._meas):
+                self._meas.remove(m)  # kept only if fused, as in order: no later replay retries it
         else:
             code = _fuse_latest(
                 T, self._U, self._X, self._F, self._Q, self._P, self._HX, self._HP,
