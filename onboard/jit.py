@@ -22,37 +22,33 @@ ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
 
 KERNELS: list[Callable[..., Any]] = []  # every kernel defined so far, compiled or not
 
-_told_compiling = False
+_told: set[str] = set()  # what this process has said once already
+
+
+def _tell_once(what: str, text: str) -> None:
+    """Say ``text`` on stderr once per process (``what`` names it): why a start is slow."""
+    if what not in _told:
+        _told.add(what)
+        print(f"peregrine: {text}", file=sys.stderr, flush=True)
 
 
 def _tell_compiling(name: str) -> None:
-    """Say once per process why it is slow to start: the kernels are being compiled (the
-    first run after an install or an upgrade; cached on disk afterwards)."""
-    global _told_compiling
-    if not _told_compiling:
-        _told_compiling = True
-        print(
-            f"peregrine: compiling the numba kernels ({name}, ...): once after an install or "
-            "upgrade, about half a minute; cached on disk afterwards",
-            file=sys.stderr,
-            flush=True,
-        )
-
-
-_told_no_cache = False
+    """The kernels are being compiled (the first run after an install or an upgrade;
+    cached on disk afterwards)."""
+    _tell_once(
+        "compiling",
+        f"compiling the numba kernels ({name}, ...): once after an install or upgrade, about "
+        "half a minute; cached on disk afterwards",
+    )
 
 
 def _tell_no_cache(name: str) -> None:
-    """Say once per process that nothing can be cached, so every start compiles."""
-    global _told_no_cache
-    if not _told_no_cache:
-        _told_no_cache = True
-        print(
-            f"peregrine: no writable cache for the numba kernels ({name}, ...): compiling them "
-            "at every start (about half a minute); set NUMBA_CACHE_DIR to a writable directory",
-            file=sys.stderr,
-            flush=True,
-        )
+    """Nothing can be cached, so every start compiles."""
+    _tell_once(
+        "no cache",
+        f"no writable cache for the numba kernels ({name}, ...): compiling them at every start "
+        "(about half a minute); set NUMBA_CACHE_DIR to a writable directory",
+    )
 
 
 def _compile(fn: F, signature: str | None, cache: bool) -> F:

@@ -412,8 +412,7 @@ class InterceptionLoop:
             prev = None if self._prev_time_s is None else self.dkf.e_px_at(self._prev_time_s)
             if prev is not None and self._prev_R_WC is not None:
                 # previous LOS from the replay-corrected buffered estimate: a fused detection
-                # moves both ends of the difference, so Delta q carries no correction jump.
-                # Unmoved since the last tick (same estimate, same attitude): that tick's angles
+                # moves both ends of the difference, so Delta q carries no correction jump
                 c = self._los_last
                 if self._rebase_los(state, R_WB, gyro, dt):
                     # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
@@ -423,7 +422,7 @@ class InterceptionLoop:
                     R_prev = propagate_rotation(R_WB, gyro, -dt) @ self.camera.R_BC
                     q_prev = direction_angles(line_of_sight(prev[0] / f, prev[1] / f, R_prev))
                 elif c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:
-                    q_prev = c[2]
+                    q_prev = c[2]  # unmoved since the last tick (same estimate and attitude)
                 else:
                     q_prev = direction_angles(
                         line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
