@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from groundstation.app.session import SortieConfig
 from groundstation.scenario import load_scenario
@@ -354,23 +353,35 @@ def test_timeline_zoom_and_recorded_fields(station, page):
     assert page.evaluate("window.peregrine.plots[1].series[2].show") is False
 
     # replay: any recorded numeric field can be added as a plot; the XY plot has the track
+    # (where the button is on the page, each frame until it is pressed: the plots' legends
+    # once grew a line when their values came, moving the button between a press and its
+    # release, and the click was lost)
+    page.evaluate(
+        """(() => {
+        const b = document.getElementById('btn-add-plot'), tops = (window.addPlotTops = []);
+        let pressed = false;
+        window.addEventListener('pointerdown', () => { pressed = true; }, true);
+        const look = () => {
+          if (pressed) return;
+          if (!b.parentElement.hidden) {
+            const top = Math.round(b.getBoundingClientRect().top + window.scrollY);
+            if (tops[tops.length - 1] !== top) tops.push(top);
+          }
+          requestAnimationFrame(look);
+        };
+        look();
+      })()"""
+    )
     api(station, "POST", "/api/replay/open", {"name": name})
     page.wait_for_selector("#add-plot-row:not([hidden])", timeout=10000)
+    page.wait_for_function("window.peregrine.plotView.dirty === false")  # its values drawn
     page.select_option("#add-field", "thrust_cmd")
     page.click("#btn-add-plot")
-    try:
-        page.wait_for_function(
-            "window.peregrine.plots.some(u => u.def && u.def.title === 'thrust_cmd')"
-        )
-    except PlaywrightTimeout:  # (failed once in a loaded CI run: say what the page held)
-        seen = page.evaluate(
-            "({field: document.getElementById('add-field').value,"
-            " fields: document.getElementById('add-field').options.length,"
-            " plots: window.peregrine.plots.map(u => u.def ? u.def.title : 'xy'),"
-            " status: window.peregrine.snap && window.peregrine.snap.status &&"
-            "  [window.peregrine.snap.status.epoch, window.peregrine.snap.status.state]})"
-        )
-        raise AssertionError(f"no thrust_cmd plot after Add plot: {seen}") from None
+    tops = page.evaluate("window.addPlotTops")
+    assert len(tops) == 1, f"the Add plot button moved while the plots filled in: {tops}"
+    page.wait_for_function(
+        "window.peregrine.plots.some(u => u.def && u.def.title === 'thrust_cmd')"
+    )
     thrust = page.evaluate(
         "window.peregrine.plots.find(u => u.def && u.def.title === 'thrust_cmd').data[1]"
     )
