@@ -63,11 +63,15 @@ def _floats(v) -> list:
     return v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
 
 
-def quat_mul_floats(a, b) -> tuple[float, float, float, float]:
-    """Hamilton product a b of quaternions (w, x, y, z) given as sequences of floats, as a
-    tuple of floats (:func:`quat_mul` without the arrays)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
+_F4 = "UniTuple(float64, 4)"
+
+
+@kernel(f"{_F4}(float64, float64, float64, float64, float64, float64, float64, float64)")
+def quat_mul4(
+    aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: float, bz: float
+) -> tuple[float, float, float, float]:
+    """Hamilton product a b of quaternions (w, x, y, z), component by component (a kernel
+    other kernels call; :func:`quat_mul_floats` takes sequences)."""
     return (
         aw * bw - ax * bx - ay * by - az * bz,
         aw * bx + ax * bw + ay * bz - az * by,
@@ -76,20 +80,32 @@ def quat_mul_floats(a, b) -> tuple[float, float, float, float]:
     )
 
 
+def quat_mul_floats(a, b) -> tuple[float, float, float, float]:
+    """Hamilton product a b of quaternions (w, x, y, z) given as sequences of floats, as a
+    tuple of floats (:func:`quat_mul` without the arrays)."""
+    return quat_mul4(*a, *b)
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a b of quaternions (w, x, y, z)."""
     return np.array(quat_mul_floats(_floats(a), _floats(b)))
 
 
-def quat_exp_floats(rotvec_rad) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of a rotation vector (rad, a sequence of floats), as a
-    tuple of floats (:func:`quat_exp` without the arrays)."""
-    x, y, z = rotvec_rad
+@kernel(f"{_F4}(float64, float64, float64)")
+def quat_exp3(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of the rotation vector (x, y, z) (rad), a kernel other
+    kernels call (:func:`quat_exp_floats` takes a sequence)."""
     ang = math.sqrt(x * x + y * y + z * z)
     if ang < 1e-12:
         return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
     s = math.sin(0.5 * ang) / ang
     return (math.cos(0.5 * ang), s * x, s * y, s * z)
+
+
+def quat_exp_floats(rotvec_rad) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of a rotation vector (rad, a sequence of floats), as a
+    tuple of floats (:func:`quat_exp` without the arrays)."""
+    return quat_exp3(*rotvec_rad)
 
 
 def quat_exp(rotvec_rad: np.ndarray) -> np.ndarray:
@@ -104,11 +120,48 @@ def propagate_attitude(q_wxyz: np.ndarray, rates_flu_rad_s: np.ndarray, dt_s: fl
     same order as the array form (the norm's sum of squares in index order)."""
     if dt_s == 0.0:
         return np.asarray(q_wxyz, dtype=float)
-    r0, r1, r2 = _floats(rates_flu_rad_s)
-    dt = float(dt_s)
-    q0, q1, q2, q3 = quat_mul_floats(_floats(q_wxyz), quat_exp_floats((r0 * dt, r1 * dt, r2 * dt)))
-    n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-    return np.array((q0 / n, q1 / n, q2 / n, q3 / n))
+    return np.array(propagated_quat(*_floats(q_wxyz), *_floats(rates_flu_rad_s), dt_s))
+
+
+@kernel(f"{_F4}(float64, float64, float64, float64, float64, float64, float64, float64)")
+def propagated_quat(
+    q0: float, q1: float, q2: float, q3: float, r0: float, r1: float, r2: float, dt_s: float
+) -> tuple[float, float, float, float]:
+    """:func:`propagate_attitude` (``dt_s`` not zero) in floats: q exp(omega dt), the norm's
+    sum of squares in index order."""
+    e0, e1, e2, e3 = quat_exp3(r0 * dt_s, r1 * dt_s, r2 * dt_s)
+    a0, a1, a2, a3 = quat_mul4(q0, q1, q2, q3, e0, e1, e2, e3)
+    n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+    return (a0 / n, a1 / n, a2 / n, a3 / n)
+
+
+@kernel(
+    "UniTuple(float64, 5)(float64, float64, float64, float64, float64, float64, float64,"
+    " float64, float64, float64, float64)"
+)
+def carried_attitude(
+    now_s: float,
+    q0: float,
+    q1: float,
+    q2: float,
+    q3: float,
+    q_time_s: float,
+    r0: float,
+    r1: float,
+    r2: float,
+    max_dt_s: float,
+    max_rate_rad_s: float,
+) -> tuple[float, float, float, float, float]:
+    """The attitude (w, x, y, z) sampled at ``q_time_s`` carried to ``now_s`` (s) at the body
+    rates (r0, r1, r2) (rad/s FLU), by at most ``max_dt_s`` and not at all at rates beyond
+    ``max_rate_rad_s`` (or not finite), and the time it is of then
+    (``fc_state.vehicle_state_at``; the simulator's hand-off calls it too)."""
+    dt = min(max(now_s - q_time_s, 0.0), max_dt_s)
+    if not math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= max_rate_rad_s:  # NaN fails too
+        return q0, q1, q2, q3, q_time_s
+    if dt != 0.0:
+        q0, q1, q2, q3 = propagated_quat(q0, q1, q2, q3, r0, r1, r2, dt)
+    return q0, q1, q2, q3, q_time_s + dt
 
 
 def propagate_rotation(R_WB: np.ndarray, rates_flu_rad_s: np.ndarray, lag_s: float) -> np.ndarray:

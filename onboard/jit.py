@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -51,9 +51,35 @@ def _tell_no_cache(name: str) -> None:
     )
 
 
-def _compile(fn: F, signature: str | None, cache: bool) -> F:
+def _source_file(fn: Callable[..., Any]) -> str:
+    return getattr(fn, "py_func", fn).__code__.co_filename
+
+
+def _forget_if_stale(fn: Callable[..., Any], uses: Sequence[Callable[..., Any]]) -> None:
+    """Drop ``fn``'s cached machine code when a kernel it calls from another file changed
+    after it was cached: numba checks only the caller's own source (its documented limit), so
+    an edited callee would otherwise keep flying in its old form inside the caller."""
+    if not uses:
+        return
+    from numba.core.caching import FunctionCache
+
+    try:
+        index = FunctionCache(fn)._cache_file._index_path
+        cached = os.stat(index).st_mtime
+        newest = max(os.stat(_source_file(u)).st_mtime for u in uses)
+    except (OSError, RuntimeError, AttributeError):  # nothing cached, or no cache at all
+        return
+    if newest > cached:
+        os.remove(index)
+
+
+def _compile(
+    fn: F, signature: str | None, cache: bool, uses: Sequence[Callable[..., Any]] = ()
+) -> F:
     import numba
 
+    if cache:
+        _forget_if_stale(fn, uses)
     options = {"cache": cache, "nogil": True}
     if signature is None:
         return numba.njit(**options)(fn)
@@ -64,17 +90,21 @@ def _compile(fn: F, signature: str | None, cache: bool) -> F:
     return compiled
 
 
-def kernel(signature: str | None = None) -> Callable[[F], F]:
+def kernel(
+    signature: str | None = None, uses: Sequence[Callable[..., Any]] = ()
+) -> Callable[[F], F]:
     """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
     for ``signature`` (eagerly, at import) or lazily on first call without one; with
-    ``PEREGRINE_JIT=0`` return it unchanged."""
+    ``PEREGRINE_JIT=0`` return it unchanged. ``uses``: the kernels of other files it calls
+    (its cache is dropped when one of them changes; callees in its own file need not be
+    named)."""
 
     def wrap(fn: F) -> F:
         if not ENABLED:
             KERNELS.append(fn)
             return fn
         try:
-            compiled = _compile(fn, signature, cache=True)
+            compiled = _compile(fn, signature, cache=True, uses=uses)
         except RuntimeError as exc:
             if "cannot cache" not in str(exc):
                 raise

@@ -244,18 +244,27 @@ def test_the_simulator_hands_the_loop_the_attitude_carried_to_the_tick():
 
 
 def test_the_simulator_hands_the_loop_what_state_at_gives_the_runtime_bit_for_bit():
-    """The simulator calls ``fc_state.vehicle_state_at`` with the estimate model's floats (no
-    FcState built per tick); the runtime calls ``state_at`` on its FcState of arrays. Every
-    tick of a sortie with every estimate error on: the same numbers, bit for bit."""
+    """The simulator hands the loop its gyro sample and state in one kernel
+    (``estimate.hand_off``); the runtime calls ``state_at`` on its FcState of arrays, built
+    here from a twin of the estimate model through its per-call methods (``gyro``,
+    ``vehicle_state_of``) and a twin of the gyro's noise stream. Every tick of a sortie with
+    every estimate error on: the same numbers, bit for bit."""
+    from groundstation.sim.physics import gyro_mean
     from onboard.runtime.fc_state import FcState, state_at
 
     sim = Simulation(load_scenario("cv-top-to-bottom"), seed=1)
     hand = sim._as_the_runtime_hands_it
     twin = copy.deepcopy(sim.estimate)  # the same streams, drawn in the same order
+    twin_noise = copy.deepcopy(sim._gyro_noise)
+    sigma = sim.scenario.sim.gyro_noise_rad_s
     checked = []
 
-    def checking_hand(t, truth, gyro):
-        state = hand(t, truth, gyro)
+    def checking_hand(t):
+        x = sim.vehicle.x.copy()  # the truth before the hand-off reads (and zeroes) the rates
+        out = hand(t)
+        r, n = gyro_mean(x), twin_noise.next()
+        gyro = twin.gyro(t, np.array([r[i] + n[i] * sigma for i in range(3)]))
+        truth = (tuple(x[0:3]), tuple(x[3:6]), tuple(x[6:10]), tuple(x[10:13]))
         est = twin.vehicle_state_of(t, *truth)
         fc = FcState(
             pos_enu_m=est.position_enu_m,
@@ -266,11 +275,17 @@ def test_the_simulator_hands_the_loop_what_state_at_gives_the_runtime_bit_for_bi
             gyro_flu_rad_s=gyro,
         )
         ref = state_at(fc, t)
-        for name in ("position_enu_m", "velocity_enu_m_s", "attitude_wxyz"):
-            a, b = getattr(state, name), getattr(ref, name)
-            assert type(a) is np.ndarray and a.tobytes() == b.tobytes(), name
+        for name, got, want in (
+            ("gyro", out[0:3], gyro),
+            ("position", out[3:6], ref.position_enu_m),
+            ("velocity", out[6:9], ref.velocity_enu_m_s),
+            ("attitude", out[9:13], ref.attitude_wxyz),
+            ("body rates", out[13:16], ref.body_rates_flu_rad_s),
+        ):
+            assert got.tobytes() == want.tobytes(), name
+        assert out[16] == ref.attitude_time_s
         checked.append(t)
-        return state
+        return out
 
     sim._as_the_runtime_hands_it = checking_hand
     sim.run()

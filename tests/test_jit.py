@@ -126,3 +126,42 @@ def test_no_writable_cache_anywhere_compiles_at_every_start_instead_of_failing(t
         proc = subprocess.run(run, env=env, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0 and proc.stdout.strip() == "5.0", proc.stderr
         assert proc.stderr.count("no writable cache for the numba kernels") == 1, proc.stderr
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_a_kernel_calling_one_of_another_file_recompiles_when_that_one_changes(tmp_path):
+    # numba's cache checks only the caller's own source: without ``uses`` the caller would
+    # keep the callee's old code inside it after an edit of the callee's file
+    pkg = tmp_path / "pair_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    callee = pkg / "callee.py"
+
+    def write_callee(k: float, mtime: float) -> None:
+        callee.write_text(
+            "from onboard.jit import kernel\n"
+            "@kernel('float64(float64)')\n"
+            f"def scale(x):\n    return {k} * x\n"
+        )
+        os.utime(callee, (mtime, mtime))
+
+    write_callee(2.0, 1_000_000_000.0)
+    (pkg / "caller.py").write_text(
+        "from onboard.jit import kernel\n"
+        "from .callee import scale\n"
+        "@kernel('float64(float64)', uses=(scale,))\n"
+        "def caller(x):\n    return scale(x) + 1.0\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}", PYTHONDONTWRITEBYTECODE="1")
+    run = [sys.executable, "-c", "from pair_pkg import caller as c; print(c.caller(1.5))"]
+
+    def result() -> str:
+        proc = subprocess.run(run, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout.strip()
+
+    assert result() == "4.0"  # compiled and cached
+    assert result() == "4.0"  # from the cache
+    write_callee(3.0, 2_000_000_000.0)  # edited after the caller was cached
+    assert result() == "5.5"

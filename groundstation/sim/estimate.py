@@ -87,18 +87,26 @@ ideal-sensor figures). Pure maths: time comes in with the samples, no clock is r
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from onboard.datatypes import Detection, VehicleState
-from onboard.geometry import quat_exp_floats, quat_mul_floats
+from onboard.geometry import carried_attitude, quat_exp3, quat_mul4
+from onboard.jit import kernel
+from onboard.runtime.fc_state import MAX_PROPAGATION_RATE_RAD_S, MAX_PROPAGATION_S
 
 from ..scenario import EstimateSpec
+from .physics import X_P, gyro_mean
+
+_QUAT = (quat_exp3, quat_mul4)  # the kernels of other files estimate_of calls
 
 # the independent random streams, in spawn order (a new error goes at the end)
 STREAMS = ("position", "velocity", "attitude", "gyro_bias", "camera_time", "thrust")
+
+
+BLOCK = 256  # normals drawn per call of a stream
 
 
 class Normals:
@@ -106,7 +114,7 @@ class Normals:
     call per 256 samples instead of one each: the stream's sequence does not depend on the
     block)."""
 
-    def __init__(self, rng: np.random.Generator, dim: int, block: int = 256) -> None:
+    def __init__(self, rng: np.random.Generator, dim: int, block: int = BLOCK) -> None:
         self._rng, self._dim, self._block = rng, dim, block
         self._buf: list[list[float]] = []
         self._i = 0
@@ -120,68 +128,83 @@ class Normals:
         return self._buf[i]
 
 
+@kernel("UniTuple(f8, 2)(f8, f8, f8)")
+def gauss_markov_factors(dt_s: float, tau_s: float, sigma: float) -> tuple[float, float]:
+    """The exact step of a first-order Gauss-Markov process over ``dt_s``: a = exp(-dt/tau)
+    and b = sigma sqrt(1 - a^2), x <- a x + b n."""
+    a = math.exp(-dt_s / tau_s)
+    return a, sigma * math.sqrt(1.0 - a * a)
+
+
+@kernel("void(f8[::1], f8, f8, f8[::1])")
+def gauss_markov_step(x: np.ndarray, a: float, b: float, n: np.ndarray) -> None:
+    """x <- a x + b n in place (:func:`gauss_markov_factors`; n standard normal)."""
+    for i in range(x.shape[0]):
+        x[i] = a * x[i] + b * n[i]
+
+
+@kernel("void(f8[::1], f8, f8[::1])")
+def random_walk_step(x: np.ndarray, s: float, n: np.ndarray) -> None:
+    """x <- x + s n in place (s = walk x sqrt(dt); n standard normal)."""
+    for i in range(x.shape[0]):
+        x[i] = x[i] + s * n[i]
+
+
 class GaussMarkov:
     """First-order Gauss-Markov process per component, x' = -x / tau + w, stationary standard
     deviation ``sigma``; started in its stationary distribution and stepped exactly for any
-    dt (x <- a x + sigma sqrt(1 - a^2) n, a = exp(-dt / tau)). Kept as floats (:attr:`x`;
-    :attr:`value` is the same as an array): numpy's per-call cost on a 3-vector is several
-    times the arithmetic, which is the same operations in the same order."""
+    dt (:func:`gauss_markov_factors`, :func:`gauss_markov_step`, the kernels the state
+    estimate model's steps call too). :attr:`x` is the state (an array, updated in place)."""
 
     def __init__(self, sigma: float, tau_s: float, dim: int, rng: np.random.Generator) -> None:
         self.sigma = float(sigma)
         self.tau_s = float(tau_s)
-        self._normals = Normals(rng, dim)
-        self._three = dim == 3
-        s = self.sigma
-        self.x = [s * n for n in self._normals.next()]
+        self._rng = rng
+        self._block = np.empty((0, dim))
+        self._i = 0
+        self.x = self.sigma * self._normal()
         self._dt_s = -1.0
         self._a = self._b = 0.0
 
+    def _normal(self) -> np.ndarray:
+        if self._i >= self._block.shape[0]:
+            self._block, self._i = self._rng.standard_normal((BLOCK, self.x_dim)), 0
+        self._i += 1
+        return self._block[self._i - 1]
+
+    @property
+    def x_dim(self) -> int:
+        return self._block.shape[1]
+
     @property
     def value(self) -> np.ndarray:
-        return np.array(self.x)
+        return self.x.copy()
 
-    def step(self, dt_s: float) -> list[float]:
+    def step(self, dt_s: float) -> np.ndarray:
         if dt_s != self._dt_s:  # the factors, once per step size
             self._dt_s = dt_s
-            self._a = math.exp(-dt_s / self.tau_s)
-            self._b = self.sigma * math.sqrt(1.0 - self._a * self._a)
-        a, b, x, n = self._a, self._b, self.x, self._normals.next()
-        if self._three:  # the estimate's vectors, written out (a comprehension costs twice)
-            self.x = [a * x[0] + b * n[0], a * x[1] + b * n[1], a * x[2] + b * n[2]]
-        else:
-            self.x = [a * xi + b * ni for xi, ni in zip(x, n, strict=True)]
+            self._a, self._b = gauss_markov_factors(dt_s, self.tau_s, self.sigma)
+        gauss_markov_step(self.x, self._a, self._b, self._normal())
         return self.x
 
 
-class RandomWalk:
+class RandomWalk(GaussMarkov):
     """A bias: N(0, ``initial``) per component at the start, then a random walk of
-    ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t)). Floats as
-    :class:`GaussMarkov`."""
+    ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t))
+    (:func:`random_walk_step`)."""
 
     def __init__(
         self, initial: float, walk_per_sqrt_s: float, dim: int, rng: np.random.Generator
     ) -> None:
+        super().__init__(initial, math.inf, dim, rng)
         self.walk = float(walk_per_sqrt_s)
-        self._normals = Normals(rng, dim)
-        self._three = dim == 3
-        s = float(initial)
-        self.x = [s * n for n in self._normals.next()]
 
-    @property
-    def value(self) -> np.ndarray:
-        return np.array(self.x)
-
-    def step(self, dt_s: float) -> list[float]:
-        s, x, n = self.walk * math.sqrt(dt_s), self.x, self._normals.next()
-        if self._three:  # as GaussMarkov.step
-            self.x = [x[0] + s * n[0], x[1] + s * n[1], x[2] + s * n[2]]
-        else:
-            self.x = [xi + s * ni for xi, ni in zip(x, n, strict=True)]
+    def step(self, dt_s: float) -> np.ndarray:
+        random_walk_step(self.x, self.walk * math.sqrt(dt_s), self._normal())
         return self.x
 
 
-@dataclass(slots=True)  # not frozen (read-only by convention): three are made a tick
+@dataclass(slots=True)  # not frozen (read-only by convention)
 class _Sample:
     """One sample of the truth: time, position, velocity, attitude (w, x, y, z) and body rates
     (sequences of floats)."""
@@ -193,72 +216,227 @@ class _Sample:
     w: tuple
 
 
-def _lerp3(a, b, f: float) -> tuple[float, float, float]:
-    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
+# a delay line's array: row 0 (first index of the history, samples held, lag in s), then one
+# row per sample (time, position, velocity, attitude w x y z, body rates), a ring
+_RING_COLS = 14
+
+
+@kernel("void(f8[:, ::1], f8[::1], f8[::1])")
+def delay_push(ring: np.ndarray, now: np.ndarray, out: np.ndarray) -> None:
+    """Push the sample ``now`` (time, p, v, q, w: 14 floats) into the delay line ``ring``
+    (room for one more) and write into ``out`` the truth ``lag`` before it: linearly
+    interpolated between the samples held (the quaternion on the short way, normalised after
+    interpolation), the oldest sample while the history does not reach back that far, the
+    newest with no lag."""
+    cap = ring.shape[0] - 1
+    lo, n, lag = int(ring[0, 0]), int(ring[0, 1]), ring[0, 2]
+    j = 1 + (lo + n) % cap
+    for c in range(_RING_COLS):
+        ring[j, c] = now[c]
+    n += 1
+    tq = now[0] - lag
+    tq_eps = tq + 1e-12
+    while n >= 2 and ring[1 + (lo + 1) % cap, 0] <= tq_eps:
+        lo = (lo + 1) % cap
+        n -= 1
+    ring[0, 0], ring[0, 1] = lo, n
+    a = ring[1 + lo]
+    if n == 1 or tq <= a[0] + 1e-12:
+        for c in range(_RING_COLS):
+            out[c] = a[c]
+        return
+    b = ring[1 + (lo + 1) % cap]
+    f = (tq - a[0]) / (b[0] - a[0])
+    out[0] = tq
+    for c in (1, 2, 3, 4, 5, 6, 11, 12, 13):  # position, velocity, body rates
+        out[c] = a[c] + f * (b[c] - a[c])
+    a0, a1, a2, a3 = a[7], a[8], a[9], a[10]
+    b0, b1, b2, b3 = b[7], b[8], b[9], b[10]
+    if not a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 >= 0.0:
+        b0, b1, b2, b3 = -b0, -b1, -b2, -b3
+    q0, q1, q2, q3 = (
+        a0 + f * (b0 - a0),
+        a1 + f * (b1 - a1),
+        a2 + f * (b2 - a2),
+        a3 + f * (b3 - a3),
+    )
+    m = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    out[7], out[8], out[9], out[10] = q0 / m, q1 / m, q2 / m, q3 / m
 
 
 class DelayLine:
-    """The truth ``lag_s`` ago, linearly interpolated between the samples pushed (quaternions
-    normalised after interpolation); before the history reaches back that far, the oldest
-    sample. With ``lag_s = 0`` it returns the newest sample unchanged."""
+    """The truth ``lag_s`` ago (:func:`delay_push`); the history grows as it needs to."""
 
     def __init__(self, lag_s: float) -> None:
         self.lag_s = float(lag_s)
-        self._hist: deque[_Sample] = deque()
+        self.ring = np.zeros((9, _RING_COLS))
+        self.ring[0, 2] = self.lag_s
+
+    def room(self) -> np.ndarray:
+        """The ring, with room for one more sample."""
+        ring = self.ring
+        cap = ring.shape[0] - 1
+        n = int(ring[0, 1])
+        if n < cap:
+            return ring
+        lo = int(ring[0, 0])
+        grown = np.zeros((2 * cap + 1, _RING_COLS))
+        grown[0, 1:] = ring[0, 1:]
+        grown[1 : 1 + n] = np.roll(ring[1:], -lo, axis=0)
+        self.ring = grown
+        return grown
 
     def push(self, s: _Sample) -> _Sample:
-        h = self._hist
-        h.append(s)
-        tq = s.time_s - self.lag_s
-        tq_eps = tq + 1e-12
-        while len(h) >= 2 and h[1].time_s <= tq_eps:
-            h.popleft()
-        a = h[0]
-        if len(h) == 1 or tq <= a.time_s + 1e-12:
-            return a
-        b = h[1]
-        f = (tq - a.time_s) / (b.time_s - a.time_s)
-        a0, a1, a2, a3 = a.q
-        b0, b1, b2, b3 = b.q
-        if not a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 >= 0.0:
-            b0, b1, b2, b3 = -b0, -b1, -b2, -b3
-        q0, q1, q2, q3 = (
-            a0 + f * (b0 - a0),
-            a1 + f * (b1 - a1),
-            a2 + f * (b2 - a2),
-            a3 + f * (b3 - a3),
-        )
-        n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        return _Sample(
-            tq,
-            _lerp3(a.p, b.p, f),
-            _lerp3(a.v, b.v, f),
-            (q0 / n, q1 / n, q2 / n, q3 / n),
-            _lerp3(a.w, b.w, f),
-        )
+        now = np.array((s.time_s, *s.p, *s.v, *s.q, *s.w), dtype=float)
+        out = np.empty(_RING_COLS)
+        delay_push(self.room(), now, out)
+        t, *o = out.tolist()
+        return _Sample(t, tuple(o[0:3]), tuple(o[3:6]), tuple(o[6:10]), tuple(o[10:13]))
+
+
+# the model's numbers (StateEstimateModel._k): time of the last step (NaN before the first),
+# next row of the normals' blocks, the attitude lag (s), the Gauss-Markov processes'
+# (position, velocity, attitude) time constants and sigmas, the bias's walk, and the
+# runtime's limits on carrying the attitude (fc_state)
+K_T, K_ROW, K_ATT_LAG, K_TAU, K_SIGMA, K_WALK, K_MAX_DT, K_MAX_RATE = 0, 1, 2, 3, 6, 9, 10, 11
+K_SIZE = 12
+# the error processes' rows (StateEstimateModel._x, ._normals)
+E_POS, E_VEL, E_ATT, E_BIAS = 0, 1, 2, 3
+
+
+@kernel("void(f8, f8[::1], f8[:, ::1], f8[:, :, ::1])")
+def advance_errors(t: float, k: np.ndarray, x: np.ndarray, normals: np.ndarray) -> None:
+    """Step every error process (rows of ``x``) to ``t`` (s), once per distinct time, each
+    with the next row of its own block of normals."""
+    last = k[K_T]
+    if last == last:  # not before the first
+        dt = t - last
+        if dt <= 0.0:
+            return
+        i = int(k[K_ROW])
+        for p in range(3):
+            a, b = gauss_markov_factors(dt, k[K_TAU + p], k[K_SIGMA + p])
+            gauss_markov_step(x[p], a, b, normals[p, i])
+        random_walk_step(x[E_BIAS], k[K_WALK] * math.sqrt(dt), normals[E_BIAS, i])
+        k[K_ROW] = i + 1
+    k[K_T] = t
+
+
+@kernel("void(f8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1])", uses=_QUAT)
+def estimate_of(
+    k: np.ndarray,
+    x: np.ndarray,
+    ring: np.ndarray,
+    att_ring: np.ndarray,
+    now: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The estimate of the truth ``now`` (time, p, v, q, w), the errors stepped to its time:
+    into ``out`` position, velocity, attitude (w, x, y, z) and body rates (13 floats), the
+    position and velocity ``lag_s`` old, attitude and rates ``att_lag_s`` old."""
+    old = np.empty(_RING_COLS)
+    delay_push(ring, now, old)
+    for c in range(3):
+        out[c] = old[1 + c] + x[E_POS, c]
+        out[3 + c] = old[4 + c] + x[E_VEL, c]
+    delay_push(att_ring, now, old)
+    # a unit quaternion times a unit quaternion: no renormalising, so that zero errors hand
+    # the loop the truth bit for bit
+    e0, e1, e2, e3 = quat_exp3(x[E_ATT, 0], x[E_ATT, 1], x[E_ATT, 2])
+    out[6], out[7], out[8], out[9] = quat_mul4(old[7], old[8], old[9], old[10], e0, e1, e2, e3)
+    for c in range(3):
+        out[10 + c] = old[11 + c] + x[E_BIAS, c]
+
+
+@kernel(
+    "void(f8, f8[::1], f8, f8, f8, f8, f8[::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1],"
+    " f8[:, ::1], f8[::1])",
+    uses=(gyro_mean, carried_attitude, *_QUAT),
+)
+def hand_off(
+    t: float,
+    truth: np.ndarray,
+    n0: float,
+    n1: float,
+    n2: float,
+    sigma: float,
+    k: np.ndarray,
+    x: np.ndarray,
+    normals: np.ndarray,
+    ring: np.ndarray,
+    att_ring: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """A control tick's inputs as ``onboard run`` hands them to the loop, from the vehicle's
+    true state ``truth`` (X_* layout) at ``t``: into ``out`` the gyro sample (the mean rate
+    since the last tick, its white noise ``sigma`` (n0, n1, n2) and the bias), then the
+    estimated position, velocity, attitude and body rates (:func:`estimate_of`), the
+    attitude carried to the tick from its stamp ``att_lag_s`` before it with that gyro
+    sample (``fc_state.vehicle_state_at``'s :func:`carried_attitude`) and the time it is of
+    (17 floats)."""
+    r0, r1, r2 = gyro_mean(truth)
+    r0, r1, r2 = r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma
+    advance_errors(t, k, x, normals)
+    g0, g1, g2 = r0 + x[E_BIAS, 0], r1 + x[E_BIAS, 1], r2 + x[E_BIAS, 2]
+    out[0], out[1], out[2] = g0, g1, g2
+    now = np.empty(_RING_COLS)
+    now[0] = t
+    for c in range(13):  # position, velocity, attitude, body rates: X_P .. X_W + 2
+        now[1 + c] = truth[X_P + c]
+    est = out[3:16]
+    estimate_of(k, x, ring, att_ring, now, est)
+    q0, q1, q2, q3, q_at = carried_attitude(
+        t, est[6], est[7], est[8], est[9], t - k[K_ATT_LAG], g0, g1, g2, k[K_MAX_DT],
+        k[K_MAX_RATE],
+    )  # fmt: skip
+    est[6], est[7], est[8], est[9] = q0, q1, q2, q3
+    out[16] = q_at
+
+
+class _Error:
+    """One error process of the model: :attr:`x` its state now (a view), :attr:`value` a
+    copy."""
+
+    def __init__(self, x: np.ndarray) -> None:
+        self.x = x
+
+    @property
+    def value(self) -> np.ndarray:
+        return self.x.copy()
 
 
 class StateEstimateModel:
     """The errors of one sortie (see the module docstring). Call :meth:`vehicle_state` and
     :meth:`gyro` at each control tick (time non-decreasing), :meth:`stamp` on each delivered
-    detection; :attr:`thrust_scale` and :attr:`command_delay_s` shape the actuation."""
+    detection; :attr:`thrust_scale` and :attr:`command_delay_s` shape the actuation. The
+    simulator calls :meth:`hand_off` instead of the first two (one kernel call a tick)."""
 
     def __init__(self, spec: EstimateSpec, seed: np.random.SeedSequence) -> None:
         self.spec = spec
         rngs = dict(
             zip(STREAMS, (np.random.default_rng(s) for s in seed.spawn(len(STREAMS))), strict=True)
         )
-        self.position_error = GaussMarkov(
-            spec.pos_noise_m, spec.pos_time_constant_s, 3, rngs["position"]
+        self._rngs = [rngs[name] for name in ("position", "velocity", "attitude", "gyro_bias")]
+        self._normals = np.empty((4, BLOCK, 3))
+        self._k = k = np.full(K_SIZE, math.nan)
+        self._draw()
+        k[K_TAU : K_TAU + 3] = (
+            spec.pos_time_constant_s,
+            spec.vel_time_constant_s,
+            spec.att_time_constant_s,
         )
-        self.velocity_error = GaussMarkov(
-            spec.vel_noise_m_s, spec.vel_time_constant_s, 3, rngs["velocity"]
-        )
-        self.attitude_error = GaussMarkov(
-            math.radians(spec.att_noise_deg), spec.att_time_constant_s, 3, rngs["attitude"]
-        )
-        self.gyro_bias = RandomWalk(
-            spec.gyro_bias_rad_s, spec.gyro_bias_walk_rad_s_sqrt_s, 3, rngs["gyro_bias"]
+        sigmas = (spec.pos_noise_m, spec.vel_noise_m_s, math.radians(spec.att_noise_deg))
+        k[K_SIGMA : K_SIGMA + 3] = sigmas
+        k[K_WALK] = spec.gyro_bias_walk_rad_s_sqrt_s
+        k[K_ATT_LAG] = spec.att_lag_s
+        k[K_MAX_DT], k[K_MAX_RATE] = MAX_PROPAGATION_S, MAX_PROPAGATION_RATE_RAD_S
+        # each process starts in its stationary distribution (the bias at its turn-on sigma)
+        self._x = np.empty((4, 3))
+        for p, s in enumerate((*sigmas, spec.gyro_bias_rad_s)):
+            self._x[p] = float(s) * self._normals[p, 0]
+        k[K_ROW] = 1.0
+        self.position_error, self.velocity_error, self.attitude_error, self.gyro_bias = (
+            _Error(self._x[p]) for p in range(4)
         )
         self._camera_rng = rngs["camera_time"]
         self.camera_offset_s = spec.camera_time_offset_s * float(self._camera_rng.standard_normal())
@@ -267,19 +445,33 @@ class StateEstimateModel:
         self.command_delay_s = spec.command_delay_s
         self._delay = DelayLine(spec.lag_s)  # position, velocity
         self._att_delay = DelayLine(spec.att_lag_s)  # attitude, body rates
-        self._time_s: float | None = None
+
+    def _draw(self) -> None:
+        """The next block of normals of each error process's stream."""
+        for p, rng in enumerate(self._rngs):
+            rng.standard_normal(out=self._normals[p])
+        self._k[K_ROW] = 0.0
 
     def _advance(self, time_s: float) -> None:
         """Step every error process to ``time_s`` (once per distinct time)."""
-        if self._time_s is not None:
-            dt = time_s - self._time_s
-            if dt <= 0.0:
-                return
-            self.position_error.step(dt)
-            self.velocity_error.step(dt)
-            self.attitude_error.step(dt)
-            self.gyro_bias.step(dt)
-        self._time_s = time_s
+        if self._k[K_ROW] >= BLOCK:
+            self._draw()
+        advance_errors(time_s, self._k, self._x, self._normals)
+
+    def hand_off(self, t: float, truth: np.ndarray, noise: Sequence[float], sigma: float):
+        """:func:`hand_off`: the gyro sample and the state the loop is handed at ``t`` from
+        the vehicle's state array ``truth`` (its rate sums read and zeroed), ``noise`` the
+        gyro's white noise draw (standard normal, 3) and ``sigma`` its size (rad/s). Returns
+        the 17 floats (an array of its own: the loop may keep views of it)."""
+        if self._k[K_ROW] >= BLOCK:
+            self._draw()
+        out = np.empty(17)
+        n0, n1, n2 = noise
+        hand_off(
+            t, truth, n0, n1, n2, sigma, self._k, self._x, self._normals,
+            self._delay.room(), self._att_delay.room(), out,
+        )  # fmt: skip
+        return out
 
     def vehicle_state(self, truth: VehicleState) -> VehicleState:
         """The estimate the loop sees at ``truth.time_s``: the truth ``lag_s`` ago with the
@@ -301,27 +493,18 @@ class StateEstimateModel:
 
     def state_floats_of(self, t: float, p, v, q, w) -> tuple[tuple[float, ...], ...]:
         """:meth:`vehicle_state_of` as tuples of floats (position, velocity, attitude
-        (w, x, y, z), body rates), for a caller that makes its own arrays (or none)."""
+        (w, x, y, z), body rates) (:func:`estimate_of`)."""
         self._advance(t)
-        now = _Sample(t, p, v, q, w)
-        old = self._delay.push(now)
-        old_att = self._att_delay.push(now)
-        (p0, p1, p2), (e0, e1, e2) = old.p, self.position_error.x
-        (v0, v1, v2), (u0, u1, u2) = old.v, self.velocity_error.x
-        (w0, w1, w2), (b0, b1, b2) = old_att.w, self.gyro_bias.x
-        return (
-            (p0 + e0, p1 + e1, p2 + e2),
-            (v0 + u0, v1 + u1, v2 + u2),
-            # a unit quaternion times a unit quaternion: no renormalising, so that zero
-            # errors hand the loop the truth bit for bit
-            quat_mul_floats(old_att.q, quat_exp_floats(self.attitude_error.x)),
-            (w0 + b0, w1 + b1, w2 + b2),
-        )
+        now = np.array((t, *p, *v, *q, *w), dtype=float)
+        out = np.empty(13)
+        estimate_of(self._k, self._x, self._delay.room(), self._att_delay.room(), now, out)
+        o = out.tolist()
+        return tuple(o[0:3]), tuple(o[3:6]), tuple(o[6:10]), tuple(o[10:13])
 
     def gyro(self, time_s: float, rates_flu_rad_s: np.ndarray) -> np.ndarray:
         """A gyro sample (FLU, rad/s) with the bias at ``time_s`` added."""
         self._advance(time_s)
-        (r0, r1, r2), (b0, b1, b2) = _floats(rates_flu_rad_s), self.gyro_bias.x
+        (r0, r1, r2), (b0, b1, b2) = _floats(rates_flu_rad_s), self._x[E_BIAS].tolist()
         return np.array([r0 + b0, r1 + b1, r2 + b2])
 
     def stamp_error_s(self) -> float:
@@ -339,13 +522,13 @@ class StateEstimateModel:
 
     def summary(self) -> dict[str, float]:
         """This sortie's draws (for reports): camera offset, thrust scale, gyro bias now."""
-        b = self.gyro_bias.x
+        b = self._x[E_BIAS].tolist()
         return {
             "camera_offset_s": self.camera_offset_s,
             "thrust_scale": self.thrust_scale,
-            "gyro_bias_x_rad_s": float(b[0]),
-            "gyro_bias_y_rad_s": float(b[1]),
-            "gyro_bias_z_rad_s": float(b[2]),
+            "gyro_bias_x_rad_s": b[0],
+            "gyro_bias_y_rad_s": b[1],
+            "gyro_bias_z_rad_s": b[2],
         }
 
 

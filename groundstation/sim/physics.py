@@ -92,6 +92,19 @@ def vehicle_step(
     return px + py + pz + vx + vy + vz + qw + qx + qy + qz + w0 + w1 + w2
 
 
+@kernel("UniTuple(f8, 3)(f8[::1])")
+def gyro_mean(x: np.ndarray) -> tuple[float, float, float]:
+    """The mean body rate (rad/s FLU) of the steps since the last read, from the sums the
+    steps keep in the state ``x`` (what averaging the IMU's samples yields), which it zeroes;
+    the body rate now if no step ran since."""
+    n = x[X_RATE_N]
+    if n == 0.0:
+        return x[X_W], x[X_W + 1], x[X_W + 2]
+    s0, s1, s2 = x[X_RATE_SUM], x[X_RATE_SUM + 1], x[X_RATE_SUM + 2]
+    x[X_RATE_SUM] = x[X_RATE_SUM + 1] = x[X_RATE_SUM + 2] = x[X_RATE_N] = 0.0
+    return s0 / n, s1 / n, s2 / n
+
+
 @kernel("void(f8[::1], f8, f8, f8, f8, f8, f8)")
 def vehicle_command(
     x: np.ndarray, max_rate: float, max_thrust_n: float, c0: float, c1: float, c2: float, t: float

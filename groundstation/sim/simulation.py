@@ -24,7 +24,6 @@ from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
 from onboard.geometry import quat_to_rotmat
 from onboard.loop import InterceptionLoop
-from onboard.runtime.fc_state import vehicle_state_at
 
 from ..scenario import Scenario, scenario_toml
 from .camera import SimCamera
@@ -335,17 +334,16 @@ class Simulation:
                 break
         self.step_index = k
 
-    def _as_the_runtime_hands_it(self, t: float, truth: tuple, gyro: np.ndarray) -> VehicleState:
-        """The estimated state of ``truth`` (position, velocity, attitude, rates as tuples) at
-        ``t`` as ``onboard run`` hands it to the loop: PX4 stamps the attitude with its sample
-        time, ``estimate.att_lag_s`` before the tick, and the runtime carries it to the tick
-        with the latest gyro sample (``fc_state.vehicle_state_at``, the code ``state_at``
-        runs); position and velocity it uses unstamped, as they come (``gains.t_vel_lag``)."""
-        est = self.estimate
-        pos, vel, q, rates = est.state_floats_of(t, *truth)
-        return vehicle_state_at(
-            t, np.array(pos), np.array(vel), q, t - est.spec.att_lag_s, np.array(rates), gyro
-        )
+    def _as_the_runtime_hands_it(self, t: float) -> np.ndarray:
+        """The control tick's gyro sample and estimated state at ``t`` as ``onboard run``
+        hands them to the loop (:func:`.estimate.hand_off`, one kernel): the gyro the mean
+        body rate since the last tick with its white noise and bias; position and velocity
+        ``estimate.lag_s`` old, used unstamped (``gains.t_vel_lag``); the attitude PX4
+        stamped ``estimate.att_lag_s`` before the tick, carried to it with that gyro sample
+        as ``fc_state.vehicle_state_at`` does. Returns gyro (3), position, velocity,
+        attitude (w, x, y, z), body rates and the attitude's time (17 floats)."""
+        noise = self._gyro_noise.next()
+        return self.estimate.hand_off(t, self.vehicle.x, noise, self.scenario.sim.gyro_noise_rad_s)
 
     def _control_tick(self, t: float) -> None:
         veh = self.vehicle
@@ -357,16 +355,14 @@ class Simulation:
             loop.on_detection(det)
             self.last_detection = det
         sigma = self.scenario.sim.gyro_noise_rad_s
-        (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
-        rates = [r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma]
         if est is None:
+            (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
+            rates = [r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma]
             loop.on_gyro(GyroSample(t, np.array(rates)))
             tel = loop.tick(veh.state(t))
         else:
-            gyro = est.gyro(t, rates)
-            loop.on_gyro(GyroSample(t, gyro))
-            truth = (tuple(veh.p), tuple(veh.v), tuple(veh.q), tuple(veh.w))
-            tel = loop.tick(self._as_the_runtime_hands_it(t, truth, gyro))
+            loop.on_gyro(GyroSample(t, (h := self._as_the_runtime_hands_it(t))[0:3]))
+            tel = loop.tick(VehicleState(t, h[3:6], h[6:9], h[9:13], h[13:16], float(h[16])))
         for r in loop.last_fusion:
             if r is FusionResult.ACCEPTED or r is FusionResult.INITIALISED:
                 self._fused += 1

@@ -23,12 +23,11 @@ from .physics import (
     X_CMD_W,
     X_P,
     X_Q,
-    X_RATE_N,
-    X_RATE_SUM,
     X_SIZE,
     X_THRUST,
     X_V,
     X_W,
+    gyro_mean,
     vehicle_command,
     vehicle_step,
 )
@@ -121,14 +120,8 @@ class Multicopter:
         vehicle_step(self.x, self.lag(dt), dt, wind[0], wind[1], wind[2])
 
     def read_gyro(self) -> list[float]:
-        """Mean body rate since the previous read (what averaging IMU samples yields)."""
-        x = self.x
-        n = int(x[X_RATE_N])
-        if n == 0:
-            return self.w
-        s0, s1, s2 = x[X_RATE_SUM : X_RATE_SUM + 3].tolist()
-        x[X_RATE_SUM : X_RATE_SUM + 4] = 0.0
-        return [s0 / n, s1 / n, s2 / n]
+        """Mean body rate since the previous read (:func:`.physics.gyro_mean`)."""
+        return list(gyro_mean(self.x))
 
     def state(self, time_s: float) -> VehicleState:
         x = self.x

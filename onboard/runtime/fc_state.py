@@ -4,7 +4,6 @@ loop the state by the same code without importing pymavlink."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -12,7 +11,7 @@ import numpy as np
 
 from ..constants import PX4_MAIN_OFFBOARD
 from ..datatypes import VehicleState
-from ..geometry import propagate_attitude
+from ..geometry import carried_attitude
 
 MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
 MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
@@ -71,13 +70,23 @@ def vehicle_state_at(
     this directly (no :class:`FcState` to build each tick)."""
     q = q_wxyz
     q_at = None
-    if q_time_s is not None:
-        dt = min(max(now_s - q_time_s, 0.0), MAX_PROPAGATION_S)
-        q_at = q_time_s
+    if q_time_s is not None and q is not None:
         rates = rates_flu_rad_s if gyro_flu_rad_s is None else gyro_flu_rad_s
-        if math.hypot(*rates.tolist()) <= MAX_PROPAGATION_RATE_RAD_S:  # NaN fails too
-            q = propagate_attitude(q, rates, dt)
-            q_at = q_time_s + dt
+        q0, q1, q2, q3 = q.tolist() if type(q) is np.ndarray else q
+        r0, r1, r2 = rates.tolist()
+        *q, q_at = carried_attitude(
+            now_s,
+            q0,
+            q1,
+            q2,
+            q3,
+            q_time_s,
+            r0,
+            r1,
+            r2,
+            MAX_PROPAGATION_S,
+            MAX_PROPAGATION_RATE_RAD_S,
+        )
     if q is not None and type(q) is not np.ndarray:  # the simulator's floats
         q = np.array(q, dtype=float)
     return VehicleState(now_s, pos_enu_m, vel_enu_m_s, q, rates_flu_rad_s, q_at)
