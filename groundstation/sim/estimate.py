@@ -110,22 +110,26 @@ BLOCK = 256  # normals drawn per call of a stream
 
 
 class Normals:
-    """Standard normal vectors of one stream as lists of floats, drawn a block at a time (one
-    call per 256 samples instead of one each: the stream's sequence does not depend on the
-    block)."""
+    """Standard normal vectors of one stream, drawn a block at a time (one call per 256
+    samples instead of one each: the stream's sequence does not depend on the block)."""
 
     def __init__(self, rng: np.random.Generator, dim: int, block: int = BLOCK) -> None:
         self._rng, self._dim, self._block = rng, dim, block
-        self._buf: list[list[float]] = []
+        self._buf = np.empty((0, dim))
         self._i = 0
 
-    def next(self) -> list[float]:
+    def row(self) -> np.ndarray:
+        """The next vector (a row of the block: read it before the block is redrawn)."""
         i = self._i
-        if i >= len(self._buf):
-            self._buf = self._rng.standard_normal((self._block, self._dim)).tolist()
+        if i >= self._buf.shape[0]:
+            self._buf = self._rng.standard_normal((self._block, self._dim))
             i = 0
         self._i = i + 1
         return self._buf[i]
+
+    def next(self) -> list[float]:
+        """The next vector as floats."""
+        return self.row().tolist()
 
 
 @kernel("UniTuple(f8, 2)(f8, f8, f8)")
@@ -159,22 +163,10 @@ class GaussMarkov:
     def __init__(self, sigma: float, tau_s: float, dim: int, rng: np.random.Generator) -> None:
         self.sigma = float(sigma)
         self.tau_s = float(tau_s)
-        self._rng = rng
-        self._block = np.empty((0, dim))
-        self._i = 0
-        self.x = self.sigma * self._normal()
+        self._normals = Normals(rng, dim)
+        self.x = self.sigma * self._normals.row()
         self._dt_s = -1.0
         self._a = self._b = 0.0
-
-    def _normal(self) -> np.ndarray:
-        if self._i >= self._block.shape[0]:
-            self._block, self._i = self._rng.standard_normal((BLOCK, self.x_dim)), 0
-        self._i += 1
-        return self._block[self._i - 1]
-
-    @property
-    def x_dim(self) -> int:
-        return self._block.shape[1]
 
     @property
     def value(self) -> np.ndarray:
@@ -184,23 +176,28 @@ class GaussMarkov:
         if dt_s != self._dt_s:  # the factors, once per step size
             self._dt_s = dt_s
             self._a, self._b = gauss_markov_factors(dt_s, self.tau_s, self.sigma)
-        gauss_markov_step(self.x, self._a, self._b, self._normal())
+        gauss_markov_step(self.x, self._a, self._b, self._normals.row())
         return self.x
 
 
-class RandomWalk(GaussMarkov):
+class RandomWalk:
     """A bias: N(0, ``initial``) per component at the start, then a random walk of
     ``walk_per_sqrt_s`` (its standard deviation grows as walk x sqrt(t))
-    (:func:`random_walk_step`)."""
+    (:func:`random_walk_step`). :attr:`x` as :class:`GaussMarkov`'s."""
 
     def __init__(
         self, initial: float, walk_per_sqrt_s: float, dim: int, rng: np.random.Generator
     ) -> None:
-        super().__init__(initial, math.inf, dim, rng)
         self.walk = float(walk_per_sqrt_s)
+        self._normals = Normals(rng, dim)
+        self.x = float(initial) * self._normals.row()
+
+    @property
+    def value(self) -> np.ndarray:
+        return self.x.copy()
 
     def step(self, dt_s: float) -> np.ndarray:
-        random_walk_step(self.x, self.walk * math.sqrt(dt_s), self._normal())
+        random_walk_step(self.x, self.walk * math.sqrt(dt_s), self._normals.row())
         return self.x
 
 

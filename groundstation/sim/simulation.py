@@ -354,14 +354,15 @@ class Simulation:
                 det = est.stamp(det)
             loop.on_detection(det)
             self.last_detection = det
-        sigma = self.scenario.sim.gyro_noise_rad_s
         if est is None:
+            sigma = self.scenario.sim.gyro_noise_rad_s
             (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
             rates = [r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma]
             loop.on_gyro(GyroSample(t, np.array(rates)))
             tel = loop.tick(veh.state(t))
         else:
-            loop.on_gyro(GyroSample(t, (h := self._as_the_runtime_hands_it(t))[0:3]))
+            h = self._as_the_runtime_hands_it(t)
+            loop.on_gyro(GyroSample(t, h[0:3]))
             tel = loop.tick(VehicleState(t, h[3:6], h[6:9], h[9:13], h[13:16], float(h[16])))
         for r in loop.last_fusion:
             if r is FusionResult.ACCEPTED or r is FusionResult.INITIALISED:

@@ -15,6 +15,7 @@ from ..geometry import carried_attitude
 
 MAX_PROPAGATION_S = 0.05  # an attitude older than this is carried forward no further
 MAX_PROPAGATION_RATE_RAD_S = 35.0  # a gyro's full scale (2000 deg/s): beyond, not propagated
+_CARRY_LIMITS = (MAX_PROPAGATION_S, MAX_PROPAGATION_RATE_RAD_S)
 
 
 @dataclass
@@ -72,21 +73,8 @@ def vehicle_state_at(
     q_at = None
     if q_time_s is not None and q is not None:
         rates = rates_flu_rad_s if gyro_flu_rad_s is None else gyro_flu_rad_s
-        q0, q1, q2, q3 = q.tolist() if type(q) is np.ndarray else q
-        r0, r1, r2 = rates.tolist()
-        *q, q_at = carried_attitude(
-            now_s,
-            q0,
-            q1,
-            q2,
-            q3,
-            q_time_s,
-            r0,
-            r1,
-            r2,
-            MAX_PROPAGATION_S,
-            MAX_PROPAGATION_RATE_RAD_S,
-        )
+        q = q.tolist() if type(q) is np.ndarray else q
+        *q, q_at = carried_attitude(now_s, *q, q_time_s, *rates.tolist(), *_CARRY_LIMITS)
     if q is not None and type(q) is not np.ndarray:  # the simulator's floats
         q = np.array(q, dtype=float)
     return VehicleState(now_s, pos_enu_m, vel_enu_m_s, q, rates_flu_rad_s, q_at)
