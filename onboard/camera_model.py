@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .geometry import camera_mount_rotation
+from .jit import kernel
 
 
 @dataclass(frozen=True)
@@ -48,14 +49,10 @@ class CameraModel:
         return u_px - self.cu_px, v_px - self.cv_px
 
     def project(self, p_cam_m: np.ndarray) -> tuple[float, float] | None:
-        """Pixel (u, v) of a camera-frame point, or None behind the camera."""
-        z = float(p_cam_m[2])
-        if z <= 1e-6:
-            return None
-        return (
-            self.cu_px + self.f_px * float(p_cam_m[0]) / z,
-            self.cv_px + self.f_px * float(p_cam_m[1]) / z,
-        )
+        """Pixel (u, v) of a camera-frame point, or None behind the camera (:func:`pixel_of`)."""
+        x, y, z = (float(c) for c in p_cam_m)
+        ahead, u, v = pixel_of(x, y, z, self.f_px, self.cu_px, self.cv_px)
+        return (u, v) if ahead else None
 
     def upright(self, x: float, y: float) -> tuple[float, float]:
         """An image-plane vector (error or its rate) as an upright camera (no mount roll) would
@@ -69,6 +66,17 @@ class CameraModel:
             -margin_px <= u_px < self.width_px + margin_px
             and -margin_px <= v_px < self.height_px + margin_px
         )
+
+
+@kernel("UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64)")
+def pixel_of(
+    x: float, y: float, z: float, f_px: float, cu_px: float, cv_px: float
+) -> tuple[float, float, float]:
+    """The pinhole projection of the camera-frame point (x, y, z) (m), compiled: (1, u, v)
+    (px), or (0, nan, nan) behind the camera (z <= 1 um)."""
+    if z <= 1e-6:
+        return 0.0, math.nan, math.nan
+    return 1.0, cu_px + f_px * x / z, cv_px + f_px * y / z
 
 
 def rotational_flow(ex_n: float, ey_n: float, omega_cam_rad_s: np.ndarray) -> tuple[float, float]:

@@ -24,9 +24,10 @@ R_BC_FORWARD = np.array(
 )
 
 
+@kernel("float64(float64)")
 def wrap_pi(angle_rad: float) -> float:
-    """Wrap an angle to (-pi, pi]."""
-    a = math.fmod(angle_rad + math.pi, 2.0 * math.pi)
+    """Wrap an angle to (-pi, pi] (compiled; nan for a non-finite angle)."""
+    a = (angle_rad + math.pi) % (2.0 * math.pi)  # numba has no math.fmod; the same result
     if a <= 0.0:
         a += 2.0 * math.pi
     return a - math.pi
@@ -42,19 +43,53 @@ def vex(m: np.ndarray) -> np.ndarray:
     return np.array([m[2, 1], m[0, 2], m[1, 0]])
 
 
+def as_quat(q_wxyz) -> np.ndarray:
+    """A quaternion (w, x, y, z) as a float64 4-vector (the array itself when it is one), for
+    the kernels, which do not check the length."""
+    q = np.asarray(q_wxyz, dtype=np.float64)
+    if q.shape != (4,):
+        raise ValueError(f"a quaternion has 4 components, not shape {q.shape}")
+    return q
+
+
 def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q_wxyz.tolist() if isinstance(q_wxyz, np.ndarray) else map(float, q_wxyz)
+    """Rotation matrix of a unit quaternion (w, x, y, z) (:func:`rotmat_of_quat`)."""
+    return rotmat_of_quat(as_quat(q_wxyz))
+
+
+@kernel("float64[:, ::1](float64[:])")
+def rotmat_of_quat(q: np.ndarray) -> np.ndarray:
+    """:func:`quat_to_rotmat` of a float64 4-vector (compiled)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    return np.array(  # from a flat list: a nested one costs numpy a third more
-        (
-            *(1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)),
-            *(2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)),
-            *(2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)),
-        )
-    ).reshape(3, 3)
+    R = np.empty((3, 3))
+    R[0, 0], R[0, 1], R[0, 2] = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
+    R[1, 0], R[1, 1], R[1, 2] = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
+    R[2, 0], R[2, 1], R[2, 2] = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
+    return R
+
+
+@kernel("float64[:, ::1](float64[:, :], float64[:, :])")
+def mat3_mul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A B for 3x3 matrices (compiled), each entry's sum in index order: numpy's product goes
+    to BLAS, whose rounding (FMA or not) depends on the CPU, and the same seeds must fly the
+    same sortie anywhere."""
+    C = np.empty((3, 3))
+    for i in range(3):
+        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
+        for j in range(3):
+            C[i, j] = a0 * B[0, j] + a1 * B[1, j] + a2 * B[2, j]
+    return C
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:], float64[:, :])")
+def body_and_camera_attitude(q_wxyz: np.ndarray, R_BC: np.ndarray):
+    """(R_WB, R_WC = R_WB R_BC) of the body attitude quaternion (w, x, y, z) and the camera
+    mount ``R_BC`` (compiled: :func:`rotmat_of_quat`, :func:`mat3_mul`)."""
+    R_WB = rotmat_of_quat(q_wxyz)
+    return R_WB, mat3_mul(R_WB, R_BC)
 
 
 def _floats(v) -> list:

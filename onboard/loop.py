@@ -11,22 +11,16 @@ from collections import deque
 import numpy as np
 
 from .camera_model import CameraModel
-from .control.attitude import attitude_floats
-from .control.disturbance import (
-    DisturbanceObserver,
-    DisturbanceObserverConfig,
-    feedforward_floats,
-)
+from .control.attitude import command_floats
+from .control.disturbance import DisturbanceObserver, DisturbanceObserverConfig
 from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
     GUIDANCE_LAWS,
     GuidanceInput,
     direction_angles,
     line_of_sight,
-    los_change,
-    normal_floats,
+    los_terms,
     saturate_norm,
-    smooth_los_change,
 )
 from .control.reacquire import (
     Candidate,
@@ -49,9 +43,17 @@ from .datatypes import (
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .gains import Gains
-from .geometry import attitude_jump_rad, propagate_rotation, quat_to_rotmat
+from .geometry import (
+    as_quat,
+    attitude_jump_rad,
+    body_and_camera_attitude,
+    mat3_mul,
+    propagate_rotation,
+    rotmat_of_quat,
+)
 
 _NAN2 = (math.nan, math.nan)
+_NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's LOS change yet
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 # an attitude that moved this much more (rad) than the gyro turned it since an on-time last
@@ -84,6 +86,7 @@ class InterceptionLoop:
         if not control_rate_hz > 0.0:
             raise ValueError("control_rate_hz must be positive")
         self.camera = camera
+        self._R_BC = np.array(camera.R_BC)  # writable, as the kernels take it
         self.vehicle = vehicle
         self.law_name = law
         self._law = GUIDANCE_LAWS[law]
@@ -126,8 +129,7 @@ class InterceptionLoop:
             )
         )
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
-        self._dq_flown: tuple[float, float, float] | None = None  # (dq_y, dq_z, hold_s)
-        self._los_last = None  # (e_px, R_WC, LOS angles) of the last tick that flew the law
+        self._dq_flown = _NO_FLOWN  # the last command's (dq_y, dq_z, hold_s) (los_terms)
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
         # the image's top/bottom edges above body x (upright: a portrait camera's long side)
         roll = math.radians(camera.mount_roll_deg)
@@ -254,17 +256,6 @@ class InterceptionLoop:
         self._fused_early.extend(out)
         return out
 
-    def _dq_unflown(self, elapsed_s: float) -> tuple[float, float] | None:
-        """The part of the last command's LOS change (dq_y, dq_z, rad) not flown because it
-        was held ``elapsed_s`` instead of its hold: positive (the rest) when this tick came
-        early, negative (the excess, turned too far) when it came late, at most one whole
-        hold's worth (a stall's over-turn is not all undone at once); None without one."""
-        last = self._dq_flown
-        if last is None or elapsed_s == last[2]:
-            return None
-        rest = max(1.0 - elapsed_s / last[2], -MAX_LATE_CARRY)
-        return last[0] * rest, last[1] * rest
-
     def _rebase_los(
         self, state: VehicleState, R_WB: np.ndarray, gyro: np.ndarray, dt: float
     ) -> bool:
@@ -327,10 +318,12 @@ class InterceptionLoop:
             self._gyro_n = 0
         else:
             gyro = state.body_rates_flu_rad_s
-        R_WB = quat_to_rotmat(state.attitude_wxyz)
+        q = as_quat(state.attitude_wxyz)
         if gains.t_att_lag > 0.0:
-            R_WB = propagate_rotation(R_WB, gyro, gains.t_att_lag)
-        R_WC = R_WB @ self.camera.R_BC
+            R_WB = propagate_rotation(rotmat_of_quat(q), gyro, gains.t_att_lag)
+            R_WC = mat3_mul(R_WB, self._R_BC)
+        else:
+            R_WB, R_WC = body_and_camera_attitude(q, self._R_BC)
         z0, z1, z2 = R_WB[0, 2], R_WB[1, 2], R_WB[2, 2]  # the thrust axis, body z in ENU
         v_est = state.velocity_enu_m_s
         v = v_est
@@ -374,7 +367,8 @@ class InterceptionLoop:
             d_hat = dob.update_floats(t, (v0, v1, v2), (z0, z1, z2))
         else:
             d_hat = dob.estimate_floats
-        est = self.dkf.estimate()
+        # the estimate, the buffered one at the last tick and the range: one read
+        est, est_prev_e, est_range = self.dkf.view(self._prev_time_s)
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0
@@ -384,7 +378,7 @@ class InterceptionLoop:
             mode = LoopMode.BRAKE
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
-            self._dq_flown = None
+            self._dq_flown = _NO_FLOWN
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -406,49 +400,30 @@ class InterceptionLoop:
         else:  # tracking, or coasting on the prediction: the guidance law
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
-            n_t = line_of_sight(e_est[0] / f, e_est[1] / f, R_WC)
-            q_y, q_z = direction_angles(n_t)
-            dq_y = dq_z = 0.0
-            prev = None if self._prev_time_s is None else self.dkf.e_px_at(self._prev_time_s)
-            if prev is not None and self._prev_R_WC is not None:
-                # previous LOS from the replay-corrected buffered estimate: a fused detection
-                # moves both ends of the difference, so Delta q carries no correction jump
-                c = self._los_last
-                if self._rebase_los(state, R_WB, gyro, dt):
-                    # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
-                    # differ by the body's turn missed or by the correction, which PNG would
-                    # turn K times within one command; the previous LOS through this attitude
-                    # turned back by the gyro instead
-                    R_prev = propagate_rotation(R_WB, gyro, -dt) @ self.camera.R_BC
-                    q_prev = direction_angles(line_of_sight(prev[0] / f, prev[1] / f, R_prev))
-                elif c is not None and c[1] is self._prev_R_WC and c[0] == prev and 0.0 not in prev:
-                    q_prev = c[2]  # unmoved since the last tick (same estimate and attitude)
-                else:
-                    q_prev = direction_angles(
-                        line_of_sight(prev[0] / f, prev[1] / f, self._prev_R_WC)
-                    )
-                dq_y, dq_z = los_change(q_y, q_z, *q_prev)
-                if hold_s is not None and gains.tau_los > 0.0 and hold != dt:
-                    # low-passed as a rate: the change over dt, per hold
-                    dq_y *= hold / dt
-                    dq_z *= hold / dt
-            self._los_last = (e_est, R_WC, (q_y, q_z))
-            if gains.tau_los > 0.0:
-                dq_y = smooth_los_change(self._dq_filt[0], dq_y, dt, gains.tau_los)
-                dq_z = smooth_los_change(self._dq_filt[1], dq_z, dt, gains.tau_los)
-                self._dq_filt = (dq_y, dq_z)
-            elif hold_s is not None:
-                # the last command's LOS change not flown (this tick cut its hold short: an
-                # early tick) or flown too far (held past its hold: a late tick), so the turn
-                # summed over the commands stays K times the LOS's
-                carry = self._dq_unflown(dt)
-                if carry is not None:
-                    dq_y += carry[0]
-                    dq_z += carry[1]
-                self._dq_flown = (dq_y, dq_z, hold)
+            # the previous LOS from the replay-corrected buffered estimate: a fused detection
+            # moves both ends of the difference, so Delta q carries no correction jump
+            prev = est_prev_e
+            R_prev = self._prev_R_WC
+            has_prev = prev is not None and R_prev is not None
+            if not has_prev:
+                prev, R_prev = (0.0, 0.0), R_WC
+            elif self._rebase_los(state, R_WB, gyro, dt):
+                # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
+                # differ by the body's turn missed or by the correction, which PNG would turn
+                # K times within one command; the previous LOS through this attitude turned
+                # back by the gyro instead
+                R_prev = mat3_mul(propagate_rotation(R_WB, gyro, -dt), self._R_BC)
+            fy, fz = self._dq_filt
+            ly, lz, lh = self._dq_flown
+            n0, n1, n2, q_y, q_z, dq_y, dq_z, fy, fz, ly, lz, lh = los_terms(
+                e_est[0], e_est[1], f, R_WC, has_prev, prev[0], prev[1], R_prev, dt, hold,
+                hold_s is not None, gains.tau_los, fy, fz, ly, lz, lh, MAX_LATE_CARRY,
+            )  # fmt: skip
+            self._dq_filt, self._dq_flown = (fy, fz), (ly, lz, lh)
+            n_t = np.array((n0, n1, n2))
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
-            mean_range = self.dkf.range_m() if gains.tau_zem > 0.0 else None
+            mean_range = est_range if gains.tau_zem > 0.0 else None
             # within r_mid the midcourse weight is 0 whatever the covariance: skip computing it
             if mean_range is not None and mean_range > gains.r_mid:
                 dv = self.dkf.depth_velocity()
@@ -480,23 +455,19 @@ class InterceptionLoop:
         # disturbance feed-forward: the attitude loop flies a_d - d^ (normal to v in flight;
         # the guidance limit a_max applies to a_d, |d^| is clamped to a_max by the observer)
         ad0, ad1, ad2 = a_d.tolist()
-        c0, c1, c2 = ad0, ad1, ad2
-        if dob.enabled:
-            f0, f1, f2 = feedforward_floats(*d_hat, *vf, gains.v_min)
-            c0, c1, c2 = c0 + f0, c1 + f1, c2 + f2
         veh = self.vehicle
-        w0, w1, w2, thrust = attitude_floats(
-            c0, c1, c2, R_WB, yaw_rate, gains.k_R, gains.omega_max, veh.mass_kg, veh.max_thrust_n
-        )
-        finite = math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
-        guard = not (finite and math.isfinite(thrust) and 0.0 <= thrust <= 1.0)
+        d0, d1, d2 = d_hat
+        # never hand a non-finite or out-of-range command on: the guard flies level hover
+        w0, w1, w2, thrust, guard, a_normal = command_floats(
+            ad0, ad1, ad2, dob.enabled, d0, d1, d2, *vf, gains.v_min, R_WB, yaw_rate,
+            gains.k_R, gains.omega_max, veh.mass_kg, veh.max_thrust_n,
+            veh.hover_thrust_normalised,
+        )  # fmt: skip
+        guard = guard != 0.0
         if guard:
-            # never hand a non-finite or out-of-range command on: level hover instead
             self.guard_trips += 1
-            w0 = w1 = w2 = 0.0
-            thrust = self.vehicle.hover_thrust_normalised
-        self.disturbance.commanded(float(thrust))
-        self._thrust_n = float(thrust) * self.vehicle.max_thrust_n
+        self.disturbance.commanded(thrust)
+        self._thrust_n = thrust * veh.max_thrust_n
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         self._prev_R_WB = R_WB
@@ -511,9 +482,9 @@ class InterceptionLoop:
             vel_elev_rad=s_y,
             vel_azim_rad=s_z,
             accel_desired_enu_m_s2=a_d,
-            accel_normal_desired_m_s2=normal_floats(ad0, ad1, ad2, *vf),
+            accel_normal_desired_m_s2=a_normal,
             yaw_rate_cmd_rad_s=yaw_rate,
-            command=RateThrustCommand(t, np.array((w0, w1, w2)), float(thrust)),
+            command=RateThrustCommand(t, np.array((w0, w1, w2)), thrust),
             dkf_time_since_detection_s=(math.inf if est is None else est.time_since_detection_s),
             dkf_lost=est is None or est.lost,
             guard_tripped=guard,

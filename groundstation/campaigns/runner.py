@@ -21,6 +21,7 @@ from onboard.control.guidance import normal_component
 
 from ..recording.writer import SortieRecorder
 from ..scenario import Scenario
+from ..sim.camera import sphere_in_view
 from ..sim.simulation import Simulation
 
 TRACE_EVERY_TICKS = 2  # 50 Hz at the default 100 Hz control rate
@@ -117,9 +118,9 @@ def run_job(job: SortieJob) -> SortieOutcome:
         observers=observers,
         records_dkf=False,
     )
-    initial_px = sim.camera_model.project(
-        sim.R_WC().T @ (np.array(sim.target.p) - np.array(sim.vehicle.p))
-    )
+    initial_px = sphere_in_view(
+        sim.camera_model, sim.R_WC(), sim.vehicle.p, sim.target.p, sim.scenario.target.diameter_m
+    )[0]
     result = sim.run().to_json_dict()
     trace = _trace(sim, initial_px) if job.trace else None
     return SortieOutcome(job.index, dict(job.labels), result, trace)

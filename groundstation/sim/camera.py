@@ -18,20 +18,64 @@ import math
 
 import numpy as np
 
-from onboard.camera_model import CameraModel
+from onboard.camera_model import CameraModel, pixel_of
 from onboard.datatypes import Detection
+from onboard.jit import kernel
 from onboard.perception import RedBalloonDetector
 
 from ..scenario import CAMERA_MODES, CameraSpec
 from .render import FrameRenderer
 
 
-def apparent_radius_px(model: CameraModel, p_cam: np.ndarray, diameter_m: float) -> float:
-    """Image radius (px) of a sphere of ``diameter_m`` at ``p_cam`` (camera frame, m): the
-    tangent cone's half-angle through the pinhole."""
+@kernel(
+    "UniTuple(float64, 4)(float64[:, :], float64, float64, float64, float64, float64, float64,"
+    " float64, float64, float64, float64)",
+    uses=(pixel_of,),
+)
+def sphere_image(
+    R_WC: np.ndarray,
+    c0: float,
+    c1: float,
+    c2: float,
+    t0: float,
+    t1: float,
+    t2: float,
+    diameter_m: float,
+    f_px: float,
+    cu_px: float,
+    cv_px: float,
+) -> tuple[float, float, float, float]:
+    """How a pinhole camera at c (ENU, m) with attitude ``R_WC`` (camera -> ENU) sees a sphere
+    of ``diameter_m`` centred at t (compiled): (1 if its centre is in front of the camera else
+    0, the centre's pixel (u, v) (:func:`~onboard.camera_model.pixel_of`; nan behind), its
+    image radius (px): the tangent cone's half-angle through the pinhole). The camera-frame
+    point R_WC^T (t - c) is summed in index order (not numpy's BLAS: its rounding depends on
+    the CPU)."""
+    d0, d1, d2 = t0 - c0, t1 - c1, t2 - c2
+    p0 = R_WC[0, 0] * d0 + R_WC[1, 0] * d1 + R_WC[2, 0] * d2
+    p1 = R_WC[0, 1] * d0 + R_WC[1, 1] * d1 + R_WC[2, 1] * d2
+    p2 = R_WC[0, 2] * d0 + R_WC[1, 2] * d1 + R_WC[2, 2] * d2
+    ahead, u, v = pixel_of(p0, p1, p2, f_px, cu_px, cv_px)
     radius = diameter_m / 2.0
-    dist2 = float(p_cam @ p_cam)
-    return model.f_px * radius / math.sqrt(max(dist2 - radius * radius, 1e-12))
+    dist2 = p0 * p0 + p1 * p1 + p2 * p2
+    return ahead, u, v, f_px * radius / math.sqrt(max(dist2 - radius * radius, 1e-12))
+
+
+def sphere_in_view(
+    model: CameraModel,
+    R_WC: np.ndarray,
+    camera_pos_enu_m: np.ndarray,
+    target_pos_enu_m: np.ndarray,
+    diameter_m: float,
+) -> tuple[tuple[float, float] | None, float]:
+    """:func:`sphere_image` for ``model``: (the centre's pixel or None behind the camera, the
+    image radius in px)."""
+    c0, c1, c2 = (float(x) for x in camera_pos_enu_m)
+    t0, t1, t2 = (float(x) for x in target_pos_enu_m)
+    ahead, u, v, r_px = sphere_image(
+        R_WC, c0, c1, c2, t0, t1, t2, diameter_m, model.f_px, model.cu_px, model.cv_px
+    )
+    return ((u, v) if ahead else None), r_px
 
 
 class DetectorFaults:
@@ -117,8 +161,10 @@ class SimCamera:
         """Take a frame at ``t_s`` and schedule its detection (if any) for delivery."""
         self.frames += 1
         spec = self.spec
-        p_cam = R_WC.T @ (target_pos_enu_m - camera_pos_enu_m)
-        self.last_truth_px = self.model.project(p_cam)
+        uv, r_px = sphere_in_view(
+            self.model, R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m
+        )
+        self.last_truth_px = uv
         # draw every random number each frame so the stream does not depend on the outcome
         dropped = self._rng.random() < spec.dropout_probability
         noise = self._rng.standard_normal(2) * spec.noise_px
@@ -132,7 +178,7 @@ class SimCamera:
             self.last_frame = frame
             det = self.detector.detect(frame, t_s)
         else:
-            det = self._project(t_s, p_cam, target_diameter_m, noise)
+            det = self._project(t_s, uv, r_px, noise)
         if det is not None and not self.faults.big_enough(max(det.bbox_px[2], det.bbox_px[3])):
             det = None
         if clutter is not None:
@@ -146,12 +192,12 @@ class SimCamera:
         self._count += 1
         heapq.heappush(self._pending, (t_s + delay, self._count, det))
 
-    def _project(self, t_s, p_cam, diameter_m, noise) -> Detection | None:
-        m = self.model
-        uv = m.project(p_cam)
+    def _project(self, t_s, uv, r_px, noise) -> Detection | None:
+        """The detection of the target seen at pixel ``uv`` (None: behind the camera) with
+        image radius ``r_px``, with pixel ``noise``; None when no part of it is in the frame."""
         if uv is None:
             return None
-        r_px = apparent_radius_px(m, p_cam, diameter_m)
+        m = self.model
         u, v = uv
         # visible when at least part of the disc is in the frame
         if not (-r_px < u < m.width_px + r_px and -r_px < v < m.height_px + r_px):

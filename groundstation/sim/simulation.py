@@ -22,7 +22,7 @@ from onboard.enums import LoopMode, Outcome
 from onboard.estimation.dkf import DkfConfig, FusionResult
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
-from onboard.geometry import quat_to_rotmat
+from onboard.geometry import as_quat, body_and_camera_attitude
 from onboard.loop import InterceptionLoop
 
 from ..scenario import Scenario, scenario_toml
@@ -144,6 +144,7 @@ class Simulation:
         self.camera_model = CameraModel(
             c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
         )
+        self._R_BC = np.array(self.camera_model.R_BC)  # writable, as the kernels take it
         self.vehicle = Multicopter(scenario.interceptor)
         self.target = (
             Target(scenario.target)
@@ -227,7 +228,7 @@ class Simulation:
         return self.outcome is not None
 
     def R_WC(self) -> np.ndarray:
-        return quat_to_rotmat(self.vehicle.q) @ self.camera_model.R_BC
+        return body_and_camera_attitude(as_quat(self.vehicle.q), self._R_BC)[1]
 
     def start_info(self) -> SortieStart:
         sc = self.scenario

@@ -14,6 +14,8 @@ import numpy as np
 from ..datatypes import GRAVITY_M_S2, VehicleParams
 from ..gains import Gains
 from ..jit import kernel
+from .disturbance import feedforward_floats
+from .guidance import normal_floats
 
 
 def desired_thrust_direction(accel_desired_enu_m_s2: np.ndarray) -> np.ndarray:
@@ -118,3 +120,54 @@ def attitude_floats(
     thrust_n = mass_kg * (ax * fx + ay * fy + az * fz)
     thrust_n = min(max(thrust_n, 0.0), max_thrust_n)
     return w0, w1, w2, thrust_n / max_thrust_n
+
+
+_COMMAND_SIG = (
+    "UniTuple(float64, 6)(float64, float64, float64, boolean, float64, float64, float64, float64,"
+    " float64, float64, float64, float64[:, :], float64, float64, float64, float64, float64,"
+    " float64)"
+)
+
+
+@kernel(_COMMAND_SIG, uses=(feedforward_floats, normal_floats))
+def command_floats(
+    a0: float,
+    a1: float,
+    a2: float,
+    feedforward: bool,
+    d0: float,
+    d1: float,
+    d2: float,
+    v0: float,
+    v1: float,
+    v2: float,
+    v_min_m_s: float,
+    R_WB: np.ndarray,
+    yaw_rate_rad_s: float,
+    k_R: float,
+    omega_max: float,
+    mass_kg: float,
+    max_thrust_n: float,
+    hover_thrust: float,
+) -> tuple[float, float, float, float, float, float]:
+    """A tick's command from the guidance's a_d = (a0, a1, a2) (ENU, m/s^2), compiled: with
+    ``feedforward`` the disturbance observer's d^ = (d0, d1, d2) is cancelled (its normal part
+    at speed: ``feedforward_floats`` of the velocity v), :func:`attitude_floats` turns it
+    into body rates (FLU, rad/s) and thrust in [0, 1], and the output guard replaces a
+    non-finite or out-of-range command by level hover (``hover_thrust``: no rates). Returns
+    (w0, w1, w2, thrust, 1 if the guard tripped else 0, |a_d normal to v| m/s^2)."""
+    c0, c1, c2 = a0, a1, a2
+    if feedforward:
+        f0, f1, f2 = feedforward_floats(d0, d1, d2, v0, v1, v2, v_min_m_s)
+        c0, c1, c2 = c0 + f0, c1 + f1, c2 + f2
+    w0, w1, w2, thrust = attitude_floats(
+        c0, c1, c2, R_WB, yaw_rate_rad_s, k_R, omega_max, mass_kg, max_thrust_n
+    )
+    ok = math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
+    ok = ok and math.isfinite(thrust) and 0.0 <= thrust <= 1.0
+    guard = 0.0
+    if not ok:
+        w0 = w1 = w2 = 0.0
+        thrust = hover_thrust
+        guard = 1.0
+    return w0, w1, w2, thrust, guard, normal_floats(a0, a1, a2, v0, v1, v2)

@@ -88,7 +88,7 @@ _F64 = np.dtype(np.float64)
 
 def _finite3(x) -> tuple[float, float, float] | None:
     """Three finite floats from a 3-vector (ndarray of shape (3,) or sequence), else None."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (3,):  # the loop's: floats
+    if type(x) is np.ndarray and x.dtype == _F64 and x.shape == (3,):  # the loop's: floats
         x0, x1, x2 = x.tolist()
         if math.isfinite(x0) and math.isfinite(x1) and math.isfinite(x2):
             return x0, x1, x2

@@ -51,13 +51,20 @@ class GuidanceOutput:
 
 
 def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndarray:
-    """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5)."""
-    # numpy's product (its rounding, FMA or not, is the reference's), then floats: the norm's
-    # sum of squares in index order (not numpy's ``r @ r``: its BLAS dot picks a kernel per CPU,
-    # and some sum three terms in another order)
-    r0, r1, r2 = (R_WC @ np.array((e_norm_x, e_norm_y, 1.0))).tolist()
+    """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5): :func:`los_floats`."""
+    return np.array(los_floats(e_norm_x, e_norm_y, R_WC))
+
+
+@kernel("UniTuple(float64, 3)(float64, float64, float64[:, :])")
+def los_floats(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> tuple[float, float, float]:
+    """:func:`line_of_sight` in floats (compiled). The product's and the norm's sums are
+    taken in index order: numpy's product goes to BLAS, whose kernel (and so its rounding,
+    FMA or not) depends on the CPU, and the same seeds must fly the same sortie anywhere."""
+    r0 = R_WC[0, 0] * e_norm_x + R_WC[0, 1] * e_norm_y + R_WC[0, 2]
+    r1 = R_WC[1, 0] * e_norm_x + R_WC[1, 1] * e_norm_y + R_WC[1, 2]
+    r2 = R_WC[2, 0] * e_norm_x + R_WC[2, 1] * e_norm_y + R_WC[2, 2]
     n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    return np.array((r0 / n, r1 / n, r2 / n))
+    return r0 / n, r1 / n, r2 / n
 
 
 _SPLITTER = 134217729.0  # 2**27 + 1 (Veltkamp): splits a double into two 26-bit halves
@@ -340,6 +347,7 @@ def pursuit_floats(
     return _min(_max(1.0 - m / pur_zone_rad, 0.0), 1.0)
 
 
+@kernel("float64(float64, float64, float64, float64)")
 def smooth_los_change(prev_rad: float, dq_rad: float, dt_s: float, tau_s: float) -> float:
     """One step of a first-order low-pass on the per-tick LOS change Delta q (eq. 8's input):
     prev + dt / (tau + dt) (dq - prev). Far away the LOS rate |v| sin(angle) / R is small and
@@ -587,3 +595,67 @@ def los_change(
 ) -> tuple[float, float]:
     """(dq_y, dq_z) between two ticks, the azimuth difference wrapped to (-pi, pi]."""
     return elev_now - elev_prev, wrap_pi(azim_now - azim_prev)
+
+
+_LOS_TERMS_SIG = (
+    "UniTuple(float64, 12)(float64, float64, float64, float64[:, :], boolean, float64, float64,"
+    " float64[:, :], float64, float64, boolean, float64, float64, float64, float64, float64,"
+    " float64, float64)"
+)
+
+
+@kernel(_LOS_TERMS_SIG, uses=(wrap_pi,))
+def los_terms(
+    ex_px: float,
+    ey_px: float,
+    f_px: float,
+    R_WC: np.ndarray,
+    has_prev: bool,
+    ex_prev_px: float,
+    ey_prev_px: float,
+    R_WC_prev: np.ndarray,
+    dt: float,
+    hold: float,
+    hold_given: bool,
+    tau_los: float,
+    filt_y: float,
+    filt_z: float,
+    flown_y: float,
+    flown_z: float,
+    flown_hold: float,
+    max_late_carry: float,
+) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
+    """A tick's line-of-sight terms (compiled): the LOS n_t through ``R_WC`` of the image
+    estimate (ex, ey) px and its angles (eqs. 5-6), and eq. 8's change (dq_y, dq_z) since the
+    previous tick's estimate through ``R_WC_prev`` (with ``has_prev``; else 0).
+
+    ``dt`` is the time since the last tick (s), ``hold`` how long this command is held;
+    ``hold_given``: the runtime gave the hold (else it is dt, a fixed grid). With the low-pass
+    on (``tau_los`` > 0) the change is filtered as a rate (over dt, per hold) with the state
+    (filt_y, filt_z) (nan: none yet); otherwise, given a hold, the part of the last command's
+    change (flown_y, flown_z) not flown because it was held dt instead of ``flown_hold`` (nan:
+    no last command) is added: the rest when this tick came early, minus the excess (at most
+    ``max_late_carry`` holds' worth) when late, so the turn summed over the commands stays K
+    times the LOS's. Returns (n_t, q_y, q_z, dq_y, dq_z, filt_y, filt_z, flown_y, flown_z,
+    flown_hold), the last five the state for the next tick."""
+    n0, n1, n2 = los_floats(ex_px / f_px, ey_px / f_px, R_WC)
+    q_y, q_z = angles_floats(n0, n1, n2)
+    dq_y = dq_z = 0.0
+    if has_prev:
+        p0, p1, p2 = los_floats(ex_prev_px / f_px, ey_prev_px / f_px, R_WC_prev)
+        qp_y, qp_z = angles_floats(p0, p1, p2)
+        dq_y, dq_z = q_y - qp_y, wrap_pi(q_z - qp_z)
+        if hold_given and tau_los > 0.0 and hold != dt:
+            dq_y *= hold / dt
+            dq_z *= hold / dt
+    if tau_los > 0.0:
+        dq_y = smooth_los_change(filt_y, dq_y, dt, tau_los)
+        dq_z = smooth_los_change(filt_z, dq_z, dt, tau_los)
+        filt_y, filt_z = dq_y, dq_z
+    elif hold_given:
+        if not math.isnan(flown_hold) and dt != flown_hold:
+            rest = max(1.0 - dt / flown_hold, -max_late_carry)
+            dq_y += flown_y * rest
+            dq_z += flown_z * rest
+        flown_y, flown_z, flown_hold = dq_y, dq_z, hold
+    return n0, n1, n2, q_y, q_z, dq_y, dq_z, filt_y, filt_z, flown_y, flown_z, flown_hold

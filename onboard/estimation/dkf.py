@@ -439,9 +439,53 @@ def _bisect_right(a, lo, hi, t):
     return lo
 
 
+@kernel(_sig("UniTuple(float64, 14)", _V, _M, _M, _FLAGS, _WIN, _B, _S, _S, _S, _B, _S))
+def _view(T, U, X, HX, win, tracking, last_accepted_s, lost_timeout_s, f, at_given, at_s):
+    """A control tick's reads of the buffer in one call (compiled). The estimate at the newest
+    row when it holds a state and ``tracking``: (1, its time, e (px), e's rate (px/s: the
+    rotational plus translational flow of x with the row's inputs), the time since the last
+    accepted detection, 1 if that is beyond ``lost_timeout_s`` else 0, the translational flow
+    (px/s)), else 0 and nans; then the buffered image error at ``at_s`` if ``at_given`` and a
+    row at that time holds a state: (1, e (px)), else (0, nan, nan); then the range along the
+    LOS (m) from the mean (the estimate's; inf for rho <= 0), nan without one."""
+    lo, hi = win[0], win[1]
+    held = 0.0
+    t = ex = ey = erx = ery = since = lost = trx = try_ = rng = math.nan
+    if tracking and hi > lo and HX[hi - 1]:
+        i = hi - 1
+        xn, yn, rho, vE, vN, vU = X[i, 0], X[i, 1], X[i, 2], X[i, 3], X[i, 4], X[i, 5]
+        wx, wy, wz = U[i, 0], U[i, 1], U[i, 2]
+        dE, dN, dU = vE - U[i, 3], vN - U[i, 4], vU - U[i, 5]
+        ux = U[i, 6] * dE + U[i, 7] * dN + U[i, 8] * dU
+        uy = U[i, 9] * dE + U[i, 10] * dN + U[i, 11] * dU
+        uz = U[i, 12] * dE + U[i, 13] * dN + U[i, 14] * dU
+        rot0 = xn * yn * wx - (1.0 + xn * xn) * wy + yn * wz
+        rot1 = (1.0 + yn * yn) * wx - xn * yn * wy - xn * wz
+        tr0, tr1 = rho * (ux - xn * uz), rho * (uy - yn * uz)
+        held = 1.0
+        t = T[i]
+        ex, ey = xn * f, yn * f
+        erx, ery = (rot0 + tr0) * f, (rot1 + tr1) * f
+        since = t - last_accepted_s
+        lost = 1.0 if since > lost_timeout_s else 0.0
+        trx, try_ = tr0 * f, tr1 * f
+        rng = math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
+    at_held = 0.0
+    pex = pey = math.nan
+    if at_given:
+        for k in range(hi - 1, lo - 1, -1):  # the newest rows first
+            if abs(T[k] - at_s) < _TIME_EPS_S:
+                if HX[k]:
+                    at_held, pex, pey = 1.0, X[k, 0] * f, X[k, 1] * f
+                break
+            if T[k] < at_s:
+                break
+    return held, t, ex, ey, erx, ery, since, lost, trx, try_, at_held, pex, pey, rng
+
+
 def _floats3(v) -> tuple[float, float, float]:
     """Three floats from a 3-vector (ndarray or sequence)."""
-    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,):
+    if type(v) is np.ndarray and v.dtype == _F64 and v.shape == (3,):
         return tuple(v.tolist())
     out = v.tolist() if isinstance(v, np.ndarray) else [float(c) for c in v]
     if len(out) != 3:
@@ -452,14 +496,14 @@ def _floats3(v) -> tuple[float, float, float]:
 def _vector3(v) -> np.ndarray:
     """A 3-vector (ndarray or sequence) as a writable float64 array (the array itself when it
     is one: the kernels' signatures take writable arrays)."""
-    if type(v) is np.ndarray and v.dtype is _F64 and v.shape == (3,) and v.flags.writeable:
+    if type(v) is np.ndarray and v.dtype == _F64 and v.shape == (3,) and v.flags.writeable:
         return v
     return np.array(_floats3(v))
 
 
 def _matrix3(m) -> np.ndarray:
     """A 3x3 matrix (ndarray or nested sequence) as a writable float64 array."""
-    if type(m) is np.ndarray and m.dtype is _F64 and m.shape == (3, 3):
+    if type(m) is np.ndarray and m.dtype == _F64 and m.shape == (3, 3):
         return m if m.flags.writeable else m.copy()
     rows = m.tolist() if isinstance(m, np.ndarray) else list(m)
     if len(rows) != 3:
@@ -749,7 +793,7 @@ class DelayedKalmanFilter:
         m = self._measurement(det)
         if m is None:
             return FusionResult.GATED
-        if any(abs(o.t - t_c) < _TIME_EPS_S for o in self._meas):
+        if self._duplicate(t_c):
             return FusionResult.DUPLICATE
         if not self._initialised or now - self._last_accepted_s > self.config.lost_timeout_s:
             return self._initialise(m)
@@ -780,6 +824,17 @@ class DelayedKalmanFilter:
                 if not _valid(self._X[hi - 1]):
                     self._drop_track()
         return FusionResult.ACCEPTED if accepted else FusionResult.GATED
+
+    def _duplicate(self, t_c: float) -> bool:
+        """Is a measurement within _TIME_EPS_S of ``t_c`` buffered? (Bisected: they are in
+        capture order; the neighbours found are tested as a scan of all would test them.)"""
+        meas = self._meas
+        i = bisect.bisect_left(meas, t_c - 2.0 * _TIME_EPS_S, key=_meas_time)
+        while i < len(meas) and meas[i].t <= t_c + 2.0 * _TIME_EPS_S:
+            if abs(meas[i].t - t_c) < _TIME_EPS_S:
+                return True
+            i += 1
+        return False
 
     def _index_at_or_before(self, t: float) -> int:
         """The buffer row (absolute) of the last prediction at or before t (the oldest if
@@ -964,38 +1019,30 @@ class DelayedKalmanFilter:
             return None
         return h[0], h[1][-1], h[3][-1], h[4]
 
-    @staticmethod
-    def _flow(x: list, u: list) -> tuple[tuple[float, float], tuple[float, float]]:
-        """Image-point rate at state x with inputs u (a row of U) (normalised/s):
-        (rotational, translational)."""
-        xn, yn, rho, vE, vN, vU = x
-        wx, wy, wz, c0, c1, c2, *r = u
-        dE, dN, dU = vE - c0, vN - c1, vU - c2
-        ux = r[0] * dE + r[1] * dN + r[2] * dU
-        uy = r[3] * dE + r[4] * dN + r[5] * dU
-        uz = r[6] * dE + r[7] * dN + r[8] * dU
-        rot = (
-            xn * yn * wx - (1.0 + xn * xn) * wy + yn * wz,
-            (1.0 + yn * yn) * wx - xn * yn * wy - xn * wz,
-        )
-        return rot, (rho * (ux - xn * uz), rho * (uy - yn * uz))
+    def _read(self, at_s: float | None = None) -> tuple:
+        """:func:`_view`'s 14 floats (the estimate, the error at ``at_s``, the range)."""
+        return _view(
+            self._T, self._U, self._X, self._HX, self._win, self._initialised,
+            self._last_accepted_s, self._config.lost_timeout_s, self._f,
+            at_s is not None, math.nan if at_s is None else at_s,
+        )  # fmt: skip
+
+    def view(
+        self, at_s: float | None = None
+    ) -> tuple[ImageEstimate | None, tuple[float, float] | None, float | None]:
+        """A control tick's reads in one kernel call: :meth:`estimate`, :meth:`e_px_at` of
+        ``at_s`` (None without it) and :meth:`range_m`."""
+        r = self._read(at_s)
+        if r[0] == 0.0:
+            est = rng = None
+        else:
+            est = ImageEstimate(r[1], (r[2], r[3]), (r[4], r[5]), r[6], r[7] != 0.0)
+            rng = r[13]
+        return est, ((r[11], r[12]) if r[10] != 0.0 else None), rng
 
     def estimate(self) -> ImageEstimate | None:
         """Current estimate (at the last prediction time), or None before the first detection."""
-        head = self._tracked()
-        if head is None:
-            return None
-        _, t, x, u = head
-        f = self._f
-        rot, tr = self._flow(x, u)
-        since = t - self._last_accepted_s
-        return ImageEstimate(
-            time_s=t,
-            e_px=(x[0] * f, x[1] * f),
-            e_rate_px_s=((rot[0] + tr[0]) * f, (rot[1] + tr[1]) * f),
-            time_since_detection_s=since,
-            lost=since > self.config.lost_timeout_s,
-        )
+        return self.view()[0]
 
     def state_vector(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The current estimate as (e_x, e_y, r_x, r_y) in px and px/s, r being the image rate
@@ -1006,7 +1053,7 @@ class DelayedKalmanFilter:
             return None
         i, _, x, u = head
         f = self._f
-        _, tr = self._flow(x, u)
+        tr = self._read()[8:10]  # the translational flow (px/s)
         # in floats (numpy's per-call cost on these small arrays is most of the work): J is
         # the Jacobian of the translational flow rho (u_xy - s_xy u_z), u = R_CW (v_t - v_c)
         xn, yn, rho, vE, vN, vU = x
@@ -1034,18 +1081,14 @@ class DelayedKalmanFilter:
         )
         P = self._P[i].tolist()
         var_r = (_quadratic_form(P, jx), _quadratic_form(P, jy))
-        state = np.array([xn * f, yn * f, tr[0] * f, tr[1] * f])
+        state = np.array([xn * f, yn * f, tr[0], tr[1]])
         cov = np.array([P[0][0] * f * f, P[1][1] * f * f, var_r[0] * f * f, var_r[1] * f * f])
         return state, cov
 
     def range_m(self) -> float | None:
         """Current range along the line of sight (m) from the mean alone (no covariance), or
         None without a track."""
-        head = self._tracked()
-        if head is None:
-            return None
-        xn, yn, rho = head[2][:3]
-        return math.sqrt(1.0 + xn * xn + yn * yn) / rho if rho > 0.0 else math.inf
+        return self.view()[2]
 
     def image_std_px(self) -> tuple[float, float] | None:
         """The 1-sigma of the current image point (px, x and y), or None without a track
@@ -1073,23 +1116,4 @@ class DelayedKalmanFilter:
 
     def e_px_at(self, time_s: float) -> tuple[float, float] | None:
         """The buffered (replay-corrected) image error at a past prediction time, if held."""
-        h = self._head()
-        if not h:
-            return None
-        i, T, HX, X, _ = h
-        for n in range(len(T) - 1, -1, -1):  # the newest rows first, as floats
-            t = T[n]
-            if abs(t - time_s) < _TIME_EPS_S:
-                return (X[n][0] * self._f, X[n][1] * self._f) if HX[n] else None
-            if t < time_s:
-                return None
-        for k in range(i - len(T), self._lo - 1, -1):
-            t = float(self._T[k])
-            if abs(t - time_s) < _TIME_EPS_S:
-                if not self._HX[k]:
-                    return None
-                x0, x1 = self._X[k, :2].tolist()
-                return x0 * self._f, x1 * self._f
-            if t < time_s:
-                break
-        return None
+        return self.view(time_s)[1]
