@@ -321,6 +321,11 @@ def _build_parser() -> argparse.ArgumentParser:
         help="--sitl: onboard run --early-tick on|off (default: the runtime's, on)",
     )
     b.add_argument(
+        "--pin-cpu",
+        choices=("on", "off"),
+        help="--sitl: onboard run --pin-cpu on|off (default: the runtime's, on)",
+    )
+    b.add_argument(
         "--video",
         action="store_true",
         help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
@@ -587,6 +592,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     video=args.video,
                     foxglove=args.foxglove_client,
                     early_tick=None if args.early_tick is None else args.early_tick == "on",
+                    pin_cpu=None if args.pin_cpu is None else args.pin_cpu == "on",
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

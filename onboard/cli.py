@@ -77,6 +77,7 @@ def _run(args) -> int:
             video=video,
             foxglove=args.foxglove,
             early_tick=args.early_tick == "on",
+            pin_cpu=args.pin_cpu == "on",
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -159,6 +160,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         default="on" if RuntimeConfig.early_tick else "off",
         help="tick as soon as the camera thread has fused a detection, not at the next "
         "deadline (default %(default)s)",
+    )
+    r.add_argument(
+        "--pin-cpu",
+        choices=("on", "off"),
+        default="on" if RuntimeConfig.pin_cpu else "off",
+        help="keep the control thread on a CPU of its own among the runtime's threads (the "
+        "receivers, the sender and the camera thread on the others), so their wake-ups do not "
+        "preempt a tick (default %(default)s; nothing to do on one CPU)",
     )
     r.add_argument(
         "--log",

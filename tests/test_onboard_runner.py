@@ -2,10 +2,12 @@
 protocol and PX4's messages taken off the tick, against sockets this test reads."""
 
 import math
+import os
 import threading
 import time
 
 import numpy as np
+import pytest
 
 from onboard.link.params import PARAM_SPECS
 from onboard.link.px4 import MavLink, mavlink
@@ -149,3 +151,48 @@ def test_px4_messages_that_find_the_loop_busy_wait_in_order_for_the_next_tick(tm
         rt.camera.stop()
         for link in (fc, gcs, rt.fc, rt.gcs):
             link.close()
+
+
+def _affinity_while_running(tmp_path, **kw) -> dict:
+    """The control thread's CPUs and the runtime's other threads' (by name), seen in a tick."""
+    rt, fc, gcs, _ = _runtime(tmp_path, control_rate_hz=100.0, **kw)
+    seen: dict = {}
+    tick = rt.tick
+
+    def tick_and_look():
+        tick()
+        if "control" not in seen:
+            seen["control"] = os.sched_getaffinity(0)
+            seen["others"] = {
+                t.name: os.sched_getaffinity(t.native_id)
+                for t in threading.enumerate()
+                if t.is_alive() and (t.name in ("sender", "camera") or t.name.startswith("rx "))
+            }
+
+    rt.tick = tick_and_look
+    try:
+        rt.run(duration_s=0.3)
+    finally:
+        for link in (fc, gcs):
+            link.close()
+    seen["stats"] = rt.stats()
+    return seen
+
+
+@pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+    reason="one CPU (or no affinity API): nothing to place",
+)
+def test_the_control_thread_has_a_cpu_of_its_own_and_gives_it_back(tmp_path):
+    cpus = os.sched_getaffinity(0)
+    top = max(cpus)
+    seen = _affinity_while_running(tmp_path)
+    assert seen["control"] == {top}
+    # the two links' receivers, the sender and the camera thread: every CPU but that one
+    assert len(seen["others"]) == 4, seen["others"]
+    assert all(c == cpus - {top} for c in seen["others"].values()), seen["others"]
+    assert seen["stats"]["control_cpu"] == top
+    assert os.sched_getaffinity(0) == cpus  # this thread goes on as it was
+    off = _affinity_while_running(tmp_path, pin_cpu=False)
+    assert off["control"] == cpus and off["stats"]["control_cpu"] is None
+    assert all(c == cpus for c in off["others"].values())

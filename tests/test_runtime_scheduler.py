@@ -5,13 +5,14 @@ held off while a tick runs."""
 from __future__ import annotations
 
 import gc
+import os
 import sys
 import threading
 import time
 
 import pytest
 
-from onboard.runtime.scheduler import PeriodicScheduler
+from onboard.runtime.scheduler import PeriodicScheduler, run_on, split_cpus
 
 
 def test_ticks_start_no_earlier_than_their_deadlines_on_a_fixed_grid():
@@ -91,3 +92,18 @@ def test_collection_is_held_during_the_loop_and_handed_back():
 def test_bad_period_is_refused():
     with pytest.raises(ValueError):
         PeriodicScheduler(0.0)
+
+
+def test_the_control_thread_gets_the_highest_cpu_and_the_others_the_rest():
+    assert split_cpus({0, 1}) == ({1}, {0})
+    assert split_cpus([3, 0, 2, 1]) == ({3}, {0, 1, 2})
+    assert split_cpus({5, 9}) == ({9}, {5})
+    assert split_cpus({4}) is None and split_cpus(()) is None  # nothing to split
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity"), reason="no affinity API")
+def test_a_refused_placement_is_a_note_and_changes_nothing():
+    before = os.sched_getaffinity(0)
+    note = run_on({10**6})  # no such CPU
+    assert note is not None and "CPU placement refused" in note
+    assert os.sched_getaffinity(0) == before

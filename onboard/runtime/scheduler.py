@@ -13,6 +13,14 @@ the control thread is spinning or ticking delays the tick by that much. They cal
 :meth:`PeriodicScheduler.wait_for_slack` before each piece of work, which returns at once while
 the control thread sleeps and otherwise waits, without the GIL, until its tick is done.
 
+CPU placement (``onboard run --pin-cpu``, on by default): the control thread gets one CPU to
+itself among the runtime's threads and the others (the links' receivers, the sender, the
+camera thread) run on the rest. A thread woken on the control thread's CPU (a PX4 datagram
+arriving, a frame detected) would otherwise preempt a tick: traced on a 2-core machine, such
+wake-ups were most of the tick-work tail beyond its CPU time (README "CPU placement").
+:func:`split_cpus` chooses, :func:`run_on` applies (the threads a thread starts inherit its
+CPUs, so the runtime narrows its own to the others' before it starts them, then to its own).
+
 Early ticks: another thread with a new input for the tick (the camera thread, right after it
 fused a detection) calls :meth:`PeriodicScheduler.request_tick`; the control thread, asleep or
 spinning, then ticks at once instead of at the next deadline (never sooner than
@@ -33,7 +41,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
 GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
@@ -43,6 +51,27 @@ MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than th
 SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
 MIN_GAP_FRACTION = 0.2  # an early tick starts no sooner than this many periods after the last
 MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for an input
+
+
+def split_cpus(cpus: Iterable[int]) -> tuple[set[int], set[int]] | None:
+    """(the control thread's CPU, the other threads' CPUs) from the CPUs the process may use:
+    the highest-numbered for the control thread, the rest for the others; None with fewer
+    than two (nothing to split)."""
+    ordered = sorted(set(cpus))
+    if len(ordered) < 2:
+        return None
+    return {ordered[-1]}, set(ordered[:-1])
+
+
+def run_on(cpus: set[int]) -> str | None:
+    """Keep the calling thread (and the threads it starts from now on) on ``cpus``; returns a
+    note when the platform refuses (no ``sched_setaffinity``, a CPU set it rejects), else
+    None."""
+    try:
+        os.sched_setaffinity(0, cpus)
+    except (AttributeError, OSError, ValueError) as exc:
+        return f"CPU placement refused ({exc}): threads left where the system puts them"
+    return None
 
 
 class PeriodicScheduler:
