@@ -103,7 +103,8 @@ def _los_args(rng: np.random.Generator) -> tuple:
         if rng.random() < 0.2
         else (*(rng.standard_normal(2) * 0.01).tolist(), float(rng.choice([0.005, 0.01])))
     )
-    filt = (math.nan,) * 2 if rng.random() < 0.2 else tuple((rng.standard_normal(2) * 0.01))
+    noise = (rng.standard_normal(2) * 0.01).tolist()
+    filt = (math.nan,) * 2 if rng.random() < 0.2 else tuple(noise)
     return (
         ex, ey, 320.0, _rotation(rng), bool(rng.random() < 0.9), pex, pey, _rotation(rng),
         dt, hold, bool(rng.random() < 0.7), float(rng.choice([0.0, 0.0, 0.1])),
@@ -185,7 +186,7 @@ def test_the_command_kernel_is_feed_forward_attitude_and_guard():
 def test_the_projection_kernel_matches_its_source_and_the_pinhole():
     rng = np.random.default_rng(2106)
     cam = CameraModel(640, 480, 90.0, 20.0, 0.0)
-    for i in range(N):
+    for _ in range(N):
         R = _rotation(rng)
         c, t = rng.standard_normal(3) * 3.0, rng.standard_normal(3) * 30.0
         args = (R, *c.tolist(), *t.tolist(), 0.5, cam.f_px, cam.cu_px, cam.cv_px)
