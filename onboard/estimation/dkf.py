@@ -753,20 +753,21 @@ class DelayedKalmanFilter:
         """The detection as a measurement, or None when it is not finite."""
         cam = self.camera
         try:
-            u, v = (float(c) for c in det.center_px)
-            t_c = float(det.capture_time_s)
+            cu, cv = det.center_px
+            u, v, t_c = float(cu), float(cv), float(det.capture_time_s)
         except (TypeError, ValueError):
             return None
         ex, ey = cam.error_px(u, v)
         if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(t_c)):
             return None
-        z = np.array([ex / self._f, ey / self._f])
-        if not (abs(z[0]) < _MAX_ABS_N and abs(z[1]) < _MAX_ABS_N):
+        xn, yn = ex / self._f, ey / self._f
+        if not (abs(xn) < _MAX_ABS_N and abs(yn) < _MAX_ABS_N):
             return None
         r_px = None
         try:
             area = float(det.area_px)
-            bx, by, bw, bh = (float(c) for c in det.bbox_px)
+            bx, by, bw, bh = det.bbox_px
+            bx, by, bw, bh = float(bx), float(by), float(bw), float(bh)
         except (TypeError, ValueError):
             area = math.nan
             bx = by = bw = bh = math.nan
@@ -774,7 +775,7 @@ class DelayedKalmanFilter:
         whole = whole and by + bh < cam.height_px - 0.5
         if math.isfinite(area) and area > 0.0 and whole:
             r_px = math.sqrt(area / math.pi)
-        return _Meas(t_c, z, r_px)
+        return _Meas(t_c, np.array((xn, yn)), r_px)
 
     def _fuse(self, det: Detection) -> FusionResult:
         self._head_cache = None  # the states may change
