@@ -84,6 +84,13 @@ def mat3_mul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return C
 
 
+@kernel("float64[:, ::1](float64[:], float64[:, :])")
+def camera_attitude(q_wxyz: np.ndarray, R_BC: np.ndarray) -> np.ndarray:
+    """R_WC = R_WB R_BC of the body attitude quaternion (w, x, y, z) and the camera mount
+    ``R_BC`` (compiled: :func:`rotmat_of_quat`, :func:`mat3_mul`)."""
+    return mat3_mul(rotmat_of_quat(q_wxyz), R_BC)
+
+
 @kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:], float64[:, :])")
 def body_and_camera_attitude(q_wxyz: np.ndarray, R_BC: np.ndarray):
     """(R_WB, R_WC = R_WB R_BC) of the body attitude quaternion (w, x, y, z) and the camera

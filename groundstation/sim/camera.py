@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -70,8 +71,8 @@ def sphere_in_view(
 ) -> tuple[tuple[float, float] | None, float]:
     """:func:`sphere_image` for ``model``: (the centre's pixel or None behind the camera, the
     image radius in px)."""
-    c0, c1, c2 = (float(x) for x in camera_pos_enu_m)
-    t0, t1, t2 = (float(x) for x in target_pos_enu_m)
+    c0, c1, c2 = camera_pos_enu_m
+    t0, t1, t2 = target_pos_enu_m
     ahead, u, v, r_px = sphere_image(
         R_WC, c0, c1, c2, t0, t1, t2, diameter_m, model.f_px, model.cu_px, model.cv_px
     )
@@ -154,11 +155,12 @@ class SimCamera:
         self,
         t_s: float,
         R_WC: np.ndarray,
-        camera_pos_enu_m: np.ndarray,
-        target_pos_enu_m: np.ndarray,
+        camera_pos_enu_m: Sequence[float],
+        target_pos_enu_m: Sequence[float],
         target_diameter_m: float,
     ) -> None:
-        """Take a frame at ``t_s`` and schedule its detection (if any) for delivery."""
+        """Take a frame at ``t_s`` and schedule its detection (if any) for delivery (the
+        positions as 3-vectors, ENU m)."""
         self.frames += 1
         spec = self.spec
         uv, r_px = sphere_in_view(
@@ -173,7 +175,7 @@ class SimCamera:
         burst_drop, clutter = self.faults.frame()
         if self.mode == "rendered":
             frame = self.renderer.render(
-                R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m
+                R_WC, np.asarray(camera_pos_enu_m), np.asarray(target_pos_enu_m), target_diameter_m
             )
             self.last_frame = frame
             det = self.detector.detect(frame, t_s)

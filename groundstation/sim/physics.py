@@ -105,6 +105,19 @@ def gyro_mean(x: np.ndarray) -> tuple[float, float, float]:
     return s0 / n, s1 / n, s2 / n
 
 
+@kernel("UniTuple(f8, 2)(f8[::1])")
+def normal_accel(x: np.ndarray) -> tuple[float, float]:
+    """The vehicle's actual acceleration normal to its velocity (m/s^2) from its state ``x``
+    (the last step's kinematic acceleration), and |v|^2 (m^2/s^2); below 1e-9 m^2/s^2 the
+    whole acceleration."""
+    a0, a1, a2 = x[X_ACC], x[X_ACC + 1], x[X_ACC + 2]
+    v0, v1, v2 = x[X_V], x[X_V + 1], x[X_V + 2]
+    vv = v0 * v0 + v1 * v1 + v2 * v2
+    av = a0 * v0 + a1 * v1 + a2 * v2
+    aa = a0 * a0 + a1 * a1 + a2 * a2
+    return math.sqrt(max(aa - (av * av / vv if vv > 1e-9 else 0.0), 0.0)), vv
+
+
 @kernel("void(f8[::1], f8, f8, f8, f8, f8, f8)")
 def vehicle_command(
     x: np.ndarray, max_rate: float, max_thrust_n: float, c0: float, c1: float, c2: float, t: float

@@ -22,7 +22,7 @@ from onboard.enums import LoopMode, Outcome
 from onboard.estimation.dkf import DkfConfig, FusionResult
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
-from onboard.geometry import as_quat, body_and_camera_attitude
+from onboard.geometry import as_quat, camera_attitude
 from onboard.loop import InterceptionLoop
 
 from ..scenario import Scenario, scenario_toml
@@ -46,6 +46,7 @@ from .physics import (
     S_CMD,
     S_CS,
     closest_approach,
+    normal_accel,
     physics_steps,
     sortie_buffer,
 )
@@ -228,7 +229,7 @@ class Simulation:
         return self.outcome is not None
 
     def R_WC(self) -> np.ndarray:
-        return body_and_camera_attitude(as_quat(self.vehicle.q), self._R_BC)[1]
+        return camera_attitude(as_quat(self.vehicle.q), self._R_BC)
 
     def start_info(self) -> SortieStart:
         sc = self.scenario
@@ -286,13 +287,7 @@ class Simulation:
 
     def _capture(self, t: float) -> None:
         veh = self.vehicle
-        self.camera.capture(
-            t,
-            self.R_WC(),
-            np.array(veh.p),
-            np.array(self.target.p),
-            self.scenario.target.diameter_m,
-        )
+        self.camera.capture(t, self.R_WC(), veh.p, self.target.p, self.scenario.target.diameter_m)
         for o in self.observers:
             o.image(t, self.camera.last_frame)
 
@@ -380,11 +375,7 @@ class Simulation:
                     tel.command.thrust_normalised * est.thrust_scale,
                 )
             )
-        a, v = veh.accel, veh.v
-        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-        av = a[0] * v[0] + a[1] * v[1] + a[2] * v[2]
-        aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-        a_n = math.sqrt(max(aa - (av * av / vv if vv > 1e-9 else 0.0), 0.0))
+        a_n, vv = normal_accel(veh.x)
         self.normal_accel_m_s2 = a_n  # actual, normal to the velocity, at this tick
         if vv > 0.25 and a_n > self.max_normal_accel_m_s2:
             self.max_normal_accel_m_s2 = a_n

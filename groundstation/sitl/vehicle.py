@@ -61,7 +61,7 @@ from onboard.control.attitude import attitude_command
 from onboard.datatypes import VehicleState
 from onboard.enums import Outcome
 from onboard.gains import Gains
-from onboard.geometry import as_quat, body_and_camera_attitude, quat_to_rotmat, wrap_pi
+from onboard.geometry import as_quat, camera_attitude, quat_to_rotmat, wrap_pi
 from onboard.link.px4 import MODE_HOLD, MODE_OFFBOARD, MavLink, mavlink, px4_mode_name
 
 from ..scenario import EstimateSpec, Scenario
@@ -408,7 +408,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
         if dropped or burst_drop or self.camera.clients == 0:
             return
         m, diameter = self.camera_model, self.scenario.target.diameter_m
-        R_WC = body_and_camera_attitude(as_quat(self.vehicle.q), np.array(m.R_BC))[1]
+        R_WC = camera_attitude(as_quat(self.vehicle.q), np.array(m.R_BC))
         cam_p, tgt_p = np.array(self.vehicle.p), np.array(self.target.p)
         visible = spec.min_blob_px <= 0.0 or self.faults.big_enough(
             2.0 * sphere_in_view(m, R_WC, cam_p, tgt_p, diameter)[1]
