@@ -100,20 +100,20 @@ class DetectorFaults:
         """Advance one frame: (drop this frame, false blob centre as fractions of width and
         height or None). The independent dropout of the good state is drawn by the camera."""
         spec = self.spec
-        u = self._rng.random(4)
+        u0, u1, u2, u3 = self._rng.random(4).tolist()
         self.frames += 1
         if self.bad:
-            drop = bool(u[0] < spec.burst_drop_probability)
-            if u[1] < 1.0 / spec.burst_mean_frames:
+            drop = u0 < spec.burst_drop_probability
+            if u1 < 1.0 / spec.burst_mean_frames:
                 self.bad = False
         else:
             drop = False
-            if u[1] < spec.burst_probability:
+            if u1 < spec.burst_probability:
                 self.bad = True
         self.dropped += drop
         clutter = None
-        if u[2] < spec.false_probability:
-            clutter = (float(u[3]), float(self._rng.random()))
+        if u2 < spec.false_probability:
+            clutter = (u3, self._rng.random())
         else:
             self._rng.random()
         return drop, clutter
@@ -169,7 +169,8 @@ class SimCamera:
         self.last_truth_px = uv
         # draw every random number each frame so the stream does not depend on the outcome
         dropped = self._rng.random() < spec.dropout_probability
-        noise = self._rng.standard_normal(2) * spec.noise_px
+        n0, n1 = self._rng.standard_normal(2).tolist()
+        noise = (n0 * spec.noise_px, n1 * spec.noise_px)
         delay = spec.delay_s + spec.delay_jitter_s * float(self._rng.standard_normal())
         delay = min(max(delay, 0.5 * spec.delay_s), 2.0 * spec.delay_s + 1e-9)
         burst_drop, clutter = self.faults.frame()
@@ -204,8 +205,8 @@ class SimCamera:
         # visible when at least part of the disc is in the frame
         if not (-r_px < u < m.width_px + r_px and -r_px < v < m.height_px + r_px):
             return None
-        u += float(noise[0])
-        v += float(noise[1])
+        u += noise[0]
+        v += noise[1]
         return Detection(
             capture_time_s=t_s,
             center_px=(u, v),
