@@ -163,11 +163,8 @@ def _affinity_while_running(tmp_path, **kw) -> dict:
         tick()
         if "control" not in seen:
             seen["control"] = os.sched_getaffinity(0)
-            seen["others"] = {
-                t.name: os.sched_getaffinity(t.native_id)
-                for t in threading.enumerate()
-                if t.is_alive() and (t.name in ("sender", "camera") or t.name.startswith("rx "))
-            }
+            threads = (rt._fc_rx, rt._gcs_rx, rt.sender, rt.camera)  # this runtime's own
+            seen["others"] = {t.name: os.sched_getaffinity(t.native_id) for t in threads}
 
     rt.tick = tick_and_look
     try:
