@@ -20,6 +20,8 @@ from .control.guidance import (
     direction_angles,
     line_of_sight,
     los_terms,
+    png_command,
+    png_law,
     saturate_norm,
 )
 from .control.reacquire import (
@@ -324,7 +326,7 @@ class InterceptionLoop:
             R_WC = mat3_mul(R_WB, self._R_BC)
         else:
             R_WB, R_WC = body_and_camera_attitude(q, self._R_BC)
-        z0, z1, z2 = R_WB[0, 2], R_WB[1, 2], R_WB[2, 2]  # the thrust axis, body z in ENU
+        z0, z1, z2 = R_WB[:, 2].tolist()  # the thrust axis, body z in ENU
         v_est = state.velocity_enu_m_s
         v = v_est
         v0, v1, v2 = v_est.tolist()
@@ -361,7 +363,6 @@ class InterceptionLoop:
                 self.last_fusion.append(self.dkf.fuse(det))
 
         dob = self.disturbance
-        z0, z1, z2 = float(z0), float(z1), float(z2)
         finite = math.isfinite  # the observer's input check (DisturbanceObserver.update)
         if finite(v0) and finite(v1) and finite(v2) and finite(z0) and finite(z1) and finite(z2):
             d_hat = dob.update_floats(t, (v0, v1, v2), (z0, z1, z2))
@@ -420,7 +421,6 @@ class InterceptionLoop:
                 hold_s is not None, gains.tau_los, fy, fz, ly, lz, lh, MAX_LATE_CARRY,
             )  # fmt: skip
             self._dq_filt, self._dq_flown = (fy, fz), (ly, lz, lh)
-            n_t = np.array((n0, n1, n2))
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
             mean_range = est_range if gains.tau_zem > 0.0 else None
@@ -434,16 +434,24 @@ class InterceptionLoop:
                     rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
                     range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
                     var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
-            out = self._law(
-                GuidanceInput(
-                    *(hold, n_t, q_y, q_z, dq_y, dq_z, v, e_n, R_WC, self.fov_edges_rad),
-                    range_m=range_m,
-                    target_vel_enu_m_s=v_t,
-                    target_vel_var_m2_s2=var_v,
-                ),
-                gains,
-            )
-            a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad
+            if self._law is png_law:  # the proposed law from the floats at hand (its own code)
+                a0, a1, a2, s_y, s_z, _ = png_command(
+                    hold, (n0, n1, n2), q_y, dq_y, dq_z, vf, R_WC, self.fov_edges_rad,
+                    range_m, v_t, var_v, gains,
+                )  # fmt: skip
+                a_d = np.array((a0, a1, a2))
+            else:
+                out = self._law(
+                    GuidanceInput(
+                        *(hold, np.array((n0, n1, n2)), q_y, q_z, dq_y, dq_z, v, e_n, R_WC),
+                        self.fov_edges_rad,
+                        range_m=range_m,
+                        target_vel_enu_m_s=v_t,
+                        target_vel_var_m2_s2=var_v,
+                    ),
+                    gains,
+                )
+                a_d, s_y, s_z = out.accel_desired_enu_m_s2, out.vel_elev_rad, out.vel_azim_rad
             e_lat_px = self.camera.upright(*e_est)[0]
             e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)

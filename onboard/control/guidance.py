@@ -451,20 +451,45 @@ def _png_gains(gains: Gains) -> np.ndarray:
 
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
-    l0, l1, l2 = _f3(inp.los_enu)
-    v0, v1, v2 = _f3(inp.velocity_enu_m_s)
-    R = inp.R_WC
-    vt = inp.target_vel_enu_m_s
+    a0, a1, a2, sigma_y, sigma_z, hovering = png_command(
+        inp.dt_s, _f3(inp.los_enu), inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
+        _f3(inp.velocity_enu_m_s), inp.R_WC, inp.fov_edges_rad, inp.range_m,
+        inp.target_vel_enu_m_s, inp.target_vel_var_m2_s2, gains,
+    )  # fmt: skip
+    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, hovering)
+
+
+def png_command(
+    dt_s: float,
+    los_enu: tuple[float, float, float],
+    los_elev_rad: float,
+    d_los_elev_rad: float,
+    d_los_azim_rad: float,
+    velocity_enu_m_s: tuple[float, float, float],
+    R_WC: np.ndarray,
+    fov_edges_rad: tuple[float, float],
+    range_m: float,
+    target_vel_enu_m_s: np.ndarray | None,
+    target_vel_var_m2_s2: float,
+    gains: Gains,
+) -> tuple[float, float, float, float, float, bool]:
+    """:func:`png_law` from floats (:class:`GuidanceInput`'s fields, the LOS and the velocity
+    as three floats each; the loop's tick calls it so): (a_d ENU m/s^2 as three floats,
+    sigma_y, sigma_z (nan while hovering), hovering)."""
+    l0, l1, l2 = los_enu
+    v0, v1, v2 = velocity_enu_m_s
+    vt = target_vel_enu_m_s
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
-    top, bottom = inp.fov_edges_rad
+    top, bottom = fov_edges_rad
+    R = R_WC
     a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
-        inp.dt_s, l0, l1, l2, inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
-        v0, v1, v2, float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom,
-        inp.range_m, vt is not None, t0, t1, t2, inp.target_vel_var_m2_s2, _png_gains(gains),
+        dt_s, l0, l1, l2, los_elev_rad, d_los_elev_rad, d_los_azim_rad, v0, v1, v2,
+        float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom, range_m, vt is not None,
+        t0, t1, t2, target_vel_var_m2_s2, _png_gains(gains),
     )  # fmt: skip
     if hovering != 0.0:  # the angles are math.nan itself (telemetry compares equal)
-        return GuidanceOutput(np.array((a0, a1, a2)), math.nan, math.nan, True)
-    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, False)
+        return a0, a1, a2, math.nan, math.nan, True
+    return a0, a1, a2, sigma_y, sigma_z, False
 
 
 @kernel(

@@ -707,7 +707,7 @@ class DelayedKalmanFilter:
         not after the last prediction, or not finite, changes nothing (a NaN row would stop the
         window from ever trimming; an infinite one would end every later prediction)."""
         lo, hi = self._win.tolist()
-        if (hi > lo and time_s <= self._T[hi - 1] + _TIME_EPS_S) or not math.isfinite(time_s):
+        if (hi > lo and time_s <= self._T.item(hi - 1) + _TIME_EPS_S) or not math.isfinite(time_s):
             return
         gyro = _vector3(gyro_rates_flu_rad_s)
         v_c = _NO_INPUT if velocity_enu_m_s is None else _vector3(velocity_enu_m_s)
@@ -732,7 +732,7 @@ class DelayedKalmanFilter:
         # measurements before the oldest buffered state can never be replayed again (they
         # are in capture order: none to cut unless the first one is)
         meas = self._meas
-        if meas and meas[0].t < T[self._win[0]]:
+        if meas and meas[0].t < T.item(self._win.item(0)):
             lo = self._lo
             del meas[: bisect.bisect_left(meas, T[lo], key=_meas_time)]
 
