@@ -321,9 +321,9 @@ def _build_parser() -> argparse.ArgumentParser:
         help="--sitl: onboard run --early-tick on|off (default: the runtime's, on)",
     )
     b.add_argument(
-        "--pin-cpu",
+        "--reserve-cpu",
         choices=("on", "off"),
-        help="--sitl: onboard run --pin-cpu on|off (default: the runtime's, on)",
+        help="--sitl: onboard run --reserve-cpu on|off (default: the runtime's, on)",
     )
     b.add_argument(
         "--video",
@@ -592,7 +592,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     video=args.video,
                     foxglove=args.foxglove_client,
                     early_tick=None if args.early_tick is None else args.early_tick == "on",
-                    pin_cpu=None if args.pin_cpu is None else args.pin_cpu == "on",
+                    reserve_cpu=None if args.reserve_cpu is None else args.reserve_cpu == "on",
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

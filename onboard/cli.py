@@ -77,7 +77,7 @@ def _run(args) -> int:
             video=video,
             foxglove=args.foxglove,
             early_tick=args.early_tick == "on",
-            pin_cpu=args.pin_cpu == "on",
+            reserve_cpu=args.reserve_cpu == "on",
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -162,12 +162,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         "deadline (default %(default)s)",
     )
     r.add_argument(
-        "--pin-cpu",
+        "--reserve-cpu",
         choices=("on", "off"),
-        default="on" if RuntimeConfig.pin_cpu else "off",
-        help="keep the control thread on a CPU of its own among the runtime's threads (the "
-        "receivers, the sender and the camera thread on the others), so their wake-ups do not "
-        "preempt a tick (default %(default)s; nothing to do on one CPU)",
+        default="on" if RuntimeConfig.reserve_cpu else "off",
+        help="leave one CPU to the control thread: the runtime's other threads (receivers, "
+        "sender, camera, video) kept off it, so their wake-ups do not preempt a tick (default "
+        "%(default)s; nothing to do on one CPU or under --realtime)",
     )
     r.add_argument(
         "--log",

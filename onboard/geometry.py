@@ -44,12 +44,12 @@ def vex(m: np.ndarray) -> np.ndarray:
 
 
 def as_quat(q_wxyz) -> np.ndarray:
-    """A quaternion (w, x, y, z) as a float64 4-vector (the array itself when it is one), for
-    the kernels, which do not check the length."""
+    """A quaternion (w, x, y, z) as a writable float64 4-vector (the array itself when it is
+    one), for the kernels, which do not check the length."""
     q = np.asarray(q_wxyz, dtype=np.float64)
     if q.shape != (4,):
         raise ValueError(f"a quaternion has 4 components, not shape {q.shape}")
-    return q
+    return q if q.flags.writeable else q.copy()  # the kernels' signatures take writable ones
 
 
 def quat_to_rotmat(q_wxyz: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from onboard.runtime.scheduler import PeriodicScheduler, run_on, split_cpus
+from onboard.runtime.scheduler import PeriodicScheduler, keep_off, split_cpus
 
 
 def test_ticks_start_no_earlier_than_their_deadlines_on_a_fixed_grid():
@@ -101,9 +101,34 @@ def test_the_control_thread_gets_the_highest_cpu_and_the_others_the_rest():
     assert split_cpus({4}) is None and split_cpus(()) is None  # nothing to split
 
 
-@pytest.mark.skipif(not hasattr(os, "sched_getaffinity"), reason="no affinity API")
+needs_affinity = pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or not os.path.isdir("/proc/self/task"),
+    reason="no affinity API or no /proc",
+)
+
+
+@needs_affinity
 def test_a_refused_placement_is_a_note_and_changes_nothing():
     before = os.sched_getaffinity(0)
-    note = run_on({10**6})  # no such CPU
+    note = keep_off({10**6}, -1)  # no such CPU
     assert note is not None and "CPU placement refused" in note
     assert os.sched_getaffinity(0) == before
+
+
+@needs_affinity
+def test_every_other_thread_is_kept_off_and_put_back():
+    cpus = os.sched_getaffinity(0)
+    if len(cpus) < 2:
+        pytest.skip("one CPU: nothing to keep off")
+    _, others = split_cpus(cpus)
+    go = threading.Event()
+    helper = threading.Thread(target=go.wait, daemon=True)
+    helper.start()
+    try:
+        assert keep_off(others, threading.get_native_id()) is None
+        assert os.sched_getaffinity(helper.native_id) == others
+        assert os.sched_getaffinity(0) == cpus  # the excepted thread is left as it was
+    finally:
+        keep_off(cpus, -1)
+        go.set()
+    assert os.sched_getaffinity(0) == cpus

@@ -47,7 +47,7 @@ def run_sitl_bench(
     video: bool = False,
     foxglove: bool = False,
     early_tick: bool | None = None,
-    pin_cpu: bool | None = None,
+    reserve_cpu: bool | None = None,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -60,7 +60,7 @@ def run_sitl_bench(
     camera's capture to the decoded frame. ``foxglove``: the onboard process also publishes
     its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
     them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
-    or ``off`` (None: the runtime's default); ``pin_cpu`` likewise ``--pin-cpu``."""
+    or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``."""
     import socket
     import subprocess
     import sys
@@ -105,7 +105,7 @@ def run_sitl_bench(
              "--sitl-auto-start", "--duration", str(seconds), "--stats", str(stats_path),
              *rt_args,
              *([] if early_tick is None else ["--early-tick", "on" if early_tick else "off"]),
-             *([] if pin_cpu is None else ["--pin-cpu", "on" if pin_cpu else "off"]),
+             *([] if reserve_cpu is None else ["--reserve-cpu", "on" if reserve_cpu else "off"]),
              *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else []),
              *(["--foxglove", f"127.0.0.1:{fox_port}"] if fox_port else [])],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -146,7 +146,7 @@ def run_sitl_bench(
         "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],
         "realtime_priority": realtime_priority,
         "early_tick": stats.get("early_tick"),
-        "control_cpu": stats.get("control_cpu"),
+        "reserved_cpu": stats.get("reserved_cpu"),
         "scheduler_stalls": stats.get("scheduler_stalls"),
         "loop_rate_hz": stats.get("rate_hz"),
         "jitter_p99_ms": stats.get("jitter_p99_ms"),
@@ -198,8 +198,8 @@ def run_sitl_bench(
     la = figures["load_average_1min_before_after"]
     rt = "" if realtime_priority is None else f", SCHED_FIFO {realtime_priority}"
     rt += {True: ", early tick on", False: ", early tick off"}.get(figures["early_tick"], "")
-    cpu = figures["control_cpu"]
-    rt += ", threads not placed" if cpu is None else f", the control thread alone on CPU {cpu}"
+    cpu = figures["reserved_cpu"]
+    rt += ", no CPU reserved" if cpu is None else f", CPU {cpu} left to the control thread"
     print(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"

@@ -52,7 +52,10 @@ class GuidanceOutput:
 
 def line_of_sight(e_norm_x: float, e_norm_y: float, R_WC: np.ndarray) -> np.ndarray:
     """n_t = R_WB R_BC r_C / |r_C|, r_C = (e_x/f, e_y/f, 1) (paper eq. 5): :func:`los_floats`."""
-    return np.array(los_floats(e_norm_x, e_norm_y, R_WC))
+    R = np.asarray(R_WC, dtype=np.float64)
+    if R.shape != (3, 3):  # the kernel reads nine entries unchecked
+        raise ValueError(f"R_WC must be 3x3, not {R.shape}")
+    return np.array(los_floats(e_norm_x, e_norm_y, R if R.flags.writeable else R.copy()))
 
 
 @kernel("UniTuple(float64, 3)(float64, float64, float64[:, :])")
@@ -615,6 +618,7 @@ GUIDANCE_LAWS: dict[str, GuidanceLaw] = {
 assert set(GUIDANCE_LAWS) == {m.value for m in Law}
 
 
+@kernel("UniTuple(float64, 2)(float64, float64, float64, float64)", uses=(wrap_pi,))
 def los_change(
     elev_now: float, azim_now: float, elev_prev: float, azim_prev: float
 ) -> tuple[float, float]:
@@ -669,7 +673,7 @@ def los_terms(
     if has_prev:
         p0, p1, p2 = los_floats(ex_prev_px / f_px, ey_prev_px / f_px, R_WC_prev)
         qp_y, qp_z = angles_floats(p0, p1, p2)
-        dq_y, dq_z = q_y - qp_y, wrap_pi(q_z - qp_z)
+        dq_y, dq_z = los_change(q_y, q_z, qp_y, qp_z)
         if hold_given and tau_los > 0.0 and hold != dt:
             dq_y *= hold / dt
             dq_z *= hold / dt

@@ -53,7 +53,7 @@ from .fc_side import FlightControllerSide
 from .fc_state import FcState, state_at
 from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
-from .scheduler import PeriodicScheduler, run_on, split_cpus
+from .scheduler import PeriodicScheduler, keep_off, split_cpus
 from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import LoopTiming
@@ -79,9 +79,9 @@ class RuntimeConfig:
     realtime_priority: int | None = None  # SCHED_FIFO priority of the control thread (1-99)
     video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
     foxglove: tuple[str, int] | None = None  # (host, port): Foxglove live (onboard run --foxglove)
-    # the control thread on a CPU of its own among the runtime's threads (onboard run --pin-cpu;
-    # scheduler.py "CPU placement")
-    pin_cpu: bool = True
+    # one CPU left to the control thread: the process's other threads kept off it (onboard run
+    # --reserve-cpu; scheduler.py "CPU placement"); not under an accepted realtime_priority
+    reserve_cpu: bool = True
     # tick as soon as a detection is fused, not at the next deadline (onboard run --early-tick).
     # The SITL sortie's crashes under load were the starved SITL's, with it on or off (README)
     early_tick: bool = True
@@ -159,7 +159,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._last_event = deque(maxlen=1)
         self.commands_sent = 0
         self._last_overrun_report = -1e9
-        self.control_cpu: int | None = None  # run(): the CPU the control thread has (pin_cpu)
+        self.reserved_cpu: int | None = None  # run(): the CPU left to the control thread
         # ten minutes of figures, not the whole day
         self.timing = LoopTiming(self.period_s, keep=int(600 * config.control_rate_hz))
         self._pending_latency: list[tuple[float, float, float]] = []
@@ -322,7 +322,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "stale_attitude_ticks": None if self.loop is None else self.loop.stale_attitude_ticks,
             "guard_trips": None if self.loop is None else self.loop.guard_trips,
             "realtime_priority": self.config.realtime_priority,
-            "control_cpu": self.control_cpu,
+            "reserved_cpu": self.reserved_cpu,
             "bad_frames_fc": self.fc.bad_frames,
             "bad_frames_gcs": None if self.gcs is None else self.gcs.bad_frames,
             "state": self.sm.state.value,
@@ -438,23 +438,35 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._tick_n += 1
 
     # ------------------------------------------------------------------ run
+    def _reserve_cpu(self) -> set[int] | None:
+        """Leave one CPU to the control thread (scheduler.py "CPU placement"): every other
+        thread of the process off it. Returns the CPUs the process had (to put the threads
+        back at the end), or None when there was nothing to do or it was refused (a warning
+        event; the threads are put back)."""
+        if not hasattr(os, "sched_getaffinity"):
+            return None
+        cpus = os.sched_getaffinity(0)
+        split = split_cpus(cpus)
+        if split is None:
+            return None
+        control = threading.get_native_id()
+        note = keep_off(split[1], control)
+        if note:
+            self._event("warning", note)
+            keep_off(cpus, control)
+            return None
+        self.reserved_cpu = next(iter(split[0]))
+        return cpus
+
     def stop(self) -> None:
         self._stop.set()
 
     def run(self, duration_s: float | None = None) -> int:
         sched = self.scheduler
-        cpus_before = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
-        split = None
-        if self.config.pin_cpu and cpus_before is not None:
-            split = split_cpus(cpus_before)
-        if split is not None:  # the threads started below inherit the others' CPUs
-            note = run_on(split[1])
-            if note:
-                self._event("warning", note)
-                split = None
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
+        realtime = self.config.realtime_priority is not None and note is None
         # PX4's stream and the ground's messages parsed and taken between ticks
         on_error = lambda msg: self._event("error", msg)  # noqa: E731
         gate = sched.wait_for_slack
@@ -471,8 +483,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         if self.foxglove is not None:
             self.foxglove.start()
             self._event("info", f"Foxglove live on {self.foxglove.live.url()}")
-        if split is not None and run_on(split[0]) is None:
-            self.control_cpu = next(iter(split[0]))
+        cpus_before = self._reserve_cpu() if self.config.reserve_cpu and not realtime else None
         self._event("info", f"onboard up: {self.config.control_rate_hz:g} Hz, FC {self.fc.url}")
         end = None if duration_s is None else time.perf_counter() + duration_s
         # every command is held a period: an early tick re-anchors the grid (eq. 17's dt)
@@ -500,8 +511,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             pass
         finally:
             sched.stop()
-            if split is not None:  # this thread goes on (a test, an embedding): as it was
-                run_on(cpus_before)
+            if cpus_before is not None:  # the threads going on (a test, an embedding): as they were
+                keep_off(cpus_before, -1)
             self._fc_rx.stop()
             if self._gcs_rx is not None:
                 self._gcs_rx.stop()

@@ -13,13 +13,16 @@ the control thread is spinning or ticking delays the tick by that much. They cal
 :meth:`PeriodicScheduler.wait_for_slack` before each piece of work, which returns at once while
 the control thread sleeps and otherwise waits, without the GIL, until its tick is done.
 
-CPU placement (``onboard run --pin-cpu``, on by default): the control thread gets one CPU to
-itself among the runtime's threads and the others (the links' receivers, the sender, the
-camera thread) run on the rest. A thread woken on the control thread's CPU (a PX4 datagram
-arriving, a frame detected) would otherwise preempt a tick: traced on a 2-core machine, such
-wake-ups were most of the tick-work tail beyond its CPU time (README "CPU placement").
-:func:`split_cpus` chooses, :func:`run_on` applies (the threads a thread starts inherit its
-CPUs, so the runtime narrows its own to the others' before it starts them, then to its own).
+CPU placement (``onboard run --reserve-cpu``, on by default): one CPU (the highest-numbered
+the process may use) is left to the control thread: every other thread of the process (the
+links' receivers, the sender, the camera thread, the video and Foxglove threads, the libraries'
+own) is kept off it, while the control thread itself may still run anywhere (hard-pinning it
+left it waiting up to 5.7 ms behind another process on its one CPU while the other was free).
+A thread woken on the control thread's CPU (a PX4 datagram arriving, a frame detected) would
+otherwise preempt a tick: traced on a 2-core machine, such wake-ups were most of the tick-work
+tail beyond its CPU time (README "CPU placement"). Not under SCHED_FIFO (``--realtime``): there
+a woken thread of the same priority does not preempt a running one, and the others would only
+be crowded onto fewer CPUs. :func:`split_cpus` chooses, :func:`keep_off` applies.
 
 Early ticks: another thread with a new input for the tick (the camera thread, right after it
 fused a detection) calls :meth:`PeriodicScheduler.request_tick`; the control thread, asleep or
@@ -54,21 +57,30 @@ MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for 
 
 
 def split_cpus(cpus: Iterable[int]) -> tuple[set[int], set[int]] | None:
-    """(the control thread's CPU, the other threads' CPUs) from the CPUs the process may use:
-    the highest-numbered for the control thread, the rest for the others; None with fewer
-    than two (nothing to split)."""
+    """(the CPU left to the control thread, the other threads' CPUs) from the CPUs the
+    process may use: the highest-numbered, and the rest; None with fewer than two (nothing to
+    split)."""
     ordered = sorted(set(cpus))
     if len(ordered) < 2:
         return None
     return {ordered[-1]}, set(ordered[:-1])
 
 
-def run_on(cpus: set[int]) -> str | None:
-    """Keep the calling thread (and the threads it starts from now on) on ``cpus``; returns a
-    note when the platform refuses (no ``sched_setaffinity``, a CPU set it rejects), else
-    None."""
+def keep_off(cpus: set[int], except_thread_id: int) -> str | None:
+    """Put every thread of this process but the one with native id ``except_thread_id`` on
+    ``cpus`` (Linux: its threads are listed in /proc/self/task; a thread that ended meanwhile
+    is skipped). Returns a note when that cannot be done (no /proc, no ``sched_setaffinity``,
+    a CPU set refused), else None; threads moved before a refusal stay moved (the caller puts
+    them back)."""
     try:
-        os.sched_setaffinity(0, cpus)
+        tids = [int(name) for name in os.listdir("/proc/self/task")]
+        for tid in tids:
+            if tid == except_thread_id:
+                continue
+            try:
+                os.sched_setaffinity(tid, cpus)
+            except ProcessLookupError:
+                continue  # ended since the listing
     except (AttributeError, OSError, ValueError) as exc:
         return f"CPU placement refused ({exc}): threads left where the system puts them"
     return None
