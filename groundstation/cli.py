@@ -310,6 +310,13 @@ def _build_parser() -> argparse.ArgumentParser:
         "--seconds", type=_seconds(0, False), default=20.0, help="--sitl: how long to fly"
     )
     b.add_argument(
+        "--runs",
+        type=_COUNT,
+        default=1,
+        help="--sitl: fly this many times; each target's per-run values and in how many runs "
+        "it was met",
+    )
+    b.add_argument(
         "--realtime",
         type=int,
         metavar="PRIO",
@@ -593,6 +600,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     foxglove=args.foxglove_client,
                     early_tick=None if args.early_tick is None else args.early_tick == "on",
                     reserve_cpu=None if args.reserve_cpu is None else args.reserve_cpu == "on",
+                    runs=args.runs,
                 )
             if args.recording:
                 return run_recording_bench(as_json=args.json)

@@ -254,7 +254,11 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
             "document.querySelector('#live-msg').textContent === 'start: accepted'"
         )
         page.wait_for_function("document.querySelector('#lv-state').textContent === 'intercept'")
-        assert "start: accepted" in page.text_content("#lv-ack")
+        # the vehicle's state can reach the page in a status update sent before the
+        # acknowledgement was taken in; the next update shows it
+        page.wait_for_function(
+            "document.querySelector('#lv-ack').textContent === 'start: accepted'", timeout=5000
+        )
         page.click("#btn-live-abort")
         page.wait_for_function(
             "document.querySelector('#live-msg').textContent === 'abort: accepted'"

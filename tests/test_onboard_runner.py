@@ -228,3 +228,32 @@ def test_a_refused_reservation_is_a_warning_and_puts_the_threads_back(tmp_path, 
     assert any("CPU placement refused" in line for line in seen["lines"])
     assert seen["stats"]["reserved_cpu"] is None
     assert all(c == cpus for c in seen["others"].values()), seen["others"]
+
+
+def test_arm_mode_and_stream_requests_leave_with_the_sender_after_the_tick(tmp_path):
+    # none of them feeds the command: the tick hands them to the sender thread, which sends
+    # them once the tick has handed over (Sender.flush), in the order the tick asked
+    from onboard.runtime.state_machine import Decision, Output
+
+    rt, fc, gcs, _ = _runtime(tmp_path)
+    rt.sm.step = lambda _inputs: Decision(
+        Output.NONE, request_arm=True, request_offboard=True, request_streams=True
+    )
+    rt.sender.start()
+    try:
+        rt.tick()
+        assert _collect(fc, "COMMAND_LONG", 0.3) == []  # held during the tick
+        rt.sender.flush()
+        got = [(m.command, m.param1, m.param2) for m in _collect(fc, "COMMAND_LONG", 1.0)]
+        interval = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+        assert [c for c, _, _ in got if c == interval] == [interval] * 3
+        assert (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0) in got
+        mode = (mavlink.MAV_CMD_DO_SET_MODE, float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED))
+        assert [g[:2] for g in got if g[0] == mode[0]] == [mode]
+        assert got[0][0] == interval  # the streams first, as the tick asked
+        assert rt._mode_requested  # the acknowledgement is matched on the control thread
+    finally:
+        rt.sender.stop()
+        rt.camera.stop()
+        for link in (fc, gcs, rt.fc, rt.gcs):
+            link.close()

@@ -58,9 +58,10 @@ def _real_time_factors(mode: str, repeat: int) -> tuple[list[float], list[float]
     return rtfs, rtfs_cpu
 
 
-def _tick_times_ms(repeat: int) -> tuple[list[float], list[float]]:
+def _tick_times_ms(repeat: int, sleep_s: float = 0.0) -> tuple[list[float], list[float]]:
     """Control tick times (ms) without and with a detection fused in the tick (the DKF's
-    replay of its buffer runs only in the latter)."""
+    replay of its buffer runs only in the latter). ``sleep_s``: the thread sleeps that long
+    before each tick (not timed), as the vehicle's control thread sleeps between ticks."""
     plain, fusing = [], []
     for seed in range(repeat):
         sim = Simulation(load_scenario("cv-top-to-bottom"), "png", seed, keep_records=False)
@@ -68,6 +69,8 @@ def _tick_times_ms(repeat: int) -> tuple[list[float], list[float]]:
         tick = loop.tick
 
         def timed(state, _tick=tick, _loop=loop):
+            if sleep_s > 0.0:
+                time.sleep(sleep_s)
             t0 = time.perf_counter()
             out = _tick(state)
             ms = (time.perf_counter() - t0) * 1e3
@@ -77,6 +80,27 @@ def _tick_times_ms(repeat: int) -> tuple[list[float], list[float]]:
         loop.tick = timed  # type: ignore[method-assign]
         sim.run()
     return plain, fusing
+
+
+def wake_cost_ms(sleep_s: float = 0.005, repeat: int = 1) -> dict[str, float]:
+    """What sleeping between ticks costs the next tick on this machine: the loop's tick in a
+    simulated sortie (cv-top-to-bottom), medians and p99 (ms) back to back and with the
+    thread asleep ``sleep_s`` before each tick, as the vehicle's control thread is for most
+    of its period. On a machine that keeps a sleeping thread's caches the two are close; on
+    a shared virtual machine the host may run others on the CPU meanwhile, and the tick then
+    starts with its code and data out of the caches (``groundstation bench --sitl`` prints
+    it with the vehicle's figures)."""
+    hot = [a for xs in _tick_times_ms(repeat) for a in xs]
+    cold = [a for xs in _tick_times_ms(repeat, sleep_s) for a in xs]
+    hot_med, cold_med = float(np.median(hot)), float(np.median(cold))
+    return {
+        "sleep_ms": 1000.0 * sleep_s,
+        "back_to_back_median_ms": hot_med,
+        "back_to_back_p99_ms": _p99(hot),
+        "after_sleep_median_ms": cold_med,
+        "after_sleep_p99_ms": _p99(cold),
+        "ratio_of_medians": cold_med / hot_med if hot_med > 0.0 else float("nan"),
+    }
 
 
 def _frame_times_ms() -> tuple[list[float], list[float], int, list[float], float]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import statistics
 import time
 from pathlib import Path
 
@@ -48,6 +49,7 @@ def run_sitl_bench(
     foxglove: bool = False,
     early_tick: bool | None = None,
     reserve_cpu: bool | None = None,
+    runs: int = 1,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -55,12 +57,94 @@ def run_sitl_bench(
     process's CPU share and peak memory (from /proc). With ``realtime_priority`` the onboard
     runtime runs with ``--realtime`` and the SITL (standing in for PX4 on its own processor)
     under SCHED_FIFO too. The load average is printed with the figures: the machine is
-    shared. ``video``: the onboard process also streams its camera (``--video``) to a
+    shared, and so is what sleeping between ticks costs a tick on it (:func:`wake_cost_ms`,
+    measured first). ``video``: the onboard process also streams its camera (``--video``) to a
     receiver here (:mod:`groundstation.app.video`): glass-to-glass latency, from the SITL
     camera's capture to the decoded frame. ``foxglove``: the onboard process also publishes
     its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
     them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
-    or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``."""
+    or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``.
+    ``runs``: fly that many times, print each run's figures, then each target's per-run
+    values and in how many runs it was met (:func:`summarise_runs`)."""
+    from .core import wake_cost_ms
+
+    host = wake_cost_ms()
+    flights = []
+    for n in range(runs):
+        figures = _fly(seconds, realtime_priority, video, foxglove, early_tick, reserve_cpu)
+        figures["host_wake_cost"] = host
+        flights.append(figures)
+        if not as_json:
+            if runs > 1:
+                print(f"run {n + 1} of {runs}")
+            _print_figures(figures)
+    summary = summarise_runs(flights)
+    if as_json:
+        out = flights[0] if runs == 1 else {"runs": flights, "summary": summary}
+        print(json.dumps(out, indent=2))
+    elif runs > 1:
+        _print_summary(summary)
+    return 0
+
+
+def summarise_runs(flights: list[dict]) -> dict:
+    """Per target of #16 (jitter p99, tick work p99, overruns, capture-to-command beyond the
+    camera p99): each run's value, their median and worst, and in how many runs it was met
+    (a run without the figure does not meet it)."""
+    targets = {
+        "jitter_p99_ms": TARGETS_MS["jitter_p99"],
+        "tick_work_p99_ms": TARGETS_MS["tick_work_p99"],
+        "overruns": 0,
+        "beyond_camera_p99_ms": TARGETS_MS["beyond_camera_p99"],
+    }
+    out = {}
+    for key, target in targets.items():
+        values = [f.get(key) for f in flights]
+        known = sorted(v for v in values if v is not None)
+        out[key] = {
+            "target_at_most": target,
+            "runs": values,
+            "median": statistics.median(known) if known else None,
+            "worst": known[-1] if known else None,
+            "met": sum(1 for v in values if v is not None and v <= target),
+            "of": len(values),
+        }
+    return out
+
+
+def _print_summary(summary: dict) -> None:
+    print(f"over {next(iter(summary.values()))['of']} runs (a target is met in a run when that "
+          "run's figure meets it):")  # fmt: skip
+    names = {
+        "jitter_p99_ms": "period jitter p99 (ms)",
+        "tick_work_p99_ms": "tick work p99 (ms)",
+        "overruns": "overruns",
+        "beyond_camera_p99_ms": "capture-to-command beyond the camera p99 (ms)",
+    }
+    for key, row in summary.items():
+        vals = " ".join("—" if v is None else f"{v:g}" if key == "overruns" else f"{v:.2f}"
+                        for v in row["runs"])  # fmt: skip
+        med, worst = row["median"], row["worst"]
+        fmt = (
+            (lambda v: "—" if v is None else f"{v:g}")
+            if key == "overruns"
+            else (lambda v: "—" if v is None else f"{v:.2f}")
+        )
+        print(
+            f"  {names[key]}: {vals}; median {fmt(med)}, worst {fmt(worst)}; target <= "
+            f"{row['target_at_most']:g} met in {row['met']} of {row['of']}"
+        )
+
+
+def _fly(
+    seconds: float,
+    realtime_priority: int | None,
+    video: bool,
+    foxglove: bool,
+    early_tick: bool | None,
+    reserve_cpu: bool | None,
+) -> dict:
+    """One flight of :func:`run_sitl_bench`: its figures."""
     import socket
     import subprocess
     import sys
@@ -184,9 +268,14 @@ def run_sitl_bench(
         if fox_client is None
         else {"messages_received": fox_client.messages, **(stats.get("foxglove") or {})},
     }
-    if as_json:
-        print(json.dumps(figures, indent=2))
-        return 0
+    return figures
+
+
+def _print_figures(figures: dict) -> None:
+    seconds, realtime_priority = figures["seconds"], figures["realtime_priority"]
+    delay_s, peak = figures["camera_delay_s"], figures["peak_rss_mb"]
+    cpu_share, timesync_error_ms = figures["cpu_share_of_one_core"], figures["timesync_error_ms"]
+    vid, result = figures["video"], figures["sitl_result"]
 
     def f(x, d=2):
         return "—" if x is None else f"{x:.{d}f}"
@@ -252,7 +341,7 @@ def run_sitl_bench(
         " ms (the rest is the camera thread: frame transfer and detection)"
     )
     print(
-        f"  onboard process: CPU {f(100 * figures['cpu_share_of_one_core'] if cpu_s else None, 0)}"
+        f"  onboard process: CPU {f(None if cpu_share is None else 100 * cpu_share, 0)}"
         f" % of one core, peak memory {f(peak, 0)} MB  target <= 300 MB"
     )
     print(
@@ -277,7 +366,15 @@ def run_sitl_bench(
         )
     if result:
         print(f"  intercept: {result['outcome']}, miss {result['miss_m']:.3f} m")
-    return 0
+    host = figures.get("host_wake_cost")
+    if host is not None:
+        print(
+            f"  this machine: the loop's tick (a simulated sortie) median "
+            f"{f(host['back_to_back_median_ms'], 3)} ms back to back, "
+            f"{f(host['after_sleep_median_ms'], 3)} ms (p99 {f(host['after_sleep_p99_ms'], 3)}) "
+            f"after a {host['sleep_ms']:g} ms sleep ({f(host['ratio_of_medians'], 1)}x): what "
+            "sleeping between ticks costs a tick here"
+        )
 
 
 class _FoxgloveClient:

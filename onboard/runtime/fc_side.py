@@ -117,11 +117,11 @@ class FlightControllerSide:
     # ------------------------------------------------------------------ outputs
     def _send_command(self, rates_flu: np.ndarray, thrust: float, now: float) -> bool:
         try:  # FLU -> FRD (frd_to_flu) on plain floats: the hot path allocates no arrays
-            x, y, z = (float(c) for c in rates_flu)
-            rates, thrust = (x, -y, -z), float(thrust)
-            ok = all(math.isfinite(c) and abs(c) <= MAX_RATE_RAD_S for c in rates) and (
-                0.0 <= thrust <= 1.0  # NaN fails too
-            )
+            x, y, z = rates_flu.tolist() if type(rates_flu) is np.ndarray else rates_flu
+            x, y, z, thrust = float(x), -float(y), -float(z), float(thrust)
+            rates = (x, y, z)
+            lim = MAX_RATE_RAD_S  # NaN and infinities fail each comparison
+            ok = abs(x) <= lim and abs(y) <= lim and abs(z) <= lim and 0.0 <= thrust <= 1.0
         except (TypeError, ValueError):
             ok = False
         if not ok:  # the last line of defence: nothing non-finite or wild reaches PX4

@@ -5,7 +5,8 @@ reads the vehicle state the receiver threads took from what the flight controlle
 ground sent, feeds the camera thread's detections to the loop,
 steps the offboard state machine (the failsafe wiring: :meth:`OnboardRuntime.tick`), sends
 the command to PX4 and hands the rest (telemetry every few ticks, events, heartbeats, TIMESYNC
-requests) to the sender thread, which sends it in the tick's slack.
+requests, the state machine's arm, mode and stream requests) to the sender thread, which sends
+it in the tick's slack.
 
 The runtime is split by concern: :mod:`.fc_side` (PX4 in and out), :mod:`.ground_side`
 (parameters, commands, telemetry, events), :mod:`.scheduler` (when the tick runs: deadlines,
@@ -390,8 +391,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         )
         for ev in decision.events:
             self._event(*ev)
-        if decision.request_streams:
-            self._request_streams()
+        if decision.request_streams:  # none of these requests feeds the command: after the tick
+            self.sender.submit(self._request_streams)
         if decision.output is not Output.NONE and tel is not None:
             self._send_command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised, now)
             sent_at = self.clock.now()
@@ -402,17 +403,19 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         if self.sm.state is not State.INTERCEPT or not tracking:
             self._pending_latency.clear()
         if decision.request_arm:
-            self._fc_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+            self.sender.submit(self._fc_command, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
         if decision.request_offboard:
             self._mode_requested = MODE_OFFBOARD
-            self._fc_command(
+            self.sender.submit(
+                self._fc_command,
                 mavlink.MAV_CMD_DO_SET_MODE,
                 mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                 PX4_MAIN_OFFBOARD,
             )
         if decision.request_hold:
             self._mode_requested = MODE_HOLD
-            self._fc_command(
+            self.sender.submit(
+                self._fc_command,
                 mavlink.MAV_CMD_DO_SET_MODE,
                 mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                 PX4_MAIN_AUTO,
