@@ -122,14 +122,13 @@ def _print_summary(summary: dict) -> None:
         "beyond_camera_p99_ms": "capture-to-command beyond the camera p99 (ms)",
     }
     for key, row in summary.items():
-        vals = " ".join("—" if v is None else f"{v:g}" if key == "overruns" else f"{v:.2f}"
-                        for v in row["runs"])  # fmt: skip
+        digits = "g" if key == "overruns" else ".2f"
+
+        def fmt(v, digits=digits) -> str:
+            return "—" if v is None else format(v, digits)
+
+        vals = " ".join(fmt(v) for v in row["runs"])
         med, worst = row["median"], row["worst"]
-        fmt = (
-            (lambda v: "—" if v is None else f"{v:g}")
-            if key == "overruns"
-            else (lambda v: "—" if v is None else f"{v:.2f}")
-        )
         print(
             f"  {names[key]}: {vals}; median {fmt(med)}, worst {fmt(worst)}; target <= "
             f"{row['target_at_most']:g} met in {row['met']} of {row['of']}"
