@@ -333,6 +333,11 @@ def _build_parser() -> argparse.ArgumentParser:
         help="--sitl: onboard run --reserve-cpu on|off (default: the runtime's, on)",
     )
     b.add_argument(
+        "--rehearse",
+        choices=("on", "off"),
+        help="--sitl: onboard run --rehearse on|off (default: the runtime's, on)",
+    )
+    b.add_argument(
         "--video",
         action="store_true",
         help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
@@ -600,6 +605,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     foxglove=args.foxglove_client,
                     early_tick=None if args.early_tick is None else args.early_tick == "on",
                     reserve_cpu=None if args.reserve_cpu is None else args.reserve_cpu == "on",
+                    rehearse=None if args.rehearse is None else args.rehearse == "on",
                     runs=args.runs,
                 )
             if args.recording:

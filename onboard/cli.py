@@ -78,6 +78,7 @@ def _run(args) -> int:
             foxglove=args.foxglove,
             early_tick=args.early_tick == "on",
             reserve_cpu=args.reserve_cpu == "on",
+            rehearse=args.rehearse == "on",
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -168,6 +169,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="leave one CPU to the control thread: the runtime's other threads (receivers, "
         "sender, camera, video) kept off it, so their wake-ups do not preempt a tick (default "
         "%(default)s; nothing to do on one CPU or under --realtime)",
+    )
+    r.add_argument(
+        "--rehearse",
+        choices=("on", "off"),
+        default="on" if RuntimeConfig.rehearse else "off",
+        help="wake a little earlier and tick a copy of the loop (its result dropped) just "
+        "before each deadline, so the tick finds its code and data in the caches (default "
+        "%(default)s)",
     )
     r.add_argument(
         "--log",

@@ -3,6 +3,8 @@ wake-cost figure it prints times only the tick, not the sleep before it."""
 
 from __future__ import annotations
 
+import collections
+
 import pytest
 
 from groundstation.bench.core import _tick_times_ms
@@ -51,3 +53,68 @@ def test_runs_must_be_a_positive_count(capsys):
     with pytest.raises(SystemExit):
         main(["bench", "--sitl", "--runs", "0"])
     assert "--runs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, None), ("on", True), ("off", False)])
+def test_rehearse_reaches_each_flight(monkeypatch, flag, expected):
+    """``bench --sitl --rehearse on|off`` is handed to each flight (None: the runtime's
+    default) and the flight's figures to the printout."""
+    import groundstation.bench.core as core
+    import groundstation.bench.sitl as sitl
+
+    asked = []
+    figures = {
+        **{k: 0.1 for k in ("jitter_p99_ms", "tick_work_p99_ms", "beyond_camera_p99_ms")},
+        "overruns": 0,
+        "rehearse": expected is not False,
+        "rehearsals": 9773,
+        "rehearsals_skipped": {"early tick": 213, "fusion": 2, "woken late": 2102},
+        "rehearsal_median_ms": 0.13,
+        "rehearsal_p99_ms": 0.35,
+        "shadow_refreshes": 72,
+        "rehearsal_errors": 0,
+        "early_tick_work_median_ms": 0.19,
+        "early_tick_work_p99_ms": 0.91,
+    }
+
+    def fly(*args):
+        asked.append(args[-1])
+        return dict(figures)
+
+    printed = []
+    monkeypatch.setattr(core, "wake_cost_ms", lambda: {})
+    monkeypatch.setattr(sitl, "_fly", fly)
+    monkeypatch.setattr(sitl, "_print_figures", lambda fig: printed.append(fig))
+    argv = ["bench", "--sitl", "--seconds", "1"] + ([] if flag is None else ["--rehearse", flag])
+    assert main(argv) == 0
+    assert asked == [expected]
+    assert printed[0]["rehearsals"] == 9773
+
+
+def test_the_rehearsal_line_names_what_was_skipped(capsys):
+    """A rehearsed flight's printout says how many rehearsals ran, how long they took, how
+    many were skipped and why; the early ticks' work is printed apart."""
+    from groundstation.bench.sitl import _print_figures
+
+    fig = collections.defaultdict(lambda: None)  # the figures this line does not need: absent
+    fig.update(
+        seconds=60,
+        camera_delay_s=0.08,
+        load_average_1min_before_after=[0.5, 0.5],
+        rehearse=True,
+        rehearsals=9773,
+        rehearsals_skipped={"early tick": 213, "fusion": 2, "woken late": 2102},
+        rehearsal_median_ms=0.13,
+        rehearsal_p99_ms=0.35,
+        shadow_refreshes=72,
+        rehearsal_errors=0,
+        early_tick_work_median_ms=0.19,
+        early_tick_work_p99_ms=0.91,
+    )
+    _print_figures(fig)
+    out = capsys.readouterr().out
+    assert "ticks rehearsed" in out
+    assert "9773 run, median 0.13 ms, p99 0.35 ms" in out
+    assert "213 early tick, 2 fusion, 2102 woken late" in out
+    assert "copies taken 72, errors 0" in out
+    assert "early ticks' (ticked as a fusion came in): median 0.19 ms, p99 0.91 ms" in out

@@ -229,6 +229,11 @@ def test_timing_keeps_early_ticks_out_of_the_jitter_and_counts_overruns():
     assert fig["rate_hz"] == pytest.approx(200.0)
     assert fig["jitter_max_ms"] == pytest.approx(0.0, abs=1e-9)
     assert timing.loop_rate_hz() == pytest.approx(200.0)
+    # the early tick's work is in the tick work and also reported apart
+    assert fig["tick_work_p99_ms"] == pytest.approx(6.1)
+    assert fig["early_tick_work_median_ms"] == pytest.approx(6.1)
+    assert fig["early_tick_work_p99_ms"] == pytest.approx(6.1)
+    assert fig["tick_work_median_ms"] == pytest.approx(0.3)
 
 
 # ---------------------------------------------------------------------- the loop's hold
@@ -409,9 +414,9 @@ def test_a_stall_takes_back_at_most_one_command_s_turn():
     assert dz1 == pytest.approx(raw_z - dz0, rel=1e-9, abs=1e-15)
 
 
-@pytest.mark.parametrize(("flag", "expected"), [(None, None), ("on", True), ("off", False)])
-def test_onboard_run_early_tick_flag_reaches_the_runtime(monkeypatch, flag, expected):
-    """``onboard run --early-tick on|off`` (default: RuntimeConfig's) sets the config."""
+def configs_of_onboard_run(monkeypatch, extra_argv: list[str]) -> list:
+    """The RuntimeConfig ``onboard run --camera 0 --gcs '' <extra_argv>`` builds (the runtime
+    replaced by one that only records its config)."""
     import signal
 
     import onboard.runtime.runner as runner_mod
@@ -431,11 +436,17 @@ def test_onboard_run_early_tick_flag_reaches_the_runtime(monkeypatch, flag, expe
 
     monkeypatch.setattr(runner_mod, "OnboardRuntime", Captured)
     monkeypatch.setattr(signal, "signal", lambda *a: None)
-    argv = ["run", "--camera", "0", "--gcs", ""]
-    if flag is not None:
-        argv += ["--early-tick", flag]
-    assert main(argv) == 0
-    default = runner_mod.RuntimeConfig.early_tick
+    assert main(["run", "--camera", "0", "--gcs", "", *extra_argv]) == 0
+    return seen
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, None), ("on", True), ("off", False)])
+def test_onboard_run_early_tick_flag_reaches_the_runtime(monkeypatch, flag, expected):
+    """``onboard run --early-tick on|off`` (default: RuntimeConfig's) sets the config."""
+    from onboard.runtime.runner import RuntimeConfig
+
+    seen = configs_of_onboard_run(monkeypatch, [] if flag is None else ["--early-tick", flag])
+    default = RuntimeConfig.early_tick
     assert [c.early_tick for c in seen] == [default if expected is None else expected]
 
 

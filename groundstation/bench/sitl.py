@@ -50,6 +50,7 @@ def run_sitl_bench(
     early_tick: bool | None = None,
     reserve_cpu: bool | None = None,
     runs: int = 1,
+    rehearse: bool | None = None,
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -63,7 +64,8 @@ def run_sitl_bench(
     camera's capture to the decoded frame. ``foxglove``: the onboard process also publishes
     its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
     them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
-    or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``.
+    or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``,
+    ``rehearse`` ``--rehearse``.
     ``runs``: fly that many times, print each run's figures, then each target's per-run
     values and in how many runs it was met (:func:`summarise_runs`)."""
     from .core import wake_cost_ms
@@ -71,7 +73,9 @@ def run_sitl_bench(
     host = wake_cost_ms()
     flights = []
     for n in range(runs):
-        figures = _fly(seconds, realtime_priority, video, foxglove, early_tick, reserve_cpu)
+        figures = _fly(
+            seconds, realtime_priority, video, foxglove, early_tick, reserve_cpu, rehearse
+        )
         figures["host_wake_cost"] = host
         flights.append(figures)
         if not as_json:
@@ -142,6 +146,7 @@ def _fly(
     foxglove: bool,
     early_tick: bool | None,
     reserve_cpu: bool | None,
+    rehearse: bool | None = None,
 ) -> dict:
     """One flight of :func:`run_sitl_bench`: its figures."""
     import socket
@@ -189,6 +194,7 @@ def _fly(
              *rt_args,
              *([] if early_tick is None else ["--early-tick", "on" if early_tick else "off"]),
              *([] if reserve_cpu is None else ["--reserve-cpu", "on" if reserve_cpu else "off"]),
+             *([] if rehearse is None else ["--rehearse", "on" if rehearse else "off"]),
              *(["--video", f"127.0.0.1:{receiver.port}"] if receiver else []),
              *(["--foxglove", f"127.0.0.1:{fox_port}"] if fox_port else [])],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -230,12 +236,21 @@ def _fly(
         "realtime_priority": realtime_priority,
         "early_tick": stats.get("early_tick"),
         "reserved_cpu": stats.get("reserved_cpu"),
+        "rehearse": stats.get("rehearse"),
+        "rehearsals": stats.get("rehearsals"),
+        "rehearsals_skipped": stats.get("rehearsals_skipped"),
+        "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
+        "rehearsal_p99_ms": stats.get("rehearsal_p99_ms"),
+        "shadow_refreshes": stats.get("shadow_refreshes"),
+        "rehearsal_errors": stats.get("rehearsal_errors"),
         "scheduler_stalls": stats.get("scheduler_stalls"),
         "loop_rate_hz": stats.get("rate_hz"),
         "jitter_p99_ms": stats.get("jitter_p99_ms"),
         "jitter_max_ms": stats.get("jitter_max_ms"),
         "tick_work_median_ms": stats.get("tick_work_median_ms"),
         "tick_work_p99_ms": stats.get("tick_work_p99_ms"),
+        "early_tick_work_median_ms": stats.get("early_tick_work_median_ms"),
+        "early_tick_work_p99_ms": stats.get("early_tick_work_p99_ms"),
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
@@ -288,6 +303,7 @@ def _print_figures(figures: dict) -> None:
     rt += {True: ", early tick on", False: ", early tick off"}.get(figures["early_tick"], "")
     cpu = figures["reserved_cpu"]
     rt += ", no CPU reserved" if cpu is None else f", CPU {cpu} left to the control thread"
+    rt += {True: ", ticks rehearsed", False: ", no rehearsal"}.get(figures.get("rehearse"), "")
     print(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
@@ -312,12 +328,27 @@ def _print_figures(figures: dict) -> None:
         f"    of which the control thread's CPU time: median {f(figures['tick_cpu_median_ms'])}"
         f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
     )
+    if figures.get("early_tick_work_median_ms") is not None:
+        print(
+            f"    of which the early ticks' (ticked as a fusion came in): median "
+            f"{f(figures['early_tick_work_median_ms'])} ms, p99 "
+            f"{f(figures['early_tick_work_p99_ms'])} ms"
+        )
     if figures["lock_wait_p99_ms"] is not None:
         print(
             f"    of which waiting for the loop's lock: p99 {f(figures['lock_wait_p99_ms'])} ms"
             f" (max {f(figures['lock_wait_max_ms'])}); ticks that waited (asleep, before they "
             f"started) for a fusion to end: {figures['ticks_waiting_for_a_fusion']} (at most "
             f"{f(figures['fusion_wait_max_ms'])} ms past the deadline)"
+        )
+    if figures.get("rehearse"):
+        skipped = figures["rehearsals_skipped"] or {}
+        print(
+            f"    before it (not in it), the rehearsal on a copy of the loop: "
+            f"{figures['rehearsals']} run, median {f(figures['rehearsal_median_ms'])} ms, p99 "
+            f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
+            + ", ".join(f"{n} {why}" for why, n in skipped.items())
+            + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
         )
     print(
         f"  overruns {figures['overruns']}, stalls re-anchored {figures['scheduler_stalls']}"

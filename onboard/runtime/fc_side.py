@@ -41,6 +41,25 @@ STREAM_RATES_HZ = {
 }
 
 
+def setpoint_fields(rates_flu, thrust: float, now_s: float) -> tuple | None:
+    """SET_ATTITUDE_TARGET's fields in wire order for body rates ``rates_flu`` (FLU, rad/s,
+    turned to PX4's FRD here) and normalised ``thrust`` at ``now_s`` (s; the message's boot
+    time in ms), or None when the output guard refuses them: a rate beyond
+    ``MAX_RATE_RAD_S``, a thrust outside [0, 1], NaN, an infinity or not numbers at all."""
+    try:  # FLU -> FRD (frd_to_flu) on plain floats: the hot path allocates no arrays
+        x, y, z = rates_flu.tolist() if type(rates_flu) is np.ndarray else rates_flu
+        x, y, z, thrust = float(x), -float(y), -float(z), float(thrust)
+    except (TypeError, ValueError):
+        return None
+    lim = MAX_RATE_RAD_S  # NaN and infinities fail each comparison
+    if not (abs(x) <= lim and abs(y) <= lim and abs(z) <= lim and 0.0 <= thrust <= 1.0):
+        return None
+    return (
+        int(now_s * 1000) & 0xFFFFFFFF, *_NO_ATTITUDE, x, y, z, thrust,
+        VEHICLE_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, _RATES_ONLY,
+    )  # fmt: skip
+
+
 class FlightControllerSide:
     """Inputs from and outputs to PX4 (mixed into the runtime)."""
 
@@ -116,22 +135,11 @@ class FlightControllerSide:
 
     # ------------------------------------------------------------------ outputs
     def _send_command(self, rates_flu: np.ndarray, thrust: float, now: float) -> bool:
-        try:  # FLU -> FRD (frd_to_flu) on plain floats: the hot path allocates no arrays
-            x, y, z = rates_flu.tolist() if type(rates_flu) is np.ndarray else rates_flu
-            x, y, z, thrust = float(x), -float(y), -float(z), float(thrust)
-            rates = (x, y, z)
-            lim = MAX_RATE_RAD_S  # NaN and infinities fail each comparison
-            ok = abs(x) <= lim and abs(y) <= lim and abs(z) <= lim and 0.0 <= thrust <= 1.0
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:  # the last line of defence: nothing non-finite or wild reaches PX4
+        fields = setpoint_fields(rates_flu, thrust, now)
+        if fields is None:  # the last line of defence: nothing non-finite or wild reaches PX4
             self._event("error", "output guard: bad command replaced by hover")
-            rates, thrust = (0.0, 0.0, 0.0), float(self.params.runtime.HOVER_THR)
-        sent = self.fc.send_fields(
-            SET_ATTITUDE_TARGET,  # the message's wire order
-            int(now * 1000) & 0xFFFFFFFF, *_NO_ATTITUDE, *rates, thrust,
-            VEHICLE_SYSTEM_ID, AUTOPILOT_COMPONENT_ID, _RATES_ONLY,
-        )  # fmt: skip
+            fields = setpoint_fields((0.0, 0.0, 0.0), float(self.params.runtime.HOVER_THR), now)
+        sent = self.fc.send_fields(SET_ATTITUDE_TARGET, *fields)
         if sent:
             self.commands_sent += 1
         return sent

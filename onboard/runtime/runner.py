@@ -6,7 +6,8 @@ ground sent, feeds the camera thread's detections to the loop,
 steps the offboard state machine (the failsafe wiring: :meth:`OnboardRuntime.tick`), sends
 the command to PX4 and hands the rest (telemetry every few ticks, events, heartbeats, TIMESYNC
 requests, the state machine's arm, mode and stream requests) to the sender thread, which sends
-it in the tick's slack.
+it in the tick's slack. Just before each grid tick a copy of the loop rehearses it, its result
+dropped, so the tick finds its code and data in the caches (:mod:`.rehearsal`).
 
 The runtime is split by concern: :mod:`.fc_side` (PX4 in and out), :mod:`.ground_side`
 (parameters, commands, telemetry, events), :mod:`.scheduler` (when the tick runs: deadlines,
@@ -54,16 +55,18 @@ from .fc_side import FlightControllerSide
 from .fc_state import FcState, state_at
 from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
+from .rehearsal import REHEARSE_LEAD_S, Rehearsal
 from .scheduler import PeriodicScheduler, keep_off, split_cpus
 from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
-from .timing import LoopTiming
+from .timing import LoopTiming, percentile, to_ms
 from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 
 # the loop flies without a live track (coast, re-acquisition, search: see onboard/loop.py)
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
 
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
+SHADOW_MIN_SLACK_S = 0.002  # the shadow is copied (about 0.5 ms) only with this much slack left
 
 
 @dataclass
@@ -86,6 +89,9 @@ class RuntimeConfig:
     # tick as soon as a detection is fused, not at the next deadline (onboard run --early-tick).
     # The SITL sortie's crashes under load were the starved SITL's, with it on or off (README)
     early_tick: bool = True
+    # rehearse the tick on a copy of the loop just before each deadline (onboard run
+    # --rehearse; rehearsal.py): the tick then finds its code and data in the caches
+    rehearse: bool = True
 
 
 class OnboardRuntime(FlightControllerSide, GroundSide):
@@ -135,8 +141,12 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._gcs_rx: LinkReceiver | None = None
         self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
         self._gcs_waiting: deque = deque()
+        self.rehearsal = Rehearsal() if config.rehearse else None
         self.scheduler = PeriodicScheduler(
-            self.period_s, realtime_priority=config.realtime_priority
+            self.period_s,
+            realtime_priority=config.realtime_priority,
+            rehearse=None if self.rehearsal is None else self._rehearse,
+            rehearse_lead_s=REHEARSE_LEAD_S,
         )
         # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
         self.sender = Sender(
@@ -316,6 +326,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "ticks_waiting_for_a_fusion": self.scheduler.input_waits,
             "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
             "early_tick": self.config.early_tick,
+            **self._rehearsal_stats(),
             "gc_runs_in_slack": self.scheduler.gc_runs,
             # ticks whose LOS change was re-based through the gyro: the attitude jumped beyond
             # the gyro's turn (a stale one replaced), or was not of the tick (stale)
@@ -336,6 +347,19 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             else 1000 * self.timesync.min_rtt_s,
             "timesync_accepted": self.timesync.accepted,
             "foxglove": None if self.foxglove is None else self.foxglove.stats(),
+        }
+
+    def _rehearsal_stats(self) -> dict:
+        rh, sched = self.rehearsal, self.scheduler
+        took = list(sched.rehearsal_s)
+        return {
+            "rehearse": rh is not None,
+            "rehearsals": None if rh is None else rh.runs,
+            "rehearsals_skipped": None if rh is None else sched.rehearsals_skipped,
+            "rehearsal_median_ms": to_ms(percentile(took, 0.5)),
+            "rehearsal_p99_ms": to_ms(percentile(took, 0.99)),
+            "shadow_refreshes": None if rh is None else rh.refreshes,
+            "rehearsal_errors": None if rh is None else rh.errors,
         }
 
     # ------------------------------------------------------------------ the tick
@@ -440,6 +464,32 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.sender.submit(self._flush_events)
         self._tick_n += 1
 
+    def _rehearse(self) -> None:
+        """On the control thread, just before a deadline (rehearsal.py): the shadow loop ticks
+        the vehicle's state as of now. Skipped while the loop's lock is taken (a fusion is
+        running: an early tick is coming) or before the state is known."""
+        f = self.fcs
+        if not self._loop_lock.acquire(blocking=False):
+            return
+        try:
+            if f.pos_enu_m is None or f.q_wxyz is None:
+                return
+            state = state_at(f, self.clock.now())
+        finally:
+            self._loop_lock.release()
+        self.rehearsal.run(state, self._hold_s)
+
+    def _refresh_shadow(self) -> None:
+        """After a tick, in the slack: a new shadow when the loop's mode moved away from it or
+        it is old (rehearsal.py), unless the next wake-up is near."""
+        loop, rh = self.loop, self.rehearsal
+        if loop is None or rh is None or not rh.needs_refresh(loop):
+            return
+        if self.scheduler.slack_s() < SHADOW_MIN_SLACK_S:
+            return  # after a later tick
+        with self._loop_lock:
+            rh.refresh(loop)
+
     # ------------------------------------------------------------------ run
     def _reserve_cpu(self) -> set[int] | None:
         """Leave one CPU to the control thread (scheduler.py "CPU placement"): every other
@@ -510,6 +560,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 if end is not None and now >= end:
                     break
                 sched.after_tick()
+                self._refresh_shadow()
         except KeyboardInterrupt:
             pass
         finally:

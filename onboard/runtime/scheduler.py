@@ -24,6 +24,11 @@ tail beyond its CPU time (README "CPU placement"). Not under SCHED_FIFO (``--rea
 a woken thread of the same priority does not preempt a running one, and the others would only
 be crowded onto fewer CPUs. :func:`split_cpus` chooses, :func:`keep_off` applies.
 
+Rehearsal (``rehearse``, :mod:`.rehearsal`): the control thread wakes ``rehearse_lead_s``
+earlier still and calls ``rehearse`` (the tick's expensive part on a copy, so the tick finds its
+code and data in the caches), then spins to the deadline as before. Not before an early tick or
+while an input is being handed over; the other threads are held off it as off the spin.
+
 Early ticks: another thread with a new input for the tick (the camera thread, right after it
 fused a detection) calls :meth:`PeriodicScheduler.request_tick`; the control thread, asleep or
 spinning, then ticks at once instead of at the next deadline (never sooner than
@@ -44,6 +49,7 @@ import os
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
@@ -54,6 +60,7 @@ MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than th
 SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
 MIN_GAP_FRACTION = 0.2  # an early tick starts no sooner than this many periods after the last
 MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for an input
+REHEARSALS_KEPT = 120_000  # the last ten minutes' rehearsal times at 200 Hz
 
 
 def split_cpus(cpus: Iterable[int]) -> tuple[set[int], set[int]] | None:
@@ -101,6 +108,8 @@ class PeriodicScheduler:
         min_gap_s: float | None = None,
         clock: Callable[[], float] = time.perf_counter,
         block: Callable[[float], None] | None = None,
+        rehearse: Callable[[], None] | None = None,
+        rehearse_lead_s: float = 0.0,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
@@ -109,6 +118,12 @@ class PeriodicScheduler:
         gap = MIN_GAP_FRACTION * period_s if min_gap_s is None else min_gap_s
         self.min_gap_s = min(max(gap, 0.0), period_s)
         self.realtime_priority = realtime_priority
+        # rehearsal.py: woken rehearse_lead_s before the spin to run ``rehearse``
+        self.rehearse = rehearse
+        self.rehearse_lead_s = 0.0 if rehearse is None else min(max(rehearse_lead_s, 0.0), period_s)
+        self.rehearsal_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)  # how long each took
+        # wake-ups not rehearsed: for an early tick, during a fusion, too late
+        self.rehearsals_skipped = dict.fromkeys(("early tick", "fusion", "woken late"), 0)
         self.stalls = 0  # times the loop fell a whole period behind and re-anchored
         self.early_ticks = 0  # ticks brought forward by request_tick
         self.early = False  # the tick wait() last returned was brought forward
@@ -216,11 +231,24 @@ class PeriodicScheduler:
                 self._block_saw_request = self._requested
                 if self._block_saw_request and earliest < deadline:
                     target = earliest if earliest > now else now
-                if target - now <= self.spin_s:
+                lead = self.spin_s + self.rehearse_lead_s
+                if target - now <= lead:
                     break
-                self._block(target - now - self.spin_s)
+                self._block(target - now - lead)
                 now = clock()
             self._busy = True
+            if self.rehearse is not None:
+                # not an early tick's (it starts at once), nor against a fusion for the GIL,
+                # nor when woken too late for it
+                if self._requested:
+                    self.rehearsals_skipped["early tick"] += 1
+                elif self._inputting:
+                    self.rehearsals_skipped["fusion"] += 1
+                elif deadline - now <= self.spin_s:
+                    self.rehearsals_skipped["woken late"] += 1
+                else:
+                    self.rehearse()
+                    self.rehearsal_s.append(clock() - now)
             while True:
                 now = clock()
                 if self._inputting and not self._requested and now < give_up:
@@ -273,6 +301,10 @@ class PeriodicScheduler:
             self._ticks_done += 1
             self._done.notify_all()
 
+    def slack_s(self) -> float:
+        """Seconds left before the control thread wakes for the next tick (negative: late)."""
+        return self._next_s - self.spin_s - self.rehearse_lead_s - self._clock()
+
     def wait_for_slack(self) -> None:
         """For the other threads, before a piece of work: return at once while the control
         thread sleeps with more than ``SLACK_LEAD_S`` to go before it wakes (``spin_s`` before
@@ -282,11 +314,7 @@ class PeriodicScheduler:
         by its length."""
         if not self._running:
             return
-        if (
-            not self._busy
-            and not self._requested
-            and self._next_s - self.spin_s - self._clock() >= SLACK_LEAD_S
-        ):
+        if not self._busy and not self._requested and self.slack_s() >= SLACK_LEAD_S:
             return
         with self._done:
             n = self._ticks_done

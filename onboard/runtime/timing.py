@@ -8,14 +8,16 @@ from __future__ import annotations
 from collections import deque
 
 
-def _pct(xs, q: float) -> float | None:
+def percentile(xs, q: float) -> float | None:
+    """The ``q`` quantile of ``xs`` (an element of it; None when empty)."""
     if not xs:
         return None
     s = sorted(xs)
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
-def _ms(x: float | None) -> float | None:
+def to_ms(x: float | None) -> float | None:
+    """Seconds to milliseconds (None stays None)."""
     return None if x is None else 1000.0 * x
 
 
@@ -43,6 +45,8 @@ class LoopTiming:
         self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
         self.periods_all: deque[float] = deque(maxlen=keep)
         self.tick_work_s: deque[float] = deque(maxlen=keep)
+        self.early_tick_work_s: deque[float] = deque(maxlen=keep)  # of them, the early ticks'
+        self._early = False  # the tick running was brought forward
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the control thread's CPU time
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
@@ -55,6 +59,7 @@ class LoopTiming:
     def tick_started(self, start_s: float, early: bool = False) -> None:
         """A tick started at ``start_s``; ``early``: brought forward by a detection (its
         interval from the previous tick is short by design: counted apart, not as jitter)."""
+        self._early = early
         if self._last_start is not None:
             per = start_s - self._last_start
             if early:
@@ -77,6 +82,8 @@ class LoopTiming:
         difference is waiting for the GIL, a lock or the CPU); True when it overran its
         period."""
         self.tick_work_s.append(work_s)
+        if self._early:
+            self.early_tick_work_s.append(work_s)
         if cpu_s is not None:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
@@ -112,22 +119,28 @@ class LoopTiming:
         return {
             "ticks": len(per) + 1 if per else 0,
             "rate_hz": (len(per) / sum(per)) if per else None,
-            "period_median_ms": _ms(_pct(per, 0.5)),
-            "jitter_p99_ms": _ms(_pct(jit, 0.99)),
+            "period_median_ms": to_ms(percentile(per, 0.5)),
+            "jitter_p99_ms": to_ms(percentile(jit, 0.99)),
             "jitter_max_ms": None if not jit else 1000 * max(jit),
-            "tick_work_median_ms": _ms(_pct(self.tick_work_s, 0.5)),
-            "tick_work_p99_ms": _ms(_pct(self.tick_work_s, 0.99)),
-            "tick_cpu_median_ms": _ms(_pct(self.tick_cpu_s, 0.5)),
-            "tick_cpu_p99_ms": _ms(_pct(self.tick_cpu_s, 0.99)),
+            "tick_work_median_ms": to_ms(percentile(self.tick_work_s, 0.5)),
+            "tick_work_p99_ms": to_ms(percentile(self.tick_work_s, 0.99)),
+            "early_tick_work_median_ms": to_ms(percentile(self.early_tick_work_s, 0.5)),
+            "early_tick_work_p99_ms": to_ms(percentile(self.early_tick_work_s, 0.99)),
+            "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
+            "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
             "overruns": self.overruns,
             "early_ticks": self.early_ticks,
-            "lock_wait_p99_ms": _ms(_pct(self.lock_waits_s, 0.99)),
-            "lock_wait_max_ms": _ms(max(self.lock_waits_s, default=None)),
-            "early_gap_median_ms": _ms(_pct(self.early_gaps_s, 0.5)),
-            "latency_total_median_ms": _ms(_pct(self.latency_total_s, 0.5)),
-            "latency_beyond_camera_median_ms": _ms(_pct(self.latency_beyond_camera_s, 0.5)),
-            "latency_beyond_camera_p99_ms": _ms(_pct(self.latency_beyond_camera_s, 0.99)),
-            "latency_after_detection_median_ms": _ms(_pct(self.latency_after_detection_s, 0.5)),
-            "latency_after_detection_p99_ms": _ms(_pct(self.latency_after_detection_s, 0.99)),
+            "lock_wait_p99_ms": to_ms(percentile(self.lock_waits_s, 0.99)),
+            "lock_wait_max_ms": to_ms(max(self.lock_waits_s, default=None)),
+            "early_gap_median_ms": to_ms(percentile(self.early_gaps_s, 0.5)),
+            "latency_total_median_ms": to_ms(percentile(self.latency_total_s, 0.5)),
+            "latency_beyond_camera_median_ms": to_ms(percentile(self.latency_beyond_camera_s, 0.5)),
+            "latency_beyond_camera_p99_ms": to_ms(percentile(self.latency_beyond_camera_s, 0.99)),
+            "latency_after_detection_median_ms": to_ms(
+                percentile(self.latency_after_detection_s, 0.5)
+            ),
+            "latency_after_detection_p99_ms": to_ms(
+                percentile(self.latency_after_detection_s, 0.99)
+            ),
             "detections_fused": len(self.latency_total_s),
         }

@@ -1,0 +1,311 @@
+"""The tick rehearsed before its deadline (onboard/runtime/rehearsal.py, #16 item 5): the shadow
+loop shares nothing with the loop (the commands flown with rehearsals are those without, to the
+bit), it is taken afresh when the loop's mode moves away from it or it is old, its failure is
+counted and dropped, the frame it packs is the setpoint PX4 would get; the scheduler rehearses
+before grid ticks only, inside the deadline, and keeps the other threads off it (fake clock:
+no timing asserted)."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from groundstation.scenario import load_scenario
+from groundstation.sim.simulation import Simulation
+from onboard.datatypes import LoopMode
+from onboard.link.px4 import mavlink
+from onboard.loop import InterceptionLoop
+from onboard.runtime.rehearsal import Rehearsal
+from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
+from onboard.runtime.scheduler import PeriodicScheduler
+
+from .sitl_rig import free_port
+from .test_runtime_early_tick import FakeClock, P, configs_of_onboard_run
+
+
+def _fly(monkeypatch, scenario: str, rehearse: bool, seed: int = 3):
+    """One simulated sortie; with ``rehearse`` every tick of its loop is preceded by a
+    rehearsal on the shadow at the same state and followed by the runtime's refresh policy.
+    Returns (commands as bytes, result, rehearsal)."""
+    sim = Simulation(load_scenario(scenario), "png", seed, keep_records=False)
+    real = sim.loop
+    rh = Rehearsal(max_age_ticks=40)
+    commands: list[bytes] = []
+    plain_tick = InterceptionLoop.tick
+
+    def tick(self, state, brake=False, hold_s=None):
+        if self is not real:  # the shadow's own tick
+            return plain_tick(self, state, brake, hold_s)
+        if rehearse:
+            rh.run(state, hold_s)
+        tel = plain_tick(self, state, brake, hold_s)
+        cmd = tel.command
+        commands.append(
+            cmd.body_rates_flu_rad_s.tobytes() + np.float64(cmd.thrust_normalised).tobytes()
+        )
+        if rehearse and rh.needs_refresh(self):
+            rh.refresh(self)
+        return tel
+
+    monkeypatch.setattr(InterceptionLoop, "tick", tick)
+    result = sim.run()
+    monkeypatch.setattr(InterceptionLoop, "tick", plain_tick)
+    return commands, result, rh
+
+
+@pytest.mark.parametrize("scenario", ["cv-top-to-bottom", "indoor-tethered-wind-4"])
+def test_rehearsals_leave_every_command_flown_unchanged_to_the_bit(monkeypatch, scenario):
+    without, res0, _ = _fly(monkeypatch, scenario, rehearse=False)
+    with_, res1, rh = _fly(monkeypatch, scenario, rehearse=True)
+    print(f"{scenario}: {len(with_)} ticks, {rh.runs} rehearsals, {rh.refreshes} copies")
+    assert rh.errors == 0
+    assert rh.runs >= len(with_) - 1  # every tick but the first (no shadow yet)
+    assert rh.refreshes >= 3  # the mode moved (search, tracking, ...) and age
+    assert with_ == without
+    assert res1 == res0  # the sortie's result (outcome, miss, time) likewise
+
+
+def test_the_shadow_is_taken_afresh_when_the_mode_moves_or_it_is_old():
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    loop = sim.loop
+    rh = Rehearsal(max_age_ticks=3)
+    assert rh.needs_refresh(loop)  # none yet
+    rh.refresh(loop)
+    assert rh.shadow is not loop and rh.shadow.dkf is not loop.dkf
+    assert [rh.needs_refresh(loop) for _ in range(4)] == [False, False, False, True]
+    rh.refresh(loop)
+    loop.mode = LoopMode.TRACKING if loop.mode is not LoopMode.TRACKING else LoopMode.COAST
+    assert rh.needs_refresh(loop)
+    assert rh.refreshes == 2
+
+
+def test_a_replaced_shadow_is_freed_without_the_collector():
+    """The runtime runs with automatic collection off (scheduler.py): a shadow in a reference
+    cycle would pile up, one per copy (about one a second), until the next full collection."""
+    import gc
+    import weakref
+
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    rh = Rehearsal()
+    rh.refresh(sim.loop)
+    rh.run(_state(sim), 0.005)
+    old = weakref.ref(rh.shadow)
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        rh.refresh(sim.loop)
+        assert old() is None
+    finally:
+        if was:
+            gc.enable()
+
+
+def _state(sim: Simulation):
+    return sim.vehicle.state(0.01)
+
+
+def test_a_failing_rehearsal_is_counted_and_its_shadow_dropped():
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    rh = Rehearsal()
+    assert rh.run(_state(sim), None) is None and rh.runs == 0  # no shadow: nothing to run
+    rh.refresh(sim.loop)
+
+    def broken(*_a, **_k):
+        raise FloatingPointError("a bad copy")
+
+    rh.shadow.tick = broken
+    assert rh.run(_state(sim), 0.005) is None
+    assert rh.errors == 1 and rh.shadow is None and rh.needs_refresh(sim.loop)
+
+
+def test_the_rehearsed_frame_is_the_setpoint_px4_would_get():
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    rh = Rehearsal()
+    rh.refresh(sim.loop)
+    state = _state(sim)
+    frame = rh.run(state, 0.005)
+    assert frame is not None
+    # the shadow's own command, ticked again on a fresh copy: what the frame must carry
+    twin = Rehearsal()
+    twin.refresh(sim.loop)
+    cmd = twin.shadow.tick(state, False, 0.005).command
+    msg = mavlink.MAVLink(None).decode(bytearray(frame))
+    assert msg.get_type() == "SET_ATTITUDE_TARGET"
+    x, y, z = cmd.body_rates_flu_rad_s.tolist()
+    assert (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate) == pytest.approx(
+        (x, -y, -z), rel=1e-6, abs=1e-7
+    )  # FLU -> FRD, float32 on the wire
+    assert msg.thrust == pytest.approx(cmd.thrust_normalised, rel=1e-6)
+    assert msg.type_mask == mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+
+
+def test_a_refused_command_packs_no_frame():
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    rh = Rehearsal()
+    rh.refresh(sim.loop)
+    good = rh.shadow.tick
+
+    def wild(*a, **k):
+        tel = good(*a, **k)
+        tel.command.body_rates_flu_rad_s[0] = math.nan
+        return tel
+
+    rh.shadow.tick = wild
+    assert rh.run(_state(sim), 0.005) is None and rh.errors == 0
+
+
+# ---------------------------------------------------------------------- the scheduler
+LEAD = 0.0003
+
+
+def _grid(clock: FakeClock, n: int, rehearse_work_s: float = 0.0001, requests=()):
+    """n ticks on the fake clock with a rehearsal that works ``rehearse_work_s``; returns the
+    tick starts, the rehearsals' (start, deadline) and the scheduler."""
+    rehearsed: list[float] = []
+
+    def rehearse() -> None:
+        rehearsed.append(clock.t)
+        clock.work(rehearse_work_s)
+
+    sched = PeriodicScheduler(
+        P, clock=clock.now, block=clock.block, rehearse=rehearse, rehearse_lead_s=LEAD
+    )
+    for t in requests:
+        clock.at(t, sched.request_tick)
+    starts = []
+    sched.start()
+    try:
+        for _ in range(n):
+            starts.append((sched.wait(), sched.early))
+            sched.served()
+            clock.work(0.0001)
+            sched.after_tick()
+    finally:
+        sched.stop()
+    return starts, rehearsed, sched
+
+
+def test_grid_ticks_are_rehearsed_inside_the_lead_and_still_start_on_time():
+    clock = FakeClock()
+    starts, rehearsed, sched = _grid(clock, 6)
+    first = starts[0][0]
+    # the first tick is due at once (no time to rehearse); each later one is rehearsed
+    # within lead + spin before its deadline, and the tick starts at the deadline
+    assert len(rehearsed) == 5
+    assert sched.rehearsals_skipped == {"early tick": 0, "fusion": 0, "woken late": 1}
+    for k, r in enumerate(rehearsed, start=1):
+        deadline = first + k * P
+        assert deadline - sched.spin_s - LEAD - 1e-5 <= r < deadline - sched.spin_s
+        assert starts[k][0] == pytest.approx(deadline, abs=1e-5)
+    assert len(sched.rehearsal_s) == 5
+    assert all(s == pytest.approx(0.0001, abs=1e-5) for s in sched.rehearsal_s)
+
+
+def test_an_early_tick_is_not_rehearsed():
+    clock = FakeClock()
+    starts, rehearsed, sched = _grid(clock, 5, requests=(100.0122,))
+    assert [e for _, e in starts] == [False, False, False, True, False]
+    early_start = starts[3][0]
+    assert early_start == pytest.approx(100.0122, abs=1e-5)  # at once, no rehearsal first
+    assert not any(early_start - 0.001 < r <= early_start for r in rehearsed)
+    assert len(rehearsed) == 3  # the grid ticks after the first (the early one is not)
+    assert sched.rehearsals_skipped == {"early tick": 1, "fusion": 0, "woken late": 1}
+
+
+def test_a_rehearsal_that_runs_past_the_deadline_makes_the_tick_late_and_shows_it():
+    clock = FakeClock()
+    starts, _, sched = _grid(clock, 3, rehearse_work_s=0.001)
+    first = starts[0][0]
+    late = starts[1][0] - (first + P)
+    assert late == pytest.approx(0.001 - sched.spin_s - LEAD, abs=2e-5)  # seen as jitter
+
+
+def test_other_threads_are_kept_off_the_rehearsal_window():
+    clock = FakeClock()
+    sched = PeriodicScheduler(
+        P, clock=clock.now, block=clock.block, rehearse=lambda: None, rehearse_lead_s=LEAD
+    )
+    sched.start()
+    try:
+        sched.wait()
+        sched.after_tick()
+        # the slack ends lead + spin before the next deadline, not spin before it
+        nxt = sched._next_s
+        assert sched.slack_s() == pytest.approx(nxt - sched.spin_s - LEAD - clock.t, abs=2e-6)
+    finally:
+        sched.stop()
+    plain = PeriodicScheduler(P, clock=clock.now, block=clock.block, rehearse_lead_s=LEAD)
+    assert plain.rehearse_lead_s == 0.0  # no rehearsal, no earlier wake-up
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, True), ("on", True), ("off", False)])
+def test_onboard_run_rehearse_flag_reaches_the_runtime(monkeypatch, flag, expected):
+    seen = configs_of_onboard_run(monkeypatch, [] if flag is None else ["--rehearse", flag])
+    assert [c.rehearse for c in seen] == [expected]
+
+
+# ---------------------------------------------------------------------- the runtime
+def _runtime(tmp_path, rehearse: bool = True):
+    cfg = RuntimeConfig(
+        fc_url=f"udpout:127.0.0.1:{free_port()}",
+        camera="sitl://127.0.0.1:9",  # never opened: run() is not called
+        params_path=tmp_path / "params.toml",
+        rehearse=rehearse,
+    )
+    rt = OnboardRuntime(cfg, log=lambda _s: None)
+    rt._build_loop(640, 480)
+    f = rt.fcs
+    f.pos_enu_m, f.vel_enu_m_s = np.array([0.0, 0.0, 10.0]), np.array([0.5, 3.0, 0.2])
+    f.q_wxyz, f.q_time_s = np.array([1.0, 0.0, 0.0, 0.0]), rt.clock.now()
+    return rt
+
+
+def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked(tmp_path):
+    rt = _runtime(tmp_path)
+    try:
+        rh, sched = rt.rehearsal, rt.scheduler
+        assert sched.rehearse == rt._rehearse and sched.rehearse_lead_s > 0.0
+        sched._next_s = time.perf_counter()  # the next wake-up is due: no copy now
+        rt._refresh_shadow()
+        assert rh.shadow is None and rh.refreshes == 0
+        sched._next_s = time.perf_counter() + 1.0
+        rt._refresh_shadow()
+        assert rh.shadow is not None and rh.shadow is not rt.loop and rh.refreshes == 1
+        rt._rehearse()
+        assert rh.runs == 1 and rh.errors == 0
+        held = threading.Event()
+        release = threading.Event()
+
+        def hold_the_lock() -> None:
+            with rt._loop_lock:  # a fusion on the camera thread
+                held.set()
+                release.wait(5.0)
+
+        t = threading.Thread(target=hold_the_lock)
+        t.start()
+        held.wait(5.0)
+        rt._rehearse()  # skipped, not waited for
+        release.set()
+        t.join(5.0)
+        assert rh.runs == 1
+        stats = rt.stats()
+        assert stats["rehearse"] is True and stats["rehearsals"] == 1
+        assert stats["shadow_refreshes"] == 1 and stats["rehearsal_errors"] == 0
+    finally:
+        rt.fc.close()
+
+
+def test_without_rehearsal_the_scheduler_wakes_at_the_spin(tmp_path):
+    rt = _runtime(tmp_path, rehearse=False)
+    try:
+        assert rt.rehearsal is None and rt.scheduler.rehearse is None
+        assert rt.scheduler.rehearse_lead_s == 0.0
+        rt.scheduler._next_s = 1e9
+        rt._refresh_shadow()  # nothing to do
+        assert rt.stats()["rehearse"] is False and rt.stats()["rehearsals"] is None
+    finally:
+        rt.fc.close()
