@@ -11,6 +11,18 @@ from pathlib import Path
 from .gains import GAIN_SPECS, GainError, Gains, load_gains_file
 from .link.address import add_host_port_option
 
+# RuntimeConfig's on/off switches, each an ``onboard run --<field> on|off`` option
+_RUNTIME_SWITCHES = {
+    "early_tick": "tick as soon as the camera thread has fused a detection, not at the next "
+    "deadline (default %(default)s)",
+    "reserve_cpu": "leave one CPU to the control thread: the runtime's other threads "
+    "(receivers, sender, camera, video) kept off it, so their wake-ups do not preempt a tick "
+    "(default %(default)s; nothing to do on one CPU or under --realtime)",
+    "rehearse": "wake a little earlier and tick a copy of the loop (its result dropped) just "
+    "before each deadline, so the tick finds its code and data in the caches (default "
+    "%(default)s)",
+}
+
 
 def _positive(unit: str, maximum: float = float("inf")):
     """An argparse type: a finite number > 0 (and <= maximum); otherwise exit 2 naming it."""
@@ -76,9 +88,7 @@ def _run(args) -> int:
             realtime_priority=args.realtime,
             video=video,
             foxglove=args.foxglove,
-            early_tick=args.early_tick == "on",
-            reserve_cpu=args.reserve_cpu == "on",
-            rehearse=args.rehearse == "on",
+            **{field: getattr(args, field) == "on" for field in _RUNTIME_SWITCHES},
         )
         if args.realtime is not None and not 1 <= args.realtime <= 99:
             raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
@@ -155,29 +165,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="run the control and camera threads under SCHED_FIFO at this priority (1-99; "
         "needs CAP_SYS_NICE, else a warning and normal scheduling)",
     )
-    r.add_argument(
-        "--early-tick",
-        choices=("on", "off"),
-        default="on" if RuntimeConfig.early_tick else "off",
-        help="tick as soon as the camera thread has fused a detection, not at the next "
-        "deadline (default %(default)s)",
-    )
-    r.add_argument(
-        "--reserve-cpu",
-        choices=("on", "off"),
-        default="on" if RuntimeConfig.reserve_cpu else "off",
-        help="leave one CPU to the control thread: the runtime's other threads (receivers, "
-        "sender, camera, video) kept off it, so their wake-ups do not preempt a tick (default "
-        "%(default)s; nothing to do on one CPU or under --realtime)",
-    )
-    r.add_argument(
-        "--rehearse",
-        choices=("on", "off"),
-        default="on" if RuntimeConfig.rehearse else "off",
-        help="wake a little earlier and tick a copy of the loop (its result dropped) just "
-        "before each deadline, so the tick finds its code and data in the caches (default "
-        "%(default)s)",
-    )
+    for field, help_text in _RUNTIME_SWITCHES.items():  # --early-tick on|off ...
+        r.add_argument(
+            "--" + field.replace("_", "-"),
+            choices=("on", "off"),
+            default="on" if getattr(RuntimeConfig, field) else "off",
+            help=help_text,
+        )
     r.add_argument(
         "--log",
         metavar="DIR",
