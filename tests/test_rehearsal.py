@@ -22,6 +22,7 @@ from onboard.loop import InterceptionLoop
 from onboard.runtime.rehearsal import Rehearsal
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 from onboard.runtime.scheduler import PeriodicScheduler
+from onboard.runtime.timing import LoopTiming
 
 from .sitl_rig import free_port
 from .test_runtime_early_tick import FakeClock, P, configs_of_onboard_run
@@ -167,9 +168,10 @@ def _grid(clock: FakeClock, n: int, rehearse_work_s: float = 0.0001, requests=()
     tick starts, the rehearsals' (start, deadline) and the scheduler."""
     rehearsed: list[float] = []
 
-    def rehearse() -> None:
+    def rehearse() -> bool:
         rehearsed.append(clock.t)
         clock.work(rehearse_work_s)
+        return True
 
     sched = PeriodicScheduler(
         P, clock=clock.now, block=clock.block, rehearse=rehearse, rehearse_lead_s=LEAD
@@ -196,7 +198,12 @@ def test_grid_ticks_are_rehearsed_inside_the_lead_and_still_start_on_time():
     # the first tick is due at once (no time to rehearse); each later one is rehearsed
     # within lead + spin before its deadline, and the tick starts at the deadline
     assert len(rehearsed) == 5
-    assert sched.rehearsals_skipped == {"early tick": 0, "fusion": 0, "woken late": 1}
+    assert sched.rehearsals_skipped == {
+        "early tick": 0,
+        "fusion": 0,
+        "woken late": 1,
+        "declined": 0,
+    }
     for k, r in enumerate(rehearsed, start=1):
         deadline = first + k * P
         assert deadline - sched.spin_s - LEAD - 1e-5 <= r < deadline - sched.spin_s
@@ -213,7 +220,62 @@ def test_an_early_tick_is_not_rehearsed():
     assert early_start == pytest.approx(100.0122, abs=1e-5)  # at once, no rehearsal first
     assert not any(early_start - 0.001 < r <= early_start for r in rehearsed)
     assert len(rehearsed) == 3  # the grid ticks after the first (the early one is not)
-    assert sched.rehearsals_skipped == {"early tick": 1, "fusion": 0, "woken late": 1}
+    assert sched.rehearsals_skipped == {
+        "early tick": 1,
+        "fusion": 0,
+        "woken late": 1,
+        "declined": 0,
+    }
+
+
+def test_each_tick_says_how_its_wake_up_went_and_its_work_is_kept_apart_by_it():
+    clock = FakeClock()
+    kinds = []
+    ran = iter([True, False, True, True, True])  # the second rehearsal declines (no shadow yet)
+
+    def rehearse() -> bool:
+        clock.work(0.0001)
+        return next(ran)
+
+    sched = PeriodicScheduler(
+        P, clock=clock.now, block=clock.block, rehearse=rehearse, rehearse_lead_s=LEAD
+    )
+    clock.at(100.0222, sched.request_tick)
+    timing = LoopTiming(P, keep=100)
+    sched.start()
+    try:
+        for _ in range(7):
+            start = sched.wait()
+            timing.tick_started(start, sched.early, sched.woken_as)
+            kinds.append(sched.woken_as)
+            sched.served()
+            clock.work(0.0009 if sched.early else 0.0001)
+            timing.tick_done(clock.t - start)
+            sched.after_tick()
+    finally:
+        sched.stop()
+    assert kinds == [
+        "woken late", "rehearsed", "declined", "rehearsed", "rehearsed", "early tick", "rehearsed"
+    ]  # fmt: skip
+    assert sched.rehearsals_skipped == {
+        "early tick": 1,
+        "fusion": 0,
+        "woken late": 1,
+        "declined": 1,
+    }
+    by = timing.work_by_kind()
+    assert {k: v["ticks"] for k, v in by.items()} == {
+        "woken late": 1,
+        "rehearsed": 4,
+        "declined": 1,
+        "early tick": 1,
+    }
+    # the slowest 1 % (here the slowest tick) is the early one
+    assert by["early tick"]["in_slowest_1pc"] == 1
+    assert sum(v["in_slowest_1pc"] for v in by.values()) == 1
+    assert by["early tick"]["median_ms"] == pytest.approx(0.9, abs=0.01)
+    assert by["rehearsed"]["p99_ms"] == pytest.approx(0.1, abs=0.01)
+    assert timing.figures()["tick_work_by_kind"] == by
 
 
 def test_a_rehearsal_that_runs_past_the_deadline_makes_the_tick_late_and_shows_it():

@@ -251,6 +251,7 @@ def _fly(
         "tick_work_p99_ms": stats.get("tick_work_p99_ms"),
         "early_tick_work_median_ms": stats.get("early_tick_work_median_ms"),
         "early_tick_work_p99_ms": stats.get("early_tick_work_p99_ms"),
+        "tick_work_by_kind": stats.get("tick_work_by_kind"),
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
         "overruns": stats.get("overruns"),
@@ -349,6 +350,17 @@ def _print_figures(figures: dict) -> None:
             f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
             + ", ".join(f"{n} {why}" for why, n in skipped.items())
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
+        )
+    by_kind = figures.get("tick_work_by_kind")
+    if by_kind:
+        slowest = sorted(by_kind.items(), key=lambda kv: -kv[1]["in_slowest_1pc"])
+        print(
+            "    by how the tick was woken (ticks, median / p99 ms, of the slowest 1 %): "
+            + "; ".join(
+                f"{kind} {v['ticks']}, {f(v['median_ms'])} / {f(v['p99_ms'])}, "
+                f"{v['in_slowest_1pc']}"
+                for kind, v in slowest
+            )
         )
     print(
         f"  overruns {figures['overruns']}, stalls re-anchored {figures['scheduler_stalls']}"

@@ -464,20 +464,21 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.sender.submit(self._flush_events)
         self._tick_n += 1
 
-    def _rehearse(self) -> None:
+    def _rehearse(self) -> bool:
         """On the control thread, just before a deadline (rehearsal.py): the shadow loop ticks
-        the vehicle's state as of now. Skipped while the loop's lock is taken (a fusion is
-        running: an early tick is coming) or before the state is known."""
-        f = self.fcs
-        if not self._loop_lock.acquire(blocking=False):
-            return
+        the vehicle's state as of now. Skipped (False) while the loop's lock is taken (a fusion
+        is running: an early tick is coming), before the state is known or without a shadow."""
+        f, rh = self.fcs, self.rehearsal
+        if rh.shadow is None or not self._loop_lock.acquire(blocking=False):
+            return False
         try:
             if f.pos_enu_m is None or f.q_wxyz is None:
-                return
+                return False
             state = state_at(f, self.clock.now())
         finally:
             self._loop_lock.release()
-        self.rehearsal.run(state, self._hold_s)
+        rh.run(state, self._hold_s)
+        return True
 
     def _refresh_shadow(self) -> None:
         """After a tick, in the slack: a new shadow when the loop's mode moved away from it or
@@ -545,7 +546,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             while not self._stop.is_set():
                 start = sched.wait()
                 cpu0 = time.thread_time()
-                self.timing.tick_started(start, sched.early)
+                self.timing.tick_started(start, sched.early, sched.woken_as)
                 with self._loop_lock:  # the camera thread fuses into the same loop
                     self.timing.lock_waited(time.perf_counter() - start)
                     sched.served()  # a detection fused before this point is in this tick

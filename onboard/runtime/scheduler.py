@@ -52,6 +52,15 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 
+from .timing import EARLY_TICK, ON_THE_GRID
+
+# how a tick's wake-up went (PeriodicScheduler.woken_as), besides early and on the grid
+REHEARSED = "rehearsed"  # the rehearsal ran before it
+FUSION = "fusion"  # not rehearsed: a fusion was running at the wake-up
+WOKEN_LATE = "woken late"  # not rehearsed: woken too close to the deadline
+DECLINED = "declined"  # not rehearsed: ``rehearse`` returned False (nothing to rehearse on)
+STALL = "stall"  # the loop fell a period behind and started afresh
+
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
 GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
 GC_OLDER_EVERY_S = 10.0  # and generation 1 this often
@@ -108,7 +117,7 @@ class PeriodicScheduler:
         min_gap_s: float | None = None,
         clock: Callable[[], float] = time.perf_counter,
         block: Callable[[float], None] | None = None,
-        rehearse: Callable[[], None] | None = None,
+        rehearse: Callable[[], bool] | None = None,
         rehearse_lead_s: float = 0.0,
     ) -> None:
         if not period_s > 0.0:
@@ -123,10 +132,11 @@ class PeriodicScheduler:
         self.rehearse_lead_s = 0.0 if rehearse is None else min(max(rehearse_lead_s, 0.0), period_s)
         self.rehearsal_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)  # how long each took
         # wake-ups not rehearsed: for an early tick, during a fusion, too late
-        self.rehearsals_skipped = dict.fromkeys(("early tick", "fusion", "woken late"), 0)
+        self.rehearsals_skipped = dict.fromkeys((EARLY_TICK, FUSION, WOKEN_LATE, DECLINED), 0)
         self.stalls = 0  # times the loop fell a whole period behind and re-anchored
         self.early_ticks = 0  # ticks brought forward by request_tick
         self.early = False  # the tick wait() last returned was brought forward
+        self.woken_as = ON_THE_GRID  # how its wake-up went: REHEARSED, EARLY_TICK, ...
         self.gc_runs = 0
         self._clock = clock
         self._block = block or self._block_until_request
@@ -218,10 +228,12 @@ class PeriodicScheduler:
         deadline = self._next_s
         now = clock()
         early = False
+        woken_as = ON_THE_GRID
         if now > deadline + period:
             self.stalls += 1
             self._busy = True
             start = now
+            woken_as = STALL
         else:
             earliest = self._last_start_s + self.min_gap_s  # of an early tick
             give_up = deadline + MAX_INPUT_WAIT_FRACTION * period
@@ -241,14 +253,18 @@ class PeriodicScheduler:
                 # not an early tick's (it starts at once), nor against a fusion for the GIL,
                 # nor when woken too late for it
                 if self._requested:
-                    self.rehearsals_skipped["early tick"] += 1
+                    woken_as = EARLY_TICK
                 elif self._inputting:
-                    self.rehearsals_skipped["fusion"] += 1
+                    woken_as = FUSION
                 elif deadline - now <= self.spin_s:
-                    self.rehearsals_skipped["woken late"] += 1
-                else:
-                    self.rehearse()
+                    woken_as = WOKEN_LATE
+                elif self.rehearse():
+                    woken_as = REHEARSED
                     self.rehearsal_s.append(clock() - now)
+                else:
+                    woken_as = DECLINED
+                if woken_as in self.rehearsals_skipped:
+                    self.rehearsals_skipped[woken_as] += 1
             while True:
                 now = clock()
                 if self._inputting and not self._requested and now < give_up:
@@ -276,6 +292,8 @@ class PeriodicScheduler:
         self.early = early
         if early:
             self.early_ticks += 1
+            woken_as = EARLY_TICK
+        self.woken_as = woken_as
         self._next_s = start + period
         self._last_start_s = start
         return clock()

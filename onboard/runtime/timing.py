@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from collections import deque
 
+EARLY_TICK = "early tick"  # brought forward by a fused detection (scheduler.py "Early ticks")
+ON_THE_GRID = "on the grid"  # at its deadline, not rehearsed
+
 
 def percentile(xs, q: float) -> float | None:
     """The ``q`` quantile of ``xs`` (an element of it; None when empty)."""
@@ -45,8 +48,10 @@ class LoopTiming:
         self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
         self.periods_all: deque[float] = deque(maxlen=keep)
         self.tick_work_s: deque[float] = deque(maxlen=keep)
-        self.early_tick_work_s: deque[float] = deque(maxlen=keep)  # of them, the early ticks'
+        # how each tick's wake-up went (scheduler.WAKE_KINDS: early, rehearsed, ...), in step
+        self.tick_kinds: deque[str] = deque(maxlen=keep)
         self._early = False  # the tick running was brought forward
+        self._kind = ON_THE_GRID
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the control thread's CPU time
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
@@ -56,10 +61,13 @@ class LoopTiming:
         self.lock_waits_s: deque[float] = deque(maxlen=keep)  # tick start -> the loop's lock
         self.early_gaps_s: deque[float] = deque(maxlen=keep)  # previous tick -> early tick
 
-    def tick_started(self, start_s: float, early: bool = False) -> None:
+    def tick_started(self, start_s: float, early: bool = False, kind: str | None = None) -> None:
         """A tick started at ``start_s``; ``early``: brought forward by a detection (its
-        interval from the previous tick is short by design: counted apart, not as jitter)."""
+        interval from the previous tick is short by design: counted apart, not as jitter);
+        ``kind``: how its wake-up went (the scheduler's ``woken_as``; by default early or on
+        the grid), its work figures kept apart by it."""
         self._early = early
+        self._kind = kind if kind is not None else (EARLY_TICK if early else ON_THE_GRID)
         if self._last_start is not None:
             per = start_s - self._last_start
             if early:
@@ -82,8 +90,7 @@ class LoopTiming:
         difference is waiting for the GIL, a lock or the CPU); True when it overran its
         period."""
         self.tick_work_s.append(work_s)
-        if self._early:
-            self.early_tick_work_s.append(work_s)
+        self.tick_kinds.append(self._kind)
         if cpu_s is not None:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
@@ -113,9 +120,30 @@ class LoopTiming:
     def jitter_p99_ms(self) -> float:
         return jitter_p99_ms(self._recent, self.period_s)
 
+    def work_by_kind(self) -> dict[str, dict]:
+        """The ticks' work by how their wake-up went: for each kind its ticks, median and p99
+        (ms) and how many of the run's slowest 1 % (at or above the whole run's p99) it has:
+        what the tail is made of."""
+        works = list(self.tick_work_s)
+        tail_from = percentile(works, 0.99)
+        by: dict[str, list[float]] = {}
+        for kind, work in zip(self.tick_kinds, works, strict=False):
+            by.setdefault(kind, []).append(work)
+        return {
+            kind: {
+                "ticks": len(ws),
+                "median_ms": to_ms(percentile(ws, 0.5)),
+                "p99_ms": to_ms(percentile(ws, 0.99)),
+                "in_slowest_1pc": sum(w >= tail_from for w in ws),
+            }
+            for kind, ws in by.items()
+        }
+
     def figures(self) -> dict:
         per = self.periods_all
         jit = [abs(p - self.period_s) for p in per]
+        by_kind = self.work_by_kind()
+        early = by_kind.get(EARLY_TICK, {})
         return {
             "ticks": len(per) + 1 if per else 0,
             "rate_hz": (len(per) / sum(per)) if per else None,
@@ -124,8 +152,9 @@ class LoopTiming:
             "jitter_max_ms": None if not jit else 1000 * max(jit),
             "tick_work_median_ms": to_ms(percentile(self.tick_work_s, 0.5)),
             "tick_work_p99_ms": to_ms(percentile(self.tick_work_s, 0.99)),
-            "early_tick_work_median_ms": to_ms(percentile(self.early_tick_work_s, 0.5)),
-            "early_tick_work_p99_ms": to_ms(percentile(self.early_tick_work_s, 0.99)),
+            "early_tick_work_median_ms": early.get("median_ms"),
+            "early_tick_work_p99_ms": early.get("p99_ms"),
+            "tick_work_by_kind": by_kind,
             "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
             "overruns": self.overruns,
