@@ -56,17 +56,17 @@ def _source_file(fn: Callable[..., Any]) -> str:
 
 
 def _forget_if_stale(fn: Callable[..., Any], uses: Sequence[Callable[..., Any]]) -> None:
-    """Drop ``fn``'s cached machine code when a kernel it calls from another file changed
-    after it was cached: numba checks only the caller's own source (its documented limit), so
-    an edited callee would otherwise keep flying in its old form inside the caller."""
-    if not uses:
-        return
+    """Drop ``fn``'s cached machine code when a kernel it calls from another file, or this
+    file (the compile options: see :func:`_compile`), changed after it was cached: numba checks
+    only the caller's own source (its documented limit), so an edited callee would otherwise
+    keep flying in its old form inside the caller, and code compiled under other options would
+    be loaded as it was."""
     from numba.core.caching import FunctionCache
 
     try:
         index = FunctionCache(fn)._cache_file._index_path
         cached = os.stat(index).st_mtime
-        newest = max(os.stat(_source_file(u)).st_mtime for u in uses)
+        newest = max(os.stat(f).st_mtime for f in {__file__, *map(_source_file, uses)})
     except (OSError, RuntimeError, AttributeError):  # nothing cached, or no cache at all
         return
     if newest > cached:
@@ -80,7 +80,11 @@ def _compile(
 
     if cache:
         _forget_if_stale(fn, uses)
-    options = {"cache": cache, "nogil": True}
+    # nogil off: a kernel call keeps the GIL. Releasing it for a call of a few microseconds
+    # buys no parallelism, and on the vehicle each release was a point where a thread waiting
+    # for the GIL (a receiver woken by a datagram, the camera thread) took it and the control
+    # thread, its kernel done, waited for that thread for up to its switch interval
+    options = {"cache": cache, "nogil": False}
     if signature is None:
         return numba.njit(**options)(fn)
     compiled = numba.njit(signature, **options)(fn)
@@ -93,7 +97,7 @@ def _compile(
 def kernel(
     signature: str | None = None, uses: Sequence[Callable[..., Any]] = ()
 ) -> Callable[[F], F]:
-    """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
+    """Compile the decorated function with numba (``nopython``, cached, keeps the GIL)
     for ``signature`` (eagerly, at import) or lazily on first call without one; with
     ``PEREGRINE_JIT=0`` return it unchanged. ``uses``: the kernels of other files it calls
     (its cache is dropped when one of them changes; callees in its own file need not be

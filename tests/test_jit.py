@@ -165,3 +165,90 @@ def test_a_kernel_calling_one_of_another_file_recompiles_when_that_one_changes(t
     assert result() == "4.0"  # from the cache
     write_callee(3.0, 2_000_000_000.0)  # edited after the caller was cached
     assert result() == "5.5"
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_kernels_compiled_under_other_options_are_compiled_again(tmp_path):
+    # the compile options live in onboard/jit.py, which numba's cache does not check: a cache
+    # older than it (made under other options, the GIL released) is dropped, not loaded
+    (tmp_path / "opt_kernels.py").write_text(
+        "from onboard.jit import kernel\n"
+        "@kernel('float64(float64)')\n"
+        "def twice(x):\n    return 2.0 * x\n"
+    )
+    newer_jit = tmp_path / "jit_edited.py"
+    newer_jit.write_text("")
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    script = (
+        "import sys\nfrom onboard import jit\n"
+        "if len(sys.argv) > 1: jit.__file__ = sys.argv[1]\n"
+        "import opt_kernels as k\nprint(k.twice(2.0))\n"
+    )
+
+    def run(*args: str) -> str:
+        proc = subprocess.run(
+            [sys.executable, "-c", script, *args], env=env, capture_output=True, text=True,
+            timeout=300,
+        )  # fmt: skip
+        assert proc.returncode == 0 and proc.stdout.strip() == "4.0", proc.stderr
+        return proc.stderr
+
+    assert "compiling" in run()
+    assert "compiling" not in run()  # cached
+    os.utime(newer_jit, (4_000_000_000.0, 4_000_000_000.0))  # the options edited since
+    assert "compiling" in run(str(newer_jit))
+
+
+def _busy(n):
+    s = 0.0
+    for i in range(n):
+        s += (i % 7) * 0.5
+    return s
+
+
+@pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
+def test_a_kernel_keeps_the_gil_while_it_runs():
+    # on the vehicle a kernel that released the GIL let a waiting thread take it, and the
+    # control thread then waited for that thread (onboard/jit.py _compile): no other Python
+    # thread may run while a kernel does. Shown against the same function compiled to release it
+    import threading
+    import time
+
+    import numba
+
+    kept = jit._compile(_busy, "float64(int64)", cache=False)
+    released = numba.njit("float64(int64)", nogil=True)(_busy)
+    n = 1_000_000
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < 0.02:  # n for a call of some 20 ms at least
+        t0 = time.perf_counter()
+        kept(n)
+        n *= 2
+    counter = [0]
+    stop = threading.Event()
+
+    def other_thread() -> None:
+        while not stop.is_set():
+            counter[0] += 1
+            time.sleep(0)  # lets the GIL go each round
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1.0)  # the main thread keeps the GIL unless it releases it
+    th = threading.Thread(target=other_thread, daemon=True)
+    th.start()
+    try:
+        while counter[0] < 10:
+            time.sleep(0.001)
+        ran_during = {}
+        for name, fn in (("kept", kept), ("released", released)):
+            before = counter[0]
+            fn(n)
+            ran_during[name] = counter[0] - before
+            time.sleep(0.005)
+    finally:
+        stop.set()
+        sys.setswitchinterval(interval)
+        th.join(5.0)
+    assert ran_during["released"] > 0  # the harness sees a kernel that lets the GIL go
+    assert ran_during["kept"] == 0

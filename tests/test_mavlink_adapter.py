@@ -5,6 +5,7 @@ import os
 import socket
 import struct
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -173,7 +174,9 @@ def test_frame_encoder_puts_pymavlink_s_bytes_on_the_wire():
     ref = mavlink.MAVLink(_Capture(), 1, 191)
     link = MavLink(f"udpout:127.0.0.1:{free_port()}", 1, 191)
     try:
-        link.mav.file = _Capture()
+        link.mav.file = _Capture()  # pymavlink's write (another kind of link)
+        # and the GIL-held datagram's (a UDP link's: datagram.py), into the same list
+        link._datagrams = SimpleNamespace(send=lambda frame, _to: link.mav.file.write(frame) or 1)
         specials = [0.0, -0.0, math.nan, math.inf, 1e-40, 20.0]
         for k in range(600):
             t_ms = int(rng.choice([0, 1, 0xFFFFFFFF, int(rng.integers(0, 2**32))]))

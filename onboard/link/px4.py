@@ -36,6 +36,7 @@ from ..constants import (  # declared there, imported from here too
     PX4_SUB_AUTO_LOITER,
 )
 from ..geometry import quat_to_rotmat, rotmat_to_quat
+from .datagram import DatagramSender, sender_for
 
 mavutil.set_dialect("common")
 mavlink = mavutil.mavlink
@@ -164,9 +165,11 @@ class MavLink:
         except Exception as exc:  # pymavlink raises what the OS raised, or ValueError
             raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from None
         self.conn.first_byte = False  # never let a stray 0xFE switch us to MAVLink 1
+        self._datagrams: DatagramSender | None = None  # send_fields's sends, the GIL held
         if isinstance(self.conn, mavutil.mavudp):  # the kernel stamps each datagram's arrival
             with contextlib.suppress(AttributeError, OSError):
                 self.conn.port.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            self._datagrams = sender_for(self.conn.port)
         self.conn.mav.robust_parsing = True
         if signing_key is not None:
             allowed = None if unsigned_ok is None else frozenset(unsigned_ok)
@@ -338,8 +341,10 @@ class MavLink:
         try:
             with self.send_lock:
                 frame = encoder.frame(mav.seq, mav.srcSystem, mav.srcComponent, fields)
-                mav.file.write(frame)
                 mav.seq = (mav.seq + 1) % 256
+                if not self._write_holding_gil(frame):
+                    self.send_errors += 1  # refused by the kernel: lost, as on the way
+                    return False
                 mav.total_packets_sent += 1
                 mav.total_bytes_sent += len(frame)
                 self.sent += 1
@@ -349,6 +354,29 @@ class MavLink:
         except Exception:  # as send(): report, go on
             self.send_errors += 1
             return False
+
+    def _write_holding_gil(self, frame: bytes) -> bool:
+        """Write ``frame`` as pymavlink would, but on a UDP link without giving the GIL away
+        (datagram.py: the control thread's setpoint must not wait for another thread that
+        took it). False when the kernel refused the datagram; other links, or a destination
+        not yet an IPv4 address (pymavlink resolves it on its first write), go through
+        pymavlink."""
+        conn, out = self.conn, self._datagrams
+        dest = None
+        if out is not None:
+            if conn.udp_server:
+                clients = conn.clients
+                if len(clients) == 1:  # else pymavlink's choice among them (timeouts)
+                    dest = next(iter(clients))
+            elif not conn.broadcast:
+                dest = conn.destination_addr
+        if dest is not None:
+            try:
+                return out.send(frame, dest)
+            except ValueError:  # a hostname: resolved by pymavlink's write below
+                pass
+        self.mav.file.write(frame)
+        return True
 
     def send_frame(self, frame: bytes) -> bool:
         """Pass an already-encoded frame on as it is (another link's message forwarded)."""
