@@ -80,11 +80,11 @@ def _compile(
 
     if cache:
         _forget_if_stale(fn, uses)
-    # nogil off: a kernel call keeps the GIL. Releasing it for a call of a few microseconds
-    # buys no parallelism, and on the vehicle each release was a point where a thread waiting
-    # for the GIL (a receiver woken by a datagram, the camera thread) took it and the control
-    # thread, its kernel done, waited for that thread for up to its switch interval
-    options = {"cache": cache, "nogil": False}
+    # nogil: a kernel call lets the GIL go. On the vehicle the control thread then waits
+    # for no other thread's kernel (the camera thread's fusion) when it wakes; keeping the GIL
+    # in kernels instead (so a waiting thread cannot take it at the control thread's own kernel
+    # calls) was measured worse: README "Session 16"
+    options = {"cache": cache, "nogil": True}
     if signature is None:
         return numba.njit(**options)(fn)
     compiled = numba.njit(signature, **options)(fn)
@@ -97,7 +97,7 @@ def _compile(
 def kernel(
     signature: str | None = None, uses: Sequence[Callable[..., Any]] = ()
 ) -> Callable[[F], F]:
-    """Compile the decorated function with numba (``nopython``, cached, keeps the GIL)
+    """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
     for ``signature`` (eagerly, at import) or lazily on first call without one; with
     ``PEREGRINE_JIT=0`` return it unchanged. ``uses``: the kernels of other files it calls
     (its cache is dropped when one of them changes; callees in its own file need not be

@@ -4,8 +4,9 @@ Python's ``socket.sendto`` releases the GIL around the system call. Another thre
 process that wants it then (a link's receiver just woken by a datagram, the camera thread
 after a detection) takes it and runs until it blocks or its switch interval (0.5 ms on the
 onboard runtime) is up, and the control thread, its send done, waits for it: in ``groundstation
-bench --sitl`` on the 2-core machine here about 6 % of the setpoint sends took 0.15-0.8 ms
-of wall time for 0.04 ms of CPU, the largest part of the tick's work tail. libc's ``sendto``
+bench --sitl`` on the 2-core machine here 7-11 % of the setpoint sends took more than 0.15 ms
+of wall time (a median 0.22 ms, up to 0.8 ms) for 0.04 ms of CPU, the largest part of the
+tick's work tail. libc's ``sendto``
 called through :class:`ctypes.PyDLL` keeps the GIL for the call (some 30-40 us on loopback);
 ``MSG_DONTWAIT`` makes sure the call never blocks while it holds it: a full send buffer drops
 the datagram with ``EAGAIN`` and the caller counts it, as it would a datagram lost on the way
