@@ -110,6 +110,8 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
         rehearsal_errors=0,
         early_tick_work_median_ms=0.19,
         early_tick_work_p99_ms=0.91,
+        wake_overshoot_median_ms=0.061,
+        wake_overshoot_p99_ms=0.412,
         tick_work_by_kind={
             "rehearsed": {"ticks": 9773, "median_ms": 0.09, "p99_ms": 0.31, "in_slowest_1pc": 40},
             "early tick": {"ticks": 213, "median_ms": 0.19, "p99_ms": 0.91, "in_slowest_1pc": 70},
@@ -122,5 +124,6 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
     assert "213 early tick, 2 fusion, 2102 woken late" in out
     assert "copies taken 72, errors 0" in out
     assert "early ticks' (ticked as a fusion came in): median 0.19 ms, p99 0.91 ms" in out
+    assert "ended median 0.061 ms, p99 0.412 ms after the time asked" in out
     # what the tail is made of, the kind with most of the slowest 1 % first
     assert "early tick 213, 0.19 / 0.91, 70; rehearsed 9773, 0.09 / 0.31, 40" in out

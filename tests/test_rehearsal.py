@@ -210,6 +210,32 @@ def test_grid_ticks_are_rehearsed_inside_the_lead_and_still_start_on_time():
         assert starts[k][0] == pytest.approx(deadline, abs=1e-5)
     assert len(sched.rehearsal_s) == 5
     assert all(s == pytest.approx(0.0001, abs=1e-5) for s in sched.rehearsal_s)
+    # each sleep ended when asked (the fake clock's reading steps aside)
+    assert len(sched.wake_overshoot_s) == 5
+    assert all(0.0 <= o < 1e-5 for o in sched.wake_overshoot_s)
+
+
+class OversleepingClock(FakeClock):
+    """A fake clock whose sleeps end ``late_s`` after the time asked (a busy host)."""
+
+    def __init__(self, late_s: float) -> None:
+        super().__init__()
+        self.late_s = late_s
+
+    def block(self, timeout_s: float) -> None:
+        super().block(timeout_s + self.late_s)
+
+
+def test_a_wake_up_later_than_the_lead_is_measured_and_not_rehearsed():
+    clock = OversleepingClock(late_s=0.0004)  # beyond the 0.3 ms lead
+    starts, rehearsed, sched = _grid(clock, 4)
+    assert rehearsed == []
+    assert sched.rehearsals_skipped["woken late"] == 4
+    assert len(sched.wake_overshoot_s) == 3  # the first tick did not sleep
+    assert all(o == pytest.approx(0.0004, abs=1e-5) for o in sched.wake_overshoot_s)
+    first = starts[0][0]
+    # 0.4 ms late from a wake-up 0.6 ms early: still on time
+    assert [s for s, _ in starts[1:]] == pytest.approx([first + k * P for k in (1, 2, 3)], abs=1e-5)
 
 
 def test_an_early_tick_is_not_rehearsed():

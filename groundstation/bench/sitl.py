@@ -240,6 +240,8 @@ def _fly(
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
+        "wake_overshoot_median_ms": stats.get("wake_overshoot_median_ms"),
+        "wake_overshoot_p99_ms": stats.get("wake_overshoot_p99_ms"),
         "rehearsal_p99_ms": stats.get("rehearsal_p99_ms"),
         "shadow_refreshes": stats.get("shadow_refreshes"),
         "rehearsal_errors": stats.get("rehearsal_errors"),
@@ -350,6 +352,13 @@ def _print_figures(figures: dict) -> None:
             f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
             + ", ".join(f"{n} {why}" for why, n in skipped.items())
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
+        )
+    if figures.get("wake_overshoot_p99_ms") is not None:
+        print(
+            f"    the sleep before a grid tick ended median "
+            f"{f(figures['wake_overshoot_median_ms'], 3)} ms, p99 "
+            f"{f(figures['wake_overshoot_p99_ms'], 3)} ms after the time asked (the kernel's "
+            "and the host's wake-up delay; later than the rehearsal's lead: woken late)"
         )
     by_kind = figures.get("tick_work_by_kind")
     if by_kind:

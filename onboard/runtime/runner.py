@@ -351,8 +351,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def _rehearsal_stats(self) -> dict:
         rh, sched = self.rehearsal, self.scheduler
-        took = list(sched.rehearsal_s)
+        took, late = list(sched.rehearsal_s), list(sched.wake_overshoot_s)
         return {
+            "wake_overshoot_median_ms": to_ms(percentile(late, 0.5)),
+            "wake_overshoot_p99_ms": to_ms(percentile(late, 0.99)),
             "rehearse": rh is not None,
             "rehearsals": None if rh is None else rh.runs,
             "rehearsals_skipped": None if rh is None else sched.rehearsals_skipped,

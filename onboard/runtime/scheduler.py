@@ -131,6 +131,9 @@ class PeriodicScheduler:
         self.rehearse = rehearse
         self.rehearse_lead_s = 0.0 if rehearse is None else min(max(rehearse_lead_s, 0.0), period_s)
         self.rehearsal_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)  # how long each took
+        # how late the sleep before a grid tick ended after the time asked (the kernel's, the
+        # hypervisor's and the GIL's delay): later than the lead leaves no time to rehearse
+        self.wake_overshoot_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)
         # wake-ups not rehearsed: for an early tick, during a fusion, too late
         self.rehearsals_skipped = dict.fromkeys((EARLY_TICK, FUSION, WOKEN_LATE, DECLINED), 0)
         self.stalls = 0  # times the loop fell a whole period behind and re-anchored
@@ -238,16 +241,20 @@ class PeriodicScheduler:
             earliest = self._last_start_s + self.min_gap_s  # of an early tick
             give_up = deadline + MAX_INPUT_WAIT_FRACTION * period
             waited_from = None
+            lead = self.spin_s + self.rehearse_lead_s
+            slept = False
             while True:
                 target = deadline
                 self._block_saw_request = self._requested
                 if self._block_saw_request and earliest < deadline:
                     target = earliest if earliest > now else now
-                lead = self.spin_s + self.rehearse_lead_s
                 if target - now <= lead:
                     break
                 self._block(target - now - lead)
+                slept = True
                 now = clock()
+            if slept and not self._requested:
+                self.wake_overshoot_s.append(now - (deadline - lead))
             self._busy = True
             if self.rehearse is not None:
                 # not an early tick's (it starts at once), nor against a fusion for the GIL,
