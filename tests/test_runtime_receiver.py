@@ -96,3 +96,73 @@ def test_the_sender_runs_work_in_order_after_the_caller_and_inline_when_stopped(
     assert sender.errors == 1 and errors == ["sender: ZeroDivisionError: division by zero"]
     sender.submit(done.append, (51, threading.current_thread().name))
     assert done[-1][0] == 51  # stopped: inline again
+
+
+def test_while_the_control_thread_ticks_the_receiver_waits_off_its_socket():
+    """With the scheduler's gate, the receiver thread waits for the slack before it waits on
+    its socket (so a datagram arriving during a tick does not wake it to take the GIL from the
+    tick), waits on the socket no longer than the slack lasts, and what arrived during the
+    tick is taken after it."""
+    import sys
+
+    from onboard.runtime.scheduler import PeriodicScheduler
+
+    port = _udp_port()
+    onboard = MavLink(f"udpin:127.0.0.1:{port}", 1, 191)
+    px4 = MavLink(f"udpout:127.0.0.1:{port}", 1, 1)
+    got: list = []
+    sched = PeriodicScheduler(0.05)
+    rx = LinkReceiver(onboard, got.extend, None, sched.wait_for_slack)
+    sched.start()
+    try:
+        sched.wait()  # this thread is the control thread, ticking from now
+        rx.start()
+        time.sleep(0.05)
+        frame = sys._current_frames()[rx.ident]
+        where = []
+        while frame is not None:
+            where.append(frame.f_code.co_name)
+            frame = frame.f_back
+        assert "wait_for_slack" in where and "select" not in where
+        px4.send(px4.mav.attitude_quaternion_encode(7, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        time.sleep(0.05)
+        assert got == []  # not during the tick
+        sched.after_tick()
+        end = time.monotonic() + 5.0
+        while not got and time.monotonic() < end:
+            time.sleep(0.005)
+        assert [m.time_boot_ms for m in got] == [7]
+    finally:
+        sched.stop()
+        rx.stop()
+        onboard.close()
+        px4.close()
+
+
+def test_the_receiver_waits_on_its_socket_no_longer_than_the_slack(monkeypatch):
+    import onboard.runtime.receiver as receiver
+
+    port = _udp_port()
+    link = MavLink(f"udpin:127.0.0.1:{port}", 1, 191)
+    calls: list = []
+    slacks = iter([0.003, None])
+
+    def gate():
+        calls.append("gate")
+        return next(slacks)
+
+    rx = LinkReceiver(link, gate=gate)
+
+    def select(_r, _w, _x, timeout):
+        calls.append(("select", timeout))
+        if len(calls) > 2:
+            rx._stop_event.set()
+        return [], [], []
+
+    monkeypatch.setattr(receiver.select, "select", select)
+    try:
+        rx.run()  # on this thread: two rounds, then stopped
+    finally:
+        link.close()
+    # the slack bounds the wait; without a running scheduler (None) the usual wait
+    assert calls == ["gate", ("select", 0.003), "gate", ("select", receiver.WAIT_S)]

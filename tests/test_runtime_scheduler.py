@@ -66,12 +66,14 @@ def test_other_threads_wait_for_the_tick_to_be_over():
         sched.after_tick()
         t.join(2.0)
         log.append("helper gone")
-        sched.wait_for_slack()  # the control thread asleep, its deadline ~40 ms off: at once
+        slack = sched.wait_for_slack()  # the control thread asleep, ~40 ms off: at once
         log.append("slack")
     finally:
         sched.stop()
     assert log == ["tick over", "helper", "helper gone", "slack"]
-    sched.wait_for_slack()  # stopped: at once
+    # how long the slack lasts: to the wake-up (spin before the deadline) less the lead
+    assert 0.0 < slack < 0.05 - sched.spin_s
+    assert sched.wait_for_slack() is None  # stopped: at once
 
 
 def test_collection_is_held_during_the_loop_and_handed_back():

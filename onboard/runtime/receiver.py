@@ -27,8 +27,9 @@ WAIT_S = 0.05  # longest wait on the socket before checking for stop
 class LinkReceiver(threading.Thread):
     """Parses ``link``'s input into a queue (:meth:`drain` takes everything queued) or, with
     ``on_messages``, hands each batch to it on this thread (an exception it raises is counted
-    in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` is called
-    before parsing what arrived (the scheduler's ``wait_for_slack``)."""
+    in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` (the scheduler's
+    ``wait_for_slack``) is called before waiting on the socket, which is then waited on no
+    longer than the slack it returns, and again before parsing what arrived."""
 
     def __init__(
         self,
@@ -50,9 +51,17 @@ class LinkReceiver(threading.Thread):
 
     def run(self) -> None:
         while not self._stop_event.is_set():
+            wait_s = WAIT_S
+            if self._gate is not None:
+                # held here, not on the socket, while the control thread ticks: a datagram
+                # arriving then does not wake this thread, which would take the GIL from the
+                # tick as it lets it go (its kernels release it) and hold it to the gate
+                slack_s = self._gate()
+                if slack_s is not None:
+                    wait_s = min(WAIT_S, slack_s)
             if self._waitable is not None:
                 try:
-                    ready, _, _ = select.select([self._waitable], [], [], WAIT_S)
+                    ready, _, _ = select.select([self._waitable], [], [], wait_s)
                 except (OSError, ValueError):  # the link was closed under us
                     return
                 if not ready:

@@ -330,23 +330,28 @@ class PeriodicScheduler:
         """Seconds left before the control thread wakes for the next tick (negative: late)."""
         return self._next_s - self.spin_s - self.rehearse_lead_s - self._clock()
 
-    def wait_for_slack(self) -> None:
+    def wait_for_slack(self) -> float | None:
         """For the other threads, before a piece of work: return at once while the control
         thread sleeps with more than ``SLACK_LEAD_S`` to go before it wakes (``spin_s`` before
         its deadline) and no early tick is pending; otherwise when its tick is over. Their work
         then falls in the tick's slack, not at its start: under SCHED_FIFO a thread of the same
         priority is not preempted, so work begun just before the wake-up would delay the tick
-        by its length."""
+        by its length. Returns how long the slack lasts from now (s, less ``SLACK_LEAD_S``:
+        how long the caller may block on its own input and still be done before the control
+        thread wakes), None when the scheduler is not running."""
         if not self._running:
-            return
-        if not self._busy and not self._requested and self.slack_s() >= SLACK_LEAD_S:
-            return
+            return None
+        if not self._busy and not self._requested:
+            slack = self.slack_s() - SLACK_LEAD_S
+            if slack >= 0.0:
+                return slack
         with self._done:
             n = self._ticks_done
             self._done.wait_for(
                 lambda: self._ticks_done != n or not self._running,
                 timeout=MAX_HOLD_OFF_S,
             )
+        return max(self.slack_s() - SLACK_LEAD_S, 0.0) if self._running else None
 
     def stop(self) -> None:
         """Hand collection back to the interpreter (and let any waiting thread go)."""
