@@ -91,6 +91,23 @@ def test_collection_is_held_during_the_loop_and_handed_back():
     assert sys.getswitchinterval() == interval
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl's timer slack")
+def test_the_control_threads_sleeps_end_when_asked_during_the_loop_only():
+    from onboard.runtime.scheduler import set_timer_slack_ns
+
+    before = set_timer_slack_ns(50_000)  # the kernel's default, whatever this thread had
+    sched = PeriodicScheduler(0.005)
+    try:
+        sched.start()
+        try:
+            assert set_timer_slack_ns(1) == 1  # the loop set it: 1 ns
+        finally:
+            sched.stop()
+        assert set_timer_slack_ns(50_000) == 50_000  # handed back
+    finally:
+        set_timer_slack_ns(before)
+
+
 def test_bad_period_is_refused():
     with pytest.raises(ValueError):
         PeriodicScheduler(0.0)

@@ -72,6 +72,28 @@ MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for 
 REHEARSALS_KEPT = 120_000  # the last ten minutes' rehearsal times at 200 Hz
 
 
+_PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30  # prctl(2)
+
+
+def set_timer_slack_ns(ns: int) -> int | None:
+    """Set this thread's timer slack (Linux: how much later than asked the kernel may end its
+    sleeps, to group wake-ups; 50 us by default) and return the previous value, or None where
+    it cannot be set (not Linux, no libc)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    zero = ctypes.c_ulong(0)
+    before = prctl(_PR_GET_TIMERSLACK, zero, zero, zero, zero)
+    if before < 0 or prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), zero, zero, zero) != 0:
+        return None
+    return before
+
+
 def split_cpus(cpus: Iterable[int]) -> tuple[set[int], set[int]] | None:
     """(the CPU left to the control thread, the other threads' CPUs) from the CPUs the
     process may use: the highest-numbered, and the rest; None with fewer than two (nothing to
@@ -155,6 +177,7 @@ class PeriodicScheduler:
         self._next_young_s = self._next_older_s = 0.0
         self._switch_interval = sys.getswitchinterval()
         self._gc_was_enabled = gc.isenabled()
+        self._timer_slack_was: int | None = None  # the control thread's, before start()
         self._running = False
         self._busy = False  # the control thread is awake: spinning to a deadline or ticking
         self._done = threading.Condition(threading.Lock())
@@ -171,6 +194,9 @@ class PeriodicScheduler:
             except (AttributeError, OSError, ValueError) as exc:
                 note = f"real-time priority {self.realtime_priority} refused ({exc}): normal"
         sys.setswitchinterval(0.0005)
+        # sleeps end when asked, not up to 50 us later: the wake-up is 0.6 ms before the
+        # deadline, and one later than 0.3 ms leaves no time to rehearse (README "Session 16")
+        self._timer_slack_was = set_timer_slack_ns(1)
         gc.collect()
         gc.freeze()
         gc.disable()
@@ -359,6 +385,9 @@ class PeriodicScheduler:
         self._tick_over()
         with self._wake:
             self._wake.notify_all()
+        if self._timer_slack_was is not None:
+            set_timer_slack_ns(self._timer_slack_was)
+            self._timer_slack_was = None
         gc.unfreeze()
         if self._gc_was_enabled:
             gc.enable()
