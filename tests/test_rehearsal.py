@@ -304,68 +304,6 @@ def test_each_tick_says_how_its_wake_up_went_and_its_work_is_kept_apart_by_it():
     assert timing.figures()["tick_work_by_kind"] == by
 
 
-def _fusion_run(fusion_at: float, input_ran: bool = True):
-    """Four ticks on the fake clock; a fusion (input_begins, its tick asked 0.5 ms later,
-    input_done) at ``fusion_at``. Returns the rehearsals for the input, each tick's
-    (start, woken_as) and the scheduler."""
-    clock = FakeClock()
-    for_input: list[float] = []
-
-    def rehearse() -> bool:
-        clock.work(0.0001)
-        return True
-
-    def rehearse_input() -> bool:
-        for_input.append(clock.t)
-        clock.work(0.0002)
-        return input_ran
-
-    sched = PeriodicScheduler(
-        P, clock=clock.now, block=clock.block, rehearse=rehearse, rehearse_lead_s=LEAD,
-        rehearse_input=rehearse_input,
-    )  # fmt: skip
-    clock.at(fusion_at, sched.input_begins)
-    clock.at(fusion_at + 0.0005, sched.request_tick)
-    clock.at(fusion_at + 0.0006, sched.input_done)
-    ticks = []
-    sched.start()
-    try:
-        for _ in range(4):
-            ticks.append((sched.wait(), sched.woken_as))
-            sched.served()
-            clock.work(0.0001)
-            sched.after_tick()
-    finally:
-        sched.stop()
-    return for_input, ticks, sched
-
-
-def test_the_early_tick_is_rehearsed_while_its_fusion_runs():
-    for_input, ticks, sched = _fusion_run(100.0072)
-    # woken as the fusion began, rehearsed once, then the early tick as the fusion asked
-    assert for_input == [pytest.approx(100.0072, abs=1e-5)]
-    assert [k for _, k in ticks] == [
-        "woken late",
-        "rehearsed",
-        "early tick, rehearsed",
-        "rehearsed",
-    ]
-    assert ticks[2][0] == pytest.approx(100.0077, abs=1e-5)  # not delayed by the rehearsal
-    assert sched.rehearsals_skipped["early tick"] == 0
-    assert len(sched.input_rehearsal_s) == 1
-    assert sched.input_rehearsal_s[0] == pytest.approx(0.0002, abs=1e-5)
-
-
-def test_no_input_rehearsal_next_to_the_deadline_or_without_a_shadow():
-    # a fusion beginning 0.2 ms before the grid's wake-up: that tick's own rehearsal is due
-    for_input, ticks, _ = _fusion_run(100.0047 - LEAD)
-    assert for_input == []
-    # a rehearsal that declines: the early tick is counted as not rehearsed
-    for_input, ticks, sched = _fusion_run(100.0072, input_ran=False)
-    assert len(for_input) >= 1 and len(sched.input_rehearsal_s) == 0
-    assert ticks[2][1] == "early tick" and sched.rehearsals_skipped["early tick"] == 1
-
-
 def test_a_rehearsal_that_runs_past_the_deadline_makes_the_tick_late_and_shows_it():
     clock = FakeClock()
     starts, _, sched = _grid(clock, 3, rehearse_work_s=0.001)
@@ -412,39 +350,6 @@ def _runtime(tmp_path, rehearse: bool = True):
     f.pos_enu_m, f.vel_enu_m_s = np.array([0.0, 0.0, 10.0]), np.array([0.5, 3.0, 0.2])
     f.q_wxyz, f.q_time_s = np.array([1.0, 0.0, 0.0, 0.0]), rt.clock.now()
     return rt
-
-
-def test_the_runtime_rehearses_for_a_fusion_without_its_lock_from_the_last_ticks_state(tmp_path):
-    rt = _runtime(tmp_path)
-    try:
-        rh = rt.rehearsal
-        assert rt.scheduler.rehearse_input == rt._rehearse_input
-        assert rt._rehearse_input() is False  # no tick yet, no shadow
-        rt.tick()  # the state it ticked is kept
-        last = rt._last_state
-        assert last is not None
-        assert rt._rehearse_input() is False  # still no shadow
-        rt.scheduler._next_s = time.perf_counter() + 1.0
-        rt._refresh_shadow()
-        held, release = threading.Event(), threading.Event()
-
-        def fusing() -> None:
-            with rt._loop_lock:  # the camera thread's fusion holds the lock
-                held.set()
-                release.wait(5.0)
-
-        t = threading.Thread(target=fusing)
-        t.start()
-        held.wait(5.0)
-        try:
-            assert rt._rehearse_input() is True  # the lock is not needed
-        finally:
-            release.set()
-            t.join(5.0)
-        assert rh.runs == 1 and rh.errors == 0
-        assert rt._last_state is last  # the kept state is not changed by it
-    finally:
-        rt.fc.close()
 
 
 def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked(tmp_path):

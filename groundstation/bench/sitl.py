@@ -240,8 +240,6 @@ def _fly(
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
-        "input_rehearsals": stats.get("input_rehearsals"),
-        "input_rehearsal_median_ms": stats.get("input_rehearsal_median_ms"),
         "wake_overshoot_median_ms": stats.get("wake_overshoot_median_ms"),
         "wake_overshoot_p99_ms": stats.get("wake_overshoot_p99_ms"),
         "rehearsal_p99_ms": stats.get("rehearsal_p99_ms"),
@@ -354,12 +352,6 @@ def _print_figures(figures: dict) -> None:
             f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
             + ", ".join(f"{n} {why}" for why, n in skipped.items())
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
-        )
-    if figures.get("input_rehearsals") is not None:
-        print(
-            f"    and while a fusion ran, for the early tick it asks for: "
-            f"{figures['input_rehearsals']} run, median "
-            f"{f(figures['input_rehearsal_median_ms'])} ms"
         )
     if figures.get("wake_overshoot_p99_ms") is not None:
         print(

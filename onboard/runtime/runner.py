@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..camera_model import CameraModel
-from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams, VehicleState
+from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.param_meta import FILE_NAMES, component_files
@@ -147,7 +147,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             realtime_priority=config.realtime_priority,
             rehearse=None if self.rehearsal is None else self._rehearse,
             rehearse_lead_s=REHEARSE_LEAD_S,
-            rehearse_input=None if self.rehearsal is None else self._rehearse_input,
         )
         # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
         self.sender = Sender(
@@ -165,7 +164,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._loop_lock = threading.RLock()
         self._fusing = False  # run(): detections are fused on the camera thread
         self._hold_s: float | None = None  # run(): how long a command is held (the period)
-        self._last_state: VehicleState | None = None  # the last tick's (for _rehearse_input)
         self._stop = threading.Event()
         self._tick_n = 0
         self._events: deque[tuple[str, str]] = deque()
@@ -354,10 +352,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     def _rehearsal_stats(self) -> dict:
         rh, sched = self.rehearsal, self.scheduler
         took, late = list(sched.rehearsal_s), list(sched.wake_overshoot_s)
-        for_input = list(sched.input_rehearsal_s)
         return {
-            "input_rehearsals": None if rh is None else len(for_input),
-            "input_rehearsal_median_ms": to_ms(percentile(for_input, 0.5)),
             "wake_overshoot_median_ms": to_ms(percentile(late, 0.5)),
             "wake_overshoot_p99_ms": to_ms(percentile(late, 0.99)),
             "rehearse": rh is not None,
@@ -400,8 +395,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         f = self.fcs
         tel = None
         if loop is not None and f.pos_enu_m is not None and f.q_wxyz is not None:
-            state = self._last_state = state_at(f, now)
-            tel = loop.tick(state, self.sm.state is State.BRAKING, self._hold_s)
+            tel = loop.tick(state_at(f, now), self.sm.state is State.BRAKING, self._hold_s)
         if self.video is not None:
             self.video_overlay = overlay_of(
                 self._last_det, tel and tel.e_est_px, loop and loop.camera, now
@@ -485,24 +479,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             state = state_at(f, self.clock.now())
         finally:
             self._loop_lock.release()
-        rh.run(state, self._hold_s)
-        return True
-
-    def _rehearse_input(self) -> bool:
-        """On the control thread, woken as the camera thread begins a fusion (under the loop's
-        lock, so the state is not read): the shadow ticks the last tick's state brought to now,
-        so the early tick the fusion will ask for finds its code in the caches. False without
-        a shadow or a tick yet."""
-        last, rh = self._last_state, self.rehearsal
-        if last is None or rh is None or rh.shadow is None:
-            return False
-        now = self.clock.now()
-        ahead = now - last.time_s
-        att_t = last.attitude_time_s
-        state = VehicleState(
-            now, last.position_enu_m, last.velocity_enu_m_s, last.attitude_wxyz,
-            last.body_rates_flu_rad_s, None if att_t is None else att_t + ahead,
-        )  # fmt: skip
         rh.run(state, self._hold_s)
         return True
 

@@ -60,7 +60,6 @@ FUSION = "fusion"  # not rehearsed: a fusion was running at the wake-up
 WOKEN_LATE = "woken late"  # not rehearsed: woken too close to the deadline
 DECLINED = "declined"  # not rehearsed: ``rehearse`` returned False (nothing to rehearse on)
 STALL = "stall"  # the loop fell a period behind and started afresh
-EARLY_TICK_REHEARSED = "early tick, rehearsed"  # rehearsed while its input was handed over
 
 SPIN_S = 0.0003  # the last 0.3 ms before a deadline are spun, not slept
 GC_YOUNG_EVERY_S = 0.5  # collect generation 0 this often, in a tick's slack
@@ -142,7 +141,6 @@ class PeriodicScheduler:
         block: Callable[[float], None] | None = None,
         rehearse: Callable[[], bool] | None = None,
         rehearse_lead_s: float = 0.0,
-        rehearse_input: Callable[[], bool] | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
@@ -155,10 +153,6 @@ class PeriodicScheduler:
         self.rehearse = rehearse
         self.rehearse_lead_s = 0.0 if rehearse is None else min(max(rehearse_lead_s, 0.0), period_s)
         self.rehearsal_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)  # how long each took
-        # while an input is handed over (a fusion, on the camera thread), the early tick that
-        # will follow rehearsed without the lock the fusion holds; True from it: it ran
-        self.rehearse_input = rehearse_input
-        self.input_rehearsal_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)
         # how late the sleep before a grid tick ended after the time asked (the kernel's, the
         # hypervisor's and the GIL's delay): later than the lead leaves no time to rehearse
         self.wake_overshoot_s: deque[float] = deque(maxlen=REHEARSALS_KEPT)
@@ -226,9 +220,6 @@ class PeriodicScheduler:
         fusion, some 0.3-1 ms): a tick falling due meanwhile waits for it, asleep, instead of
         spinning against it for the GIL and then waiting for the lock as tick work."""
         self._inputting = True
-        if self.rehearse_input is not None:  # wake the control thread to rehearse meanwhile
-            with self._wake:
-                self._wake.notify()
 
     def input_done(self) -> None:
         """The input is in (its tick asked for by :meth:`request_tick`) or came to nothing: a
@@ -267,7 +258,6 @@ class PeriodicScheduler:
         now = clock()
         early = False
         woken_as = ON_THE_GRID
-        input_rehearsed = False
         if now > deadline + period:
             self.stalls += 1
             self._busy = True
@@ -286,11 +276,6 @@ class PeriodicScheduler:
                     target = earliest if earliest > now else now
                 if target - now <= lead:
                     break
-                if self._inputting and not self._requested and not input_rehearsed:
-                    input_rehearsed = self._rehearse_input(now)
-                    if input_rehearsed:
-                        now = clock()
-                        continue
                 self._block(target - now - lead)
                 slept = True
                 now = clock()
@@ -301,7 +286,7 @@ class PeriodicScheduler:
                 # not an early tick's (it starts at once), nor against a fusion for the GIL,
                 # nor when woken too late for it
                 if self._requested:
-                    woken_as = EARLY_TICK_REHEARSED if input_rehearsed else EARLY_TICK
+                    woken_as = EARLY_TICK
                 elif self._inputting:
                     woken_as = FUSION
                 elif deadline - now <= self.spin_s:
@@ -340,24 +325,11 @@ class PeriodicScheduler:
         self.early = early
         if early:
             self.early_ticks += 1
-            woken_as = EARLY_TICK_REHEARSED if input_rehearsed else EARLY_TICK
+            woken_as = EARLY_TICK
         self.woken_as = woken_as
         self._next_s = start + period
         self._last_start_s = start
         return clock()
-
-    def _rehearse_input(self, now: float) -> bool:
-        """While an input is handed over, well before the deadline: the early tick that will
-        follow rehearsed (the camera thread's fusion runs meanwhile; the kernels of both let
-        the GIL go). True when it ran."""
-        if self.rehearse_input is None:
-            return False
-        if self._next_s - now <= self.spin_s + self.rehearse_lead_s + self.period_s * 0.1:
-            return False  # the grid tick's own rehearsal is about due
-        if not self.rehearse_input():
-            return False
-        self.input_rehearsal_s.append(self._clock() - now)
-        return True
 
     def after_tick(self) -> None:
         """Let the threads waiting for slack go; collect garbage if due and there is slack
