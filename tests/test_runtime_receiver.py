@@ -162,7 +162,13 @@ def test_the_receiver_waits_on_its_socket_no_longer_than_the_slack(monkeypatch):
     monkeypatch.setattr(receiver.select, "select", select)
     try:
         rx.run()  # on this thread: two rounds, then stopped
+        # the slack bounds the wait; without a running scheduler (None) the usual wait
+        assert calls == ["gate", ("select", 0.003), "gate", ("select", receiver.WAIT_S)]
+        # a quiet link is not bounded: not woken before every tick for nothing
+        calls.clear()
+        slacks = iter([0.003, None])
+        rx = LinkReceiver(link, gate=gate, off_socket_during_ticks=False)
+        rx.run()
+        assert calls == ["gate", ("select", receiver.WAIT_S), "gate", ("select", receiver.WAIT_S)]
     finally:
         link.close()
-    # the slack bounds the wait; without a running scheduler (None) the usual wait
-    assert calls == ["gate", ("select", 0.003), "gate", ("select", receiver.WAIT_S)]

@@ -29,19 +29,23 @@ class LinkReceiver(threading.Thread):
     ``on_messages``, hands each batch to it on this thread (an exception it raises is counted
     in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` (the scheduler's
     ``wait_for_slack``) is called before waiting on the socket, which is then waited on no
-    longer than the slack it returns, and again before parsing what arrived."""
+    longer than the slack it returns (unless ``off_socket_during_ticks`` is False: a link
+    with a few messages a second would be woken before every tick for nothing), and again
+    before parsing what arrived."""
 
     def __init__(
         self,
         link: MavLink,
         on_messages: Callable[[list], None] | None = None,
         on_error: Callable[[str], None] | None = None,
-        gate: Callable[[], None] | None = None,
+        gate: Callable[[], float | None] | None = None,
+        off_socket_during_ticks: bool = True,
     ) -> None:
         super().__init__(name=f"rx {link.url}", daemon=True)
         self.link = link
         self.errors = 0
         self._gate = gate
+        self._bounded = off_socket_during_ticks
         self._on_messages = on_messages
         self._on_error = on_error
         self._queue: collections.deque = collections.deque()
@@ -57,7 +61,7 @@ class LinkReceiver(threading.Thread):
                 # arriving then does not wake this thread, which would take the GIL from the
                 # tick as it lets it go (its kernels release it) and hold it to the gate
                 slack_s = self._gate()
-                if slack_s is not None:
+                if slack_s is not None and self._bounded:
                     wait_s = min(WAIT_S, slack_s)
             if self._waitable is not None:
                 try:

@@ -529,7 +529,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error, gate)
         self._fc_rx.start()
         if self.gcs is not None:
-            self._gcs_rx = LinkReceiver(self.gcs, self._take_gcs_batch, on_error, gate)
+            # a few messages a second: not worth waking it before every tick to park it
+            self._gcs_rx = LinkReceiver(
+                self.gcs, self._take_gcs_batch, on_error, gate, off_socket_during_ticks=False
+            )
             self._gcs_rx.start()
         self.sender.start()
         self._fusing = True
