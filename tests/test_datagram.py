@@ -8,6 +8,7 @@ import ctypes
 import errno
 import socket
 import sys
+import time
 
 import pytest
 
@@ -141,3 +142,33 @@ def test_a_refused_setpoint_is_counted_not_raised(monkeypatch):
         assert link.send_errors == 1 and link.sent == 0
     finally:
         link.close()
+
+
+@LINUX
+def test_a_listening_link_answers_its_one_client_with_the_gil_held(monkeypatch):
+    port = free_port()
+    onboard = MavLink(f"udpin:127.0.0.1:{port}", 1, 191)
+    px4 = MavLink(f"udpout:127.0.0.1:{port}", 1, 1)
+    sent_to = []
+    real = onboard._datagrams.send
+    monkeypatch.setattr(
+        onboard._datagrams, "send", lambda frame, dest: sent_to.append(dest) or real(frame, dest)
+    )
+    try:
+        assert _setpoint(onboard, 5) is True  # no client yet: pymavlink's write, to no one
+        assert sent_to == []
+        px4.send(px4.mav.heartbeat_encode(2, 12, 0, 0, 0))
+        end = time.monotonic() + 5.0
+        while not onboard.poll() and time.monotonic() < end:
+            time.sleep(0.005)
+        assert _setpoint(onboard, 10)
+        assert sent_to == [("127.0.0.1", px4.conn.port.getsockname()[1])]
+        end = time.monotonic() + 5.0
+        got = []
+        while not got and time.monotonic() < end:
+            got = [m for m in px4.poll() if m.get_type() == "SET_ATTITUDE_TARGET"]
+            time.sleep(0.005)
+        assert [m.time_boot_ms for m in got] == [10]
+    finally:
+        onboard.close()
+        px4.close()

@@ -84,6 +84,14 @@ def test_sorties_fly_the_same_compiled_and_as_python():
         assert len(k.signatures) >= 1, k
 
 
+def _env_with_cache_in(tmp_path) -> dict[str, str]:
+    """A subprocess's environment: modules from ``tmp_path`` and the project, numba's cache in
+    ``tmp_path/cache``."""
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    return env
+
+
 @pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
 def test_a_cold_cache_says_it_is_compiling_once_and_a_warm_one_is_silent(tmp_path):
     (tmp_path / "tiny_kernels.py").write_text(
@@ -93,8 +101,7 @@ def test_a_cold_cache_says_it_is_compiling_once_and_a_warm_one_is_silent(tmp_pat
         "@kernel('float64(float64)')\n"
         "def thrice(x):\n    return 3.0 * x\n"
     )
-    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    env = _env_with_cache_in(tmp_path)
     run = [sys.executable, "-c", "import tiny_kernels as k; print(k.twice(2.0) + k.thrice(1.0))"]
     cold = subprocess.run(run, env=env, capture_output=True, text=True, check=True, timeout=300)
     warm = subprocess.run(run, env=env, capture_output=True, text=True, check=True, timeout=300)
@@ -170,7 +177,7 @@ def test_a_kernel_calling_one_of_another_file_recompiles_when_that_one_changes(t
 @pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing is compiled")
 def test_kernels_compiled_under_other_options_are_compiled_again(tmp_path):
     # the compile options live in onboard/jit.py, which numba's cache does not check: a cache
-    # older than it (made under other options, the GIL released) is dropped, not loaded
+    # older than it (made under other options, nogil for one) is dropped, not loaded
     (tmp_path / "opt_kernels.py").write_text(
         "from onboard.jit import kernel\n"
         "@kernel('float64(float64)')\n"
@@ -178,8 +185,7 @@ def test_kernels_compiled_under_other_options_are_compiled_again(tmp_path):
     )
     newer_jit = tmp_path / "jit_edited.py"
     newer_jit.write_text("")
-    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    env = _env_with_cache_in(tmp_path)
     script = (
         "import sys\nfrom onboard import jit\n"
         "if len(sys.argv) > 1: jit.__file__ = sys.argv[1]\n"

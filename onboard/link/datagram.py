@@ -19,6 +19,7 @@ caller falls back to ``socket.sendto``: :func:`sender_for` returns None.
 from __future__ import annotations
 
 import ctypes
+import errno
 import socket
 import struct
 import sys
@@ -77,7 +78,7 @@ class DatagramSender:
             self._addr_key = address
         fd = self._sock.fileno()  # -1 once closed: never a number since reused by another file
         if fd < 0:
-            self.last_errno = 9  # EBADF
+            self.last_errno = errno.EBADF
             return False
         n = self._sendto(fd, frame, len(frame), _MSG_DONTWAIT, self._addr, len(self._addr))
         if n < 0:
