@@ -104,6 +104,38 @@ def test_a_port_in_use_names_the_port_and_prints_no_url(tmp_path):
     assert "--port 0 for any free port" in r.stderr and "Traceback" not in r.stderr
 
 
+def test_port_0_prints_the_port_the_server_took_and_it_answers(tmp_path):
+    # the advice above: the URL printed must carry the free port taken, not 0
+    import re
+    import urllib.request
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "groundstation", "serve", "--port", "0",
+         "--data-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs")],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=tmp_path,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )  # fmt: skip
+    try:
+        line = proc.stdout.readline()
+        m = re.search(r"http://127\.0\.0\.1:(\d+)/\?token=(\S+)", line)
+        assert m and int(m.group(1)) > 0, line
+        req = urllib.request.Request(
+            f"http://127.0.0.1:{m.group(1)}/api/status",
+            headers={"Authorization": f"Bearer {m.group(2)}"},
+        )
+        end, status = time.monotonic() + 60, None
+        while status is None and time.monotonic() < end:
+            try:
+                with urllib.request.urlopen(req, timeout=5) as r:
+                    status = r.status
+            except OSError:
+                time.sleep(0.1)  # not serving yet
+        assert status == 200
+    finally:
+        proc.terminate()
+        proc.wait(15)
+
+
 def test_help_imports_none_of_the_heavy_libraries():
     code = (
         "import sys\nfrom groundstation.cli import main\n"

@@ -22,7 +22,7 @@ from groundstation.recording.reader import inspect_log, iter_messages
 from groundstation.scenario import load_scenario
 from onboard.link.px4 import mavlink
 
-from .sitl_rig import Rig, free_port
+from .sitl_rig import Rig
 
 MISS_LIMIT_M = 0.3
 
@@ -59,19 +59,20 @@ def _no_traceback(rig: Rig) -> None:
 # ---------------------------------------------------------------------- end to end
 class GroundStationProcess:
     def __init__(self, tmp, url: str, key_file) -> None:
-        self.port = free_port(socket.SOCK_STREAM)
         self.err = tmp / "gs.log"
+        # --port 0: the server takes a free port itself and prints it (a port picked here and
+        # closed could be taken by another socket before the server binds it)
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "groundstation", "serve", "--port", str(self.port),
+            [sys.executable, "-m", "groundstation", "serve", "--port", "0",
              "--mavlink", url, "--signing-key", str(key_file), "--log-dir", str(tmp / "logs"),
              "--data-dir", str(tmp / "data")],
             stdout=subprocess.PIPE, stderr=self.err.open("w"), text=True, cwd=tmp,
             env=dict(os.environ, PYTHONUNBUFFERED="1"),
         )  # fmt: skip
         line = self.proc.stdout.readline()
-        m = re.search(r"token=(\S+)", line)
+        m = re.search(r"http://127\.0\.0\.1:(\d+)/\?token=(\S+)", line)
         assert m, f"no URL printed: {line!r} {self.err.read_text()}"
-        self.token = m.group(1)
+        self.port, self.token = int(m.group(1)), m.group(2)
 
     def api(self, method: str, path: str, body=None) -> tuple[int, dict]:
         req = urllib.request.Request(

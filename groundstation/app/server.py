@@ -431,9 +431,29 @@ class GroundStation:
             )
         )
         self._thread: threading.Thread | None = None
+        # port 0: a free port taken now and handed to the server, so the URL printed before
+        # it serves (``groundstation serve --port 0``) carries the real port
+        self._listening: socket.socket | None = None
+        if port == 0:
+            sock = socket.socket(
+                socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM
+            )
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
+            try:
+                sock.bind((host, 0))
+            except OSError:
+                sock.close()
+                raise
+            self._listening = sock
+
+    @property
+    def _sockets(self) -> list[socket.socket] | None:
+        return None if self._listening is None else [self._listening]
 
     @property
     def port(self) -> int:
+        if self._listening is not None:
+            return self._listening.getsockname()[1]
         for srv in getattr(self.server, "servers", []):
             for sock in srv.sockets:
                 return sock.getsockname()[1]
@@ -447,7 +467,9 @@ class GroundStation:
     def start_in_thread(self, timeout_s: float = 10.0) -> None:
         if self.scene_http is not None:
             self.scene_http.start()
-        self._thread = threading.Thread(target=self.server.run, daemon=True)
+        self._thread = threading.Thread(
+            target=self.server.run, kwargs={"sockets": self._sockets}, daemon=True
+        )
         self._thread.start()
         deadline = time.monotonic() + timeout_s
         while not self.server.started:
@@ -459,7 +481,7 @@ class GroundStation:
         if self.scene_http is not None:
             self.scene_http.start()
         try:
-            self.server.run()
+            self.server.run(sockets=self._sockets)
         finally:
             self.close()
 
@@ -479,3 +501,5 @@ class GroundStation:
             self.session.video.stop()
         with contextlib.redirect_stdout(io.StringIO()):
             self.viser.stop()
+        if self._listening is not None:
+            self._listening.close()
