@@ -436,20 +436,18 @@ def _port_problem(host: str, port: int) -> str | None:
     """Why ``serve`` could not listen on host:port, or None (checked before anything
     starts, so a port in use prints no URL)."""
     import errno
-    import socket
 
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
-        try:
-            sock.bind((host, port))
-        except OSError as exc:
-            if exc.errno == errno.EADDRINUSE:
-                return (
-                    f"argument --port: port {port} on {host} is in use (another ground "
-                    "station?); pick another with --port N, or --port 0 for any free port"
-                )
-            return f"argument --host: cannot listen on {host}:{port}: {exc.strerror or exc}"
+    from onboard.link.address import bind_tcp_listener
+
+    try:
+        bind_tcp_listener(host, port).close()
+    except OSError as exc:
+        if exc.errno == errno.EADDRINUSE:
+            return (
+                f"argument --port: port {port} on {host} is in use (another ground "
+                "station?); pick another with --port N, or --port 0 for any free port"
+            )
+        return f"argument --host: cannot listen on {host}:{port}: {exc.strerror or exc}"
     return None
 
 

@@ -29,6 +29,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
+from onboard.link.address import bind_tcp_listener
+
 from ..campaigns.tune import default_storage_url
 from ..recording.reader import LogIndex
 from ..scenario import ScenarioError
@@ -433,18 +435,7 @@ class GroundStation:
         self._thread: threading.Thread | None = None
         # port 0: a free port taken now and handed to the server, so the URL printed before
         # it serves (``groundstation serve --port 0``) carries the real port
-        self._listening: socket.socket | None = None
-        if port == 0:
-            sock = socket.socket(
-                socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM
-            )
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
-            try:
-                sock.bind((host, 0))
-            except OSError:
-                sock.close()
-                raise
-            self._listening = sock
+        self._listening = bind_tcp_listener(host, 0) if port == 0 else None
 
     @property
     def _sockets(self) -> list[socket.socket] | None:

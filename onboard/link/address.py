@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import socket
 
 
 def parse_host_port(
@@ -48,3 +49,17 @@ def add_host_port_option(
         const=("127.0.0.1", default_port),
         help=help,
     )
+
+
+def bind_tcp_listener(host: str, port: int) -> socket.socket:
+    """A TCP socket bound to ``host:port`` (IPv6 when the host has a colon; port 0: a free
+    one), with SO_REUSEADDR as uvicorn sets it; not yet listening. OSError when it cannot be
+    bound (the socket is closed)."""
+    sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    return sock
