@@ -151,6 +151,9 @@ class FakeOnboard:
         self.names = [s.param_id for s in PARAM_SPECS]
         self.state = 2  # ready
         self.commands: list[int] = []
+        self.hold_param_sets = threading.Event()  # set: PARAM_SETs kept unanswered until clear
+        self.param_sets: list[tuple[str, float]] = []
+        self._held: list = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -165,14 +168,21 @@ class FakeOnboard:
         k = 0
         while not self._stop.is_set():
             link = self.link
-            for m in link.poll():
+            msgs = link.poll()
+            if not self.hold_param_sets.is_set():
+                msgs, self._held = self._held + msgs, []
+            for m in msgs:
                 kind = m.get_type()
+                if kind == "PARAM_SET" and self.hold_param_sets.is_set():
+                    self._held.append(m)
+                    continue
                 if kind == "PARAM_REQUEST_LIST":
                     for i, n in enumerate(self.names):
                         link.send(link.mav.param_value_encode(n.encode(), self.values[n], 9,
                                                               len(self.names), i))  # fmt: skip
                 elif kind == "PARAM_SET":
                     name = m.param_id
+                    self.param_sets.append((name, m.param_value))
                     if name == "PRG_K_P" and 0.0 <= m.param_value <= 0.2:
                         self.values[name] = m.param_value
                     link.send(link.mav.param_value_encode(
@@ -203,11 +213,7 @@ class FakeOnboard:
 
 
 def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_udp_port()
     gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs",
                        mavlink_url=f"udpin:127.0.0.1:{port}")  # fmt: skip
     gs.start_in_thread()
@@ -238,13 +244,14 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
             fake.values["PRG_K_P"] == pytest.approx(0.05) and gs.session.gains.k_p == 0.05
         ):
             time.sleep(0.05)
+        live = gs.session.status()["live"]  # which end of the round trip stalled, if one did
+        assert fake.values["PRG_K_P"] == pytest.approx(0.05), (fake.param_sets, live)
+        assert gs.session.gains.k_p == 0.05, live  # the float32 on the wire, read back as 0.05
         page.wait_for_function(
             "document.querySelector('#gains input[data-gain=\"k_p\"]').value === '0.05'"
             " && !document.querySelector('#gains-applied').textContent.includes('waiting')",
             timeout=10000,
         )
-        assert fake.values["PRG_K_P"] == pytest.approx(0.05)
-        assert gs.session.gains.k_p == 0.05  # the float32 on the wire, read back as 0.05
         page.wait_for_function(  # every gain shown as the decimal it is, not float32 noise
             "[...document.querySelectorAll('#gains input')].every(i => i.value.length < 8)"
         )
@@ -270,6 +277,79 @@ def test_live_mode_panel_start_abort_and_gain_round_trip(browser, tmp_path):
         page.close()
         fake.close()
         gs.stop()
+
+
+def test_a_gain_read_answered_late_does_not_put_back_the_value_replaced(browser, tmp_path):
+    """After Apply the page reads the gains in force twice: once when the PUT returns (the
+    vehicle has not answered yet: the old value) and again when the vehicle's PARAM_VALUE
+    is in. Answered in the other order, the field still shows the value the vehicle flies."""
+    port = free_udp_port()
+    gs = GroundStation(port=0, data_dir=tmp_path, log_dir=tmp_path / "logs",
+                       mavlink_url=f"udpin:127.0.0.1:{port}")  # fmt: skip
+    gs.start_in_thread()
+    fake = FakeOnboard(port)
+    n = len(PARAM_SPECS)
+    page = browser.new_page(viewport={"width": 1500, "height": 1000})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    reads = []  # k_p in each read after Apply, as the server answered it
+    after_apply = {"on": False, "held": None}  # the first read's route and answer
+
+    def gains_read(route):
+        if route.request.method != "GET" or not after_apply["on"]:
+            return route.continue_()
+        answer = route.fetch()
+        reads.append(answer.json()["values"]["k_p"])
+        if len(reads) == 1:
+            after_apply["held"] = (route, answer)  # the first read after Apply: held back
+            return None
+        route.fulfill(response=answer)  # the later read answered first
+        held, held_answer = after_apply["held"]
+        held.fulfill(response=held_answer)  # then the earlier one, its value now stale
+        return None
+
+    try:
+        page.route(re.compile(r".*/api/gains(\?.*)?$"), gains_read)
+        page.goto(gs.url())
+        page.wait_for_function(
+            f"document.querySelector('#lv-params').textContent.startsWith('{n}/{n}')",
+            timeout=15000,
+        )
+        page.wait_for_function("document.querySelectorAll('#gains input').length > 5")
+        assert page.input_value('#gains input[data-gain="k_p"]') == "0.03"
+        fake.hold_param_sets.set()  # the vehicle answers once the first read is out
+        after_apply["on"] = True
+        page.fill('#gains input[data-gain="k_p"]', "0.05")
+        page.click("#btn-apply-gains")
+        deadline = time.monotonic() + 10.0
+        while after_apply["held"] is None and time.monotonic() < deadline:
+            page.wait_for_timeout(20)
+        assert reads == [pytest.approx(0.03)], reads
+        assert ("PRG_K_P", pytest.approx(0.05)) not in fake.param_sets  # not answered yet
+        fake.hold_param_sets.clear()
+        page.wait_for_function(
+            "document.querySelector('#gains-applied').textContent.includes('applied at t =')",
+            timeout=10000,
+        )
+        while len(reads) < 2 and time.monotonic() < deadline + 10.0:
+            page.wait_for_timeout(20)
+        assert reads == [pytest.approx(0.03), pytest.approx(0.05)]
+        page.wait_for_timeout(300)  # both answers taken in by the page
+        assert page.input_value('#gains input[data-gain="k_p"]') == "0.05"
+        assert gs.session.gains.k_p == 0.05
+        assert not errors, errors
+    finally:
+        page.close()
+        fake.close()
+        gs.stop()
+
+
+def free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def test_option_lists_come_from_the_api_and_the_chosen_law_flies(station, browser):

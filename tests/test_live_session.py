@@ -164,3 +164,58 @@ def test_a_signing_key_mismatch_is_named_when_a_command_goes_unanswered():
     finally:
         session.close()
         onboard.close()
+
+
+def test_an_unanswered_gain_edit_is_sent_again_then_reported(monkeypatch):
+    """The parameter protocol's retry: a PARAM_SET lost on the way (or its PARAM_VALUE) is
+    sent again after the timeout; one never answered is reported, not left waiting."""
+    import groundstation.app.live as live
+
+    monkeypatch.setattr(live, "PARAM_SET_TIMEOUT_S", 0.3)
+    port = free_port()
+    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
+    try:
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+        for i, (name, value) in enumerate(Gains().to_dict().items()):
+            onboard.send(onboard.mav.param_value_encode(PARAM_IDS[name].encode(), value, 9, 22, i))
+        assert _wait(lambda: len(session.params) == len(GAIN_NAMES))
+        sets = []
+
+        def param_sets(n):
+            def got():
+                sets.extend(m for m in onboard.poll() if m.get_type() == "PARAM_SET")
+                return len(sets) >= n
+
+            return got
+
+        # the first PARAM_SET is "lost" (not answered): the second is, and the edit applies
+        session.set_gains(session.gains.replace(k_a=3.0))
+        assert _wait(param_sets(2), 3.0)
+        assert session.status()["live"]["params_sends"]["k_a"] >= 2  # shown while it waits
+        assert session.gains.k_a == 2.0
+        onboard.send(onboard.mav.param_value_encode(b"PRG_K_A", 3.0, 9, 22, 0))
+        assert _wait(lambda: session.gains.k_a == 3.0 and not session.status()["gains_pending"])
+        time.sleep(3 * live.PARAM_SET_TIMEOUT_S)  # answered: nothing more goes out
+        param_sets(0)()
+        assert {(m.param_id, m.param_value) for m in sets} == {("PRG_K_A", 3.0)}
+        assert session.param_set_resends == len(sets) - 1 >= 1
+        n = len(sets)
+        time.sleep(3 * live.PARAM_SET_TIMEOUT_S)
+        assert not param_sets(n + 1)()
+        sets.clear()
+
+        # never answered: sent PARAM_SET_SENDS times in all, then reported
+        onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+        session.set_gains(session.gains.replace(k_a=4.0))
+        assert _wait(lambda: not session.status()["gains_pending"], 5.0)
+        param_sets(live.PARAM_SET_SENDS)()
+        assert len(sets) == live.PARAM_SET_SENDS == 4
+        assert {(m.param_id, m.param_value) for m in sets} == {("PRG_K_A", 4.0)}
+        assert session.status()["live"]["params_refused"] == {
+            "k_a": "k_a: no PARAM_VALUE from the vehicle after 4 sends"
+        }
+        assert session.gains.k_a == 3.0  # what the vehicle last said it flies
+    finally:
+        session.close()
+        onboard.close()

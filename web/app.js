@@ -504,8 +504,9 @@ function showLive(lv) {
   $("lv-fc").textContent = `${lv.fc_link ? "link up" : "no link"} · ${lv.fc_mode} · ${lv.fc_armed ? "armed" : "disarmed"}${lv.target_reported ? " · target reports its position" : ""}`;
   const num = (x, d) => (x === null || x === undefined ? "—" : Number(x).toFixed(d));
   $("lv-loop").textContent = `jitter p99 ${num(lv.loop_jitter_p99_ms, 2)} ms · capture→command ${num(lv.latency_ms, 1)} ms · overruns ${num(lv.overruns, 0)}`;
-  const pend = Object.keys(lv.params_pending), refused = Object.values(lv.params_refused);
-  $("lv-params").textContent = `${lv.params_received}/${lv.params_total} read` + (pend.length ? ` · waiting for PARAM_VALUE: ${pend.join(", ")}` : "") + (refused.length ? ` · refused: ${refused.join("; ")}` : "");
+  const sends = lv.params_sends || {};
+  const pend = Object.keys(lv.params_pending).map((n) => (sends[n] > 1 ? `${n} (sent ${sends[n]}×)` : n)), refused = Object.values(lv.params_refused);
+  $("lv-params").textContent = `${lv.params_received}/${lv.params_total} read` + (pend.length ? ` · waiting for PARAM_VALUE: ${pend.join(", ")}` : "") + (refused.length ? ` · not applied: ${refused.join("; ")}` : "");
   $("lv-ack").textContent = lv.last_ack ? `${lv.last_ack.command}: ${lv.last_ack.result}` : "—";
   $("lv-rates").textContent = Object.entries(lv.rates_hz).map(([k, v]) => `${k} ${v}`).join(" · ") + (lv.bad_frames ? ` · bad frames ${lv.bad_frames}` : "");
   const ev = $("lv-events"); ev.innerHTML = "";
@@ -661,9 +662,17 @@ $("speed").onchange = async () => { try { await api("PUT", "/api/sortie/speed", 
 // default highlighted, a reset per gain, search, the edits made during this sortie, and named
 // gain sets saved, loaded, downloaded and uploaded. A refused value goes back to the one in force.
 let gainValues = {}, gainSpecs = {};
-async function loadGains() {
+// Reads of the gains in force can cross (a read after Apply and one after the vehicle's
+// PARAM_VALUE): the values of the latest read asked for win, whatever order the answers come in.
+let gainsAsked = 0, gainsShown = 0;
+async function readGains() {
+  const n = ++gainsAsked;
   const g = await api("GET", "/api/gains");
-  gainValues = g.values;
+  if (n > gainsShown) { gainsShown = n; gainValues = g.values; }
+  return g;
+}
+async function loadGains() {
+  const g = await readGains();
   if (PV.cmp) showCompareLegend(); // B's gains are told against A's: the legend needs these
   const tb = document.querySelector("#gains tbody"); tb.innerHTML = "";
   let group = null;
@@ -674,7 +683,7 @@ async function loadGains() {
       const gr = document.createElement("tr"); gr.className = "group"; gr.innerHTML = `<th colspan="7">${esc(group || "")}</th>`; tb.appendChild(gr);
     }
     const tr = document.createElement("tr"); tr.dataset.gain = s.name; tr.dataset.search = `${s.name} ${s.meaning} ${s.group}`.toLowerCase();
-    tr.innerHTML = `<td class="gname">${esc(s.name)}</td><td><input data-gain="${esc(s.name)}" value="${g.values[s.name]}"></td><td>${esc(unitText(s.unit))}</td>` +
+    tr.innerHTML = `<td class="gname">${esc(s.name)}</td><td><input data-gain="${esc(s.name)}" value="${gainValues[s.name]}"></td><td>${esc(unitText(s.unit))}</td>` +
       `<td class="meaning">${esc(s.meaning)}</td><td>${s.min} to ${s.max}</td><td>${s.default}</td><td><button class="mini" data-reset="${esc(s.name)}" title="back to the default, ${s.default}">reset</button></td>`;
     tb.appendChild(tr);
   }
@@ -691,9 +700,7 @@ async function loadGains() {
 }
 // The values in force into the fields, except a field the operator is editing.
 async function refreshGainValues() {
-  let g;
-  try { g = await api("GET", "/api/gains"); } catch (e) { return; }
-  gainValues = g.values;
+  try { await readGains(); } catch (e) { return; }
   if (PV.cmp) showCompareLegend();
   document.querySelectorAll("#gains input[data-gain]").forEach((inp) => {
     if (document.activeElement === inp || inp.classList.contains("changed")) return;

@@ -61,6 +61,11 @@ def _acquired(t: dict[str, Any]) -> bool:
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
 ACK_TIMEOUT_S = 2.0
+# the parameter protocol's answer to a lost PARAM_SET or PARAM_VALUE: send the PARAM_SET again
+# when no PARAM_VALUE came back within this long, at most PARAM_SET_SENDS times in all (then
+# the edit is reported as unanswered, not left waiting for ever); mavros's figures
+PARAM_SET_TIMEOUT_S = 1.0
+PARAM_SET_SENDS = 4
 TARGET_DIAMETER_M = 0.3  # drawn size of a cooperative target (its telemetry has no size)
 FINISHED_STATES = (RuntimeState.FINISHED.value, RuntimeState.LINK_LOST.value)
 ACK_NAMES = {
@@ -103,6 +108,9 @@ class LiveSession(LinkState):
         self._publish_count = 0
         self._scene_reset = True  # (re)build the 3D scene at the next publish
         self.miss_m: float | None = None  # the last recorded sortie's closest approach
+        self._param_sends: dict[str, int] = {}  # PARAM_SETs of each pending edit so far
+        self._param_sent_s: dict[str, float] = {}  # when the last of them went out
+        self.param_set_resends = 0
         self.scene_errors = 0
         self.errors = 0
         self.last_error: str | None = None
@@ -150,16 +158,36 @@ class LiveSession(LinkState):
                 if not math.isclose(new, self.params[name], rel_tol=1e-6, abs_tol=1e-7):
                     self.pending[name] = new
                     self.refused.pop(name, None)
-                    self.link.send(
-                        self.link.mav.param_set_encode(
-                            VEHICLE_SYSTEM_ID,
-                            ONBOARD_COMPONENT_ID,
-                            PARAM_IDS[name].encode("ascii"),
-                            new,
-                            mavlink.MAV_PARAM_TYPE_REAL32,
-                        )
-                    )
+                    self._param_sends[name] = 0
+                    self._send_param_set(name, time.monotonic())
         return gains
+
+    def _send_param_set(self, name: str, now: float) -> None:
+        """PARAM_SET of the pending value of gain ``name`` (under the lock)."""
+        self._param_sends[name] += 1
+        self._param_sent_s[name] = now
+        self.link.send(
+            self.link.mav.param_set_encode(
+                VEHICLE_SYSTEM_ID,
+                ONBOARD_COMPONENT_ID,
+                PARAM_IDS[name].encode("ascii"),
+                self.pending[name],
+                mavlink.MAV_PARAM_TYPE_REAL32,
+            )
+        )
+
+    def _resend_unanswered(self, now: float) -> None:
+        """Each pending edit unanswered for PARAM_SET_TIMEOUT_S is sent again, or after
+        PARAM_SET_SENDS sends reported as unanswered (under the lock)."""
+        for name in [n for n in self.pending if now - self._param_sent_s[n] >= PARAM_SET_TIMEOUT_S]:
+            if self._param_sends[name] < PARAM_SET_SENDS:
+                self.param_set_resends += 1
+                self._send_param_set(name, now)
+            else:
+                del self.pending[name]
+                self.refused[name] = (
+                    f"{name}: no PARAM_VALUE from the vehicle after {PARAM_SET_SENDS} sends"
+                )
 
     def _command(self, command: int, label: str) -> dict[str, Any]:
         with self._lock:
@@ -228,6 +256,8 @@ class LiveSession(LinkState):
                 self.link.send(
                     self.link.mav.param_request_list_encode(VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
                 )
+            if self.pending:
+                self._resend_unanswered(now)
             self._maybe_finish(now)
         if now >= next_publish:
             next_publish = now + self.publish_period_s
@@ -385,6 +415,7 @@ class LiveSession(LinkState):
                     "params_received": len(self.params),
                     "params_total": len(PARAM_SPECS),
                     "params_pending": dict(self.pending),
+                    "params_sends": {n: self._param_sends[n] for n in self.pending},
                     "params_refused": dict(self.refused),
                     "last_ack": self.last_ack,
                     "events": list(self.events)[-8:],
