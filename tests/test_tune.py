@@ -120,6 +120,35 @@ def test_a_study_scored_by_an_older_objective_is_refused(tmp_path):
     assert open_study(f"sqlite:///{tmp_path / 'new.db'}", "s", defn, 0).study_name == "s"
 
 
+@pytest.mark.filterwarnings("ignore:Heartbeat of storage")  # ask/tell here, not optimize
+def test_a_worker_waits_out_another_holding_the_sqlite_file(tmp_path, monkeypatch):
+    """A write that finds the file locked by another worker waits for it (up to
+    SQLITE_BUSY_TIMEOUT_S), not sqlite3's 5 s default, after which it failed the trial."""
+    import threading
+
+    import groundstation.campaigns.tune as tune
+
+    defn = TuneDefinition(TARGET, parse_gain_space("K_y,K_z"), n=1)
+    db = tmp_path / "studies.db"
+    study = open_study(f"sqlite:///{db}", "s", defn, 0)
+    other = sqlite3.connect(db, check_same_thread=False)
+    other.execute("BEGIN EXCLUSIVE")  # another worker in the middle of a long write
+    held_s = 5.5
+    releaser = threading.Timer(held_s, other.commit)
+    releaser.start()
+    t0 = time.monotonic()
+    try:
+        trial = study.ask()  # a write: waits for the lock
+    finally:
+        releaser.join()
+        other.close()
+    waited = time.monotonic() - t0
+    assert waited >= held_s - 0.5
+    study.tell(trial, 1.0)
+    assert [t.state.name for t in study.trials] == ["COMPLETE"]
+    assert tune.SQLITE_BUSY_TIMEOUT_S >= 30.0
+
+
 def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():
     defn = TuneDefinition(TARGET, parse_gain_space("K_y,K_z"), n=1)
     jobs = build_tune_jobs(defn, 0)

@@ -35,6 +35,7 @@ from .tune_options import DEFAULT_N, DEFAULT_SATURATION_PENALTY, OBJECTIVE_HELP,
 DEFAULT_OUT_ROOT = Path("logs") / "tune"
 HEARTBEAT_S = 20  # a trial whose process stopped beating for GRACE_S is failed and retried
 GRACE_S = 90
+SQLITE_BUSY_TIMEOUT_S = 60.0  # open_study: how long a worker waits for the database file
 # 2: success-cep's saturation penalty inside the CEP tie-break; a study scored with another
 # version is refused rather than mixed (its losses are on another scale). success-mean was
 # added at version 2 without changing how the other objectives score.
@@ -340,13 +341,18 @@ def open_study(storage_url: str, study_name: str, defn: TuneDefinition, sampler_
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    engine_kwargs = {}
     if storage_url.startswith("sqlite:///"):
         Path(storage_url[len("sqlite:///") :]).parent.mkdir(parents=True, exist_ok=True)
+        # workers sharing the file wait for each other's writes this long, not sqlite3's 5 s
+        # default (a worker that gives up first fails its trial: "database is locked")
+        engine_kwargs["connect_args"] = {"timeout": SQLITE_BUSY_TIMEOUT_S}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             storage = optuna.storages.RDBStorage(
                 storage_url,
+                engine_kwargs=engine_kwargs,
                 heartbeat_interval=HEARTBEAT_S,
                 grace_period=GRACE_S,
                 heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(
