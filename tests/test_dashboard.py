@@ -3,6 +3,7 @@ flown after Start, the plotted series after a backward seek, the replay speed ac
 re-fly overlay and its legend, plots restored after a reload, the recording banner after a write
 error. One ground station and one headless chromium serve every test of this module."""
 
+import itertools
 import json
 import re
 import shutil
@@ -391,6 +392,36 @@ def test_timeline_zoom_and_recorded_fields(station, page):
     xy = page.evaluate("window.peregrine.plots.find(u => u.xy).data[1]")
     assert len(xy[0]) > 50 and len(xy[0]) == len(xy[1])
     assert page.text_content("#timeline .k-gain") == "k_p 0.03 → 0.05"  # from the recording
+
+
+def test_timeline_labels_of_events_close_together_do_not_overlap(station, page):
+    s = station.session
+    s.set_gains(s.default_gains())
+    s.start(SortieConfig(load_scenario("cv-top-to-bottom"), speed="5"))
+    for k_p in (0.04, 0.05, 0.06):  # three edits a few ticks apart: a few pixels on the page
+        t = max(s.sim.time_s, 1.0)
+        while s.sim.time_s < t + 0.05:
+            time.sleep(0.005)
+        s.set_gains(s.gains.replace(k_p=k_p))
+    while s.state != "finished":
+        time.sleep(0.05)
+    goto(page, station)  # (gains put back after: an edit now would be a mark at the end)
+    page.wait_for_function("document.querySelectorAll('#timeline .k-gain').length === 3")
+    marks = page.evaluate(
+        """[...document.querySelectorAll('#timeline .mark')].map(m => {
+             const r = m.getBoundingClientRect();
+             return {left: r.left, right: r.right, text: m.textContent, title: m.title,
+                     whole: m.scrollWidth <= m.clientWidth, bare: m.classList.contains('bare')};
+           }).sort((a, b) => a.left - b.left)"""
+    )
+    gains = [m for m in marks if "k_p" in m["text"]]
+    assert [m["text"] for m in gains] == ["k_p 0.03 → 0.04", "k_p 0.04 → 0.05", "k_p 0.05 → 0.06"]
+    assert gains[1]["left"] - gains[0]["left"] < 20  # close enough to have overlapped
+    for a, b in itertools.pairwise(marks):
+        assert a["right"] <= b["left"] + 0.01, (a, b)  # no label runs into the next mark
+    assert gains[-1]["whole"] and not gains[-1]["bare"]  # the last of them has room: all of it
+    assert all(m["title"].endswith(m["text"]) for m in marks)  # every text whole on hover
+    s.set_gains(s.default_gains())
 
 
 # ---------------------------------------------------------------------- B11: gains panel

@@ -231,13 +231,21 @@ function refreshPlots(force) {
   drawTimeline();
 }
 
+const TIMELINE_LABEL_PX = 165, TIMELINE_MIN_LABEL_PX = 12; // a label's box at most, and least
 function drawTimeline() {
   const tl = $("timeline"); const u = W.plots.find((p) => !p.xy); if (!u) return;
   const [min, max] = currentRange();
   const left = u.bbox.left / devicePixelRatio, w = u.bbox.width / devicePixelRatio;
-  const html = PV.events.filter(([t]) => t !== null && t >= min && t <= max).map(([t, kind, text]) =>
-    `<span class="mark k-${kind}" style="left:${(left + ((t - min) / (max - min)) * w).toFixed(1)}px" data-t="${t}" title="t = ${Number(t).toFixed(2)} s: ${esc(text)}">${esc(text)}</span>`);
-  tl.innerHTML = html.join("");
+  const shown = PV.events.filter(([t]) => t !== null && t >= min && t <= max).sort((a, b) => a[0] - b[0]);
+  const xs = shown.map(([t]) => left + ((t - min) / (max - min)) * w);
+  // one row: a label ends where the next mark begins (the whole text on hover, or zoom in);
+  // with no room for any of it, only its line shows
+  const html = shown.map(([t, kind, text], i) => {
+    const room = Math.min(TIMELINE_LABEL_PX, (i + 1 < xs.length ? xs[i + 1] : Infinity) - xs[i] - 1);
+    const fit = room >= TIMELINE_MIN_LABEL_PX ? `max-width:${(room - 5).toFixed(1)}px` : "";
+    return `<span class="mark k-${kind}${fit ? "" : " bare"}" style="left:${xs[i].toFixed(1)}px;${fit}" data-t="${t}" title="t = ${Number(t).toFixed(2)} s: ${esc(text)}">${esc(text)}</span>`;
+  }).join("");
+  if (html !== tl.dataset.drawn) { tl.innerHTML = html; tl.dataset.drawn = html; }
 }
 const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
 $("timeline").onclick = (ev) => {
