@@ -257,3 +257,26 @@ def test_arm_mode_and_stream_requests_leave_with_the_sender_after_the_tick(tmp_p
         rt.camera.stop()
         for link in (fc, gcs, rt.fc, rt.gcs):
             link.close()
+
+
+def test_a_tick_that_raised_on_the_camera_thread_ends_the_run_as_on_the_control_thread(tmp_path):
+    """The early tick the camera thread ticks itself (scheduler.tick_here) fails as a control
+    thread's tick fails: the run stops with its exception, rather than the camera thread
+    counting it and carrying on."""
+    rt, fc, gcs, _ = _runtime(tmp_path)
+    tick = rt.tick
+
+    def failing_tick():
+        raise RuntimeError("tick failed")
+
+    rt.tick = failing_tick
+    rt._tick_here(time.perf_counter())  # as _fuse_on_arrival does on the camera thread
+    rt.tick = tick
+    assert rt.stats()["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == 1
+    try:
+        with pytest.raises(RuntimeError, match="tick failed"):
+            rt.run(duration_s=0.5)
+        assert rt.stats()["ticks"] <= 1  # it stopped at its first wake-up
+    finally:
+        for link in (fc, gcs):
+            link.close()

@@ -212,6 +212,93 @@ def test_other_threads_wait_while_an_early_tick_is_pending():
     assert log == ["slack", "early tick", "helper"]
 
 
+# ---------------------------------------------------------------------- ticked where fused
+def test_the_fusing_thread_ticks_itself_while_the_control_thread_sleeps():
+    """tick_here: the early tick starts at once on the thread that fused, the grid re-anchors
+    one period after it, and the control thread, woken for the old deadline, sleeps on."""
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    here = []
+
+    def fused() -> None:  # the camera thread, as run() has it
+        start = sched.tick_here()
+        here.append(None if start is None else round(start - 100.0, 6))
+        clock.work(0.0003)
+        sched.tick_here_done()
+
+    clock.at(100.0072, fused)  # between the grid's 5 and 10 ms, the control thread asleep
+    starts = _run(clock, sched, 4)
+    assert here == pytest.approx([0.0072], abs=1e-5)
+    t = [s for s, _ in starts]
+    assert t == pytest.approx([0.0, 0.005, 0.0122, 0.0172], abs=1e-5)  # not 10 ms
+    assert not any(e for _, e in starts)  # the control thread's ticks are on the grid
+    assert sched.early_ticks == sched.ticks_here == 1 and sched.stalls == 0
+
+
+@pytest.mark.parametrize(
+    ("when", "why"),
+    [
+        (100.00505, "the control thread is ticking"),
+        (100.0098, "the control thread is awake for its deadline (within the spin)"),
+        (100.0052, "within the minimum gap after the last tick"),
+    ],
+)
+def test_the_fusing_thread_leaves_the_tick_to_the_control_thread(when, why):
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    here = []
+    clock.at(when, lambda: here.append(sched.tick_here()))
+    starts = _run(clock, sched, 4, work_s=0.0003)
+    assert here == [None], why
+    assert [s for s, _ in starts] == pytest.approx([0.0, 0.005, 0.010, 0.015], abs=1e-5)
+    assert sched.ticks_here == 0
+
+
+def test_a_pending_request_is_left_to_the_control_thread():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    sched.start()
+    try:
+        sched.wait()
+        sched.served()
+        sched.after_tick()
+        sched.request_tick()
+        assert sched.tick_here() is None  # the control thread is waking for it
+    finally:
+        sched.stop()
+
+
+def test_other_threads_wait_while_the_fusing_thread_ticks():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    log: list[str] = []
+    sched.start()
+    try:
+        sched.wait()
+        sched.served()
+        clock.work(0.0003)
+        sched.after_tick()
+        clock.work(0.002)  # asleep, 2.7 ms to go
+        assert sched.tick_here() is not None
+        asked = threading.Event()
+
+        def helper() -> None:
+            asked.set()
+            sched.wait_for_slack()
+            log.append("helper")
+
+        th = threading.Thread(target=helper)
+        th.start()
+        asked.wait(2.0)
+        th.join(0.05)  # held while the tick runs
+        log.append("tick here over")
+        sched.tick_here_done()
+        th.join(2.0)
+    finally:
+        sched.stop()
+    assert log == ["tick here over", "helper"]
+
+
 def test_timing_keeps_early_ticks_out_of_the_jitter_and_counts_overruns():
     timing = LoopTiming(P, keep=100)
     for start, early, work in [

@@ -167,6 +167,11 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     # loop timing (rate, jitter, overruns) is a benchmark figure (`groundstation bench --sitl`),
     # not asserted here: a shared 2-core machine cannot promise it; the loop must not stall
     assert stats["ticks"] > 0 and stats["rate_hz"] >= 100.0, stats
+    # detections fused on the camera thread, which ticked the early tick itself while the
+    # control thread slept (scheduler.tick_here): counted and timed as ticks of their own kind
+    here = stats["early_ticks_on_camera_thread"]
+    assert 0 < here <= stats["early_ticks"], stats
+    assert stats["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == here, stats
 
 
 # ---------------------------------------------------------------------- faults

@@ -260,6 +260,7 @@ def _fly(
         "attitude_jumps": stats.get("attitude_jumps"),
         "stale_attitude_ticks": stats.get("stale_attitude_ticks"),
         "early_ticks": stats.get("early_ticks"),
+        "early_ticks_on_camera_thread": stats.get("early_ticks_on_camera_thread"),
         "early_gap_median_ms": stats.get("early_gap_median_ms"),
         "ticks": stats.get("ticks"),
         "lock_wait_p99_ms": stats.get("lock_wait_p99_ms"),
@@ -317,6 +318,12 @@ def _print_figures(figures: dict) -> None:
             f"  early ticks (a detection fused, the grid re-anchored) {figures['early_ticks']}, "
             f"median {f(figures['early_gap_median_ms'])} ms after the previous tick (not counted "
             "in the rate and jitter)"
+            + (
+                ""
+                if figures.get("early_ticks_on_camera_thread") is None
+                else f"; {figures['early_ticks_on_camera_thread']} of them ticked on the camera "
+                "thread as it fused, the others by the control thread, awake already"
+            )
         )
     print(
         f"  period jitter p99 {f(figures['jitter_p99_ms'])} ms (max {f(figures['jitter_max_ms'])})"

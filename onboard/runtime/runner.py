@@ -59,7 +59,7 @@ from .rehearsal import REHEARSE_LEAD_S, Rehearsal
 from .scheduler import PeriodicScheduler, keep_off, split_cpus
 from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
-from .timing import LoopTiming, percentile, to_ms
+from .timing import EARLY_TICK_HERE, LoopTiming, percentile, to_ms
 from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 
 # the loop flies without a live track (coast, re-acquisition, search: see onboard/loop.py)
@@ -170,6 +170,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._last_event = deque(maxlen=1)
         self.commands_sent = 0
         self._last_overrun_report = -1e9
+        self._tick_failure: Exception | None = None  # of a tick on the camera thread
         self.reserved_cpu: int | None = None  # run(): the CPU left to the control thread
         # ten minutes of figures, not the whole day
         self.timing = LoopTiming(self.period_s, keep=int(600 * config.control_rate_hz))
@@ -302,9 +303,37 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 loop.on_detection(ev.detection)
                 fused = bool(loop.fuse_detections())
                 if fused and self.config.early_tick:
-                    sched.request_tick()
+                    start = sched.tick_here()
+                    if start is None:  # the control thread is awake: it ticks at once
+                        sched.request_tick()
+                    else:
+                        self._tick_here(start)
         finally:
             sched.input_done()
+
+    def _tick_here(self, start: float) -> None:
+        """On the camera thread, under the loop's lock, right after a fusion: the early tick
+        (scheduler.py "Early ticks"), timed as the control thread times its ticks. A tick that
+        raises is raised again on the control thread, as if it had been its own."""
+        cpu0 = time.thread_time()
+        self.timing.tick_started(start, True, EARLY_TICK_HERE)
+        self.timing.lock_waited(0.0)  # taken for the fusion already
+        try:
+            self.tick()
+        except Exception as exc:
+            self._tick_failure = exc
+        finally:
+            now = time.perf_counter()
+            work = now - start
+            overran = self.timing.tick_done(work, time.thread_time() - cpu0)
+            self.sender.flush()
+            self.scheduler.tick_here_done()
+        self._report_overrun(overran, work, now)
+
+    def _report_overrun(self, overran: bool, work_s: float, now: float) -> None:
+        if overran and now - self._last_overrun_report > 5.0:
+            self._last_overrun_report = now
+            self._event("warning", f"loop overrun: tick took {1000 * work_s:.1f} ms")
 
     # ------------------------------------------------------------------ timing figures
     @property
@@ -323,6 +352,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "frames": self.camera.frames,
             "commands_sent": self.commands_sent,
             "scheduler_stalls": self.scheduler.stalls,
+            "early_ticks_on_camera_thread": self.scheduler.ticks_here,
             "ticks_waiting_for_a_fusion": self.scheduler.input_waits,
             "fusion_wait_max_ms": 1000.0 * self.scheduler.input_wait_max_s,
             "early_tick": self.config.early_tick,
@@ -550,6 +580,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         try:
             while not self._stop.is_set():
                 start = sched.wait()
+                if self._tick_failure is not None:  # a tick on the camera thread raised
+                    raise self._tick_failure
                 cpu0 = time.thread_time()
                 self.timing.tick_started(start, sched.early, sched.woken_as)
                 with self._loop_lock:  # the camera thread fuses into the same loop
@@ -560,9 +592,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 work = now - start
                 overran = self.timing.tick_done(work, time.thread_time() - cpu0)
                 self.sender.flush()  # what the tick handed off, to the sender thread now
-                if overran and now - self._last_overrun_report > 5.0:
-                    self._last_overrun_report = now
-                    self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
+                self._report_overrun(overran, work, now)
                 if end is not None and now >= end:
                     break
                 sched.after_tick()

@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections import deque
 
 EARLY_TICK = "early tick"  # brought forward by a fused detection (scheduler.py "Early ticks")
+EARLY_TICK_HERE = "early tick on the camera thread"  # one the fusing thread ticked itself
+EARLY_KINDS = (EARLY_TICK, EARLY_TICK_HERE)
 ON_THE_GRID = "on the grid"  # at its deadline, not rehearsed
 
 
@@ -143,7 +145,9 @@ class LoopTiming:
         per = self.periods_all
         jit = [abs(p - self.period_s) for p in per]
         by_kind = self.work_by_kind()
-        early = by_kind.get(EARLY_TICK, {})
+        early = [
+            w for k, w in zip(self.tick_kinds, self.tick_work_s, strict=False) if k in EARLY_KINDS
+        ]
         return {
             "ticks": len(per) + 1 if per else 0,
             "rate_hz": (len(per) / sum(per)) if per else None,
@@ -152,8 +156,8 @@ class LoopTiming:
             "jitter_max_ms": None if not jit else 1000 * max(jit),
             "tick_work_median_ms": to_ms(percentile(self.tick_work_s, 0.5)),
             "tick_work_p99_ms": to_ms(percentile(self.tick_work_s, 0.99)),
-            "early_tick_work_median_ms": early.get("median_ms"),
-            "early_tick_work_p99_ms": early.get("p99_ms"),
+            "early_tick_work_median_ms": to_ms(percentile(early, 0.5)),
+            "early_tick_work_p99_ms": to_ms(percentile(early, 0.99)),
             "tick_work_by_kind": by_kind,
             "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
