@@ -176,6 +176,23 @@ def test_a_stall_is_still_a_stall_and_re_anchors():
     assert nxt - after_stall == pytest.approx(P, abs=1e-5)
 
 
+def _waiting_for_slack(sched: PeriodicScheduler, log: list[str]) -> threading.Thread:
+    """Another thread that waits for slack, then logs "helper"; returned once it has had
+    50 ms to get past the wait."""
+    asked = threading.Event()
+
+    def helper() -> None:
+        asked.set()
+        sched.wait_for_slack()
+        log.append("helper")
+
+    th = threading.Thread(target=helper)
+    th.start()
+    asked.wait(2.0)
+    th.join(0.05)
+    return th
+
+
 def test_other_threads_wait_while_an_early_tick_is_pending():
     """wait_for_slack holds another thread off while a request is pending (the control thread
     is about to wake), and lets it go when that tick is over."""
@@ -191,17 +208,7 @@ def test_other_threads_wait_while_an_early_tick_is_pending():
         sched.wait_for_slack()  # asleep with 4.7 ms to go: at once
         log.append("slack")
         sched.request_tick()
-        asked = threading.Event()
-
-        def helper() -> None:
-            asked.set()
-            sched.wait_for_slack()
-            log.append("helper")
-
-        th = threading.Thread(target=helper)
-        th.start()
-        asked.wait(2.0)
-        th.join(0.05)  # still held: the early tick has not run
+        th = _waiting_for_slack(sched, log)  # still held: the early tick has not run
         log.append("early tick")
         sched.wait()
         sched.served()
@@ -280,17 +287,7 @@ def test_other_threads_wait_while_the_fusing_thread_ticks():
         sched.after_tick()
         clock.work(0.002)  # asleep, 2.7 ms to go
         assert sched.tick_here() is not None
-        asked = threading.Event()
-
-        def helper() -> None:
-            asked.set()
-            sched.wait_for_slack()
-            log.append("helper")
-
-        th = threading.Thread(target=helper)
-        th.start()
-        asked.wait(2.0)
-        th.join(0.05)  # held while the tick runs
+        th = _waiting_for_slack(sched, log)  # held while the tick runs
         log.append("tick here over")
         sched.tick_here_done()
         th.join(2.0)

@@ -54,7 +54,7 @@ class LoopTiming:
         self.tick_kinds: deque[str] = deque(maxlen=keep)
         self._early = False  # the tick running was brought forward
         self._kind = ON_THE_GRID
-        self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the control thread's CPU time
+        self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the ticking thread's CPU time
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
