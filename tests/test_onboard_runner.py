@@ -264,19 +264,40 @@ def test_a_tick_that_raised_on_the_camera_thread_ends_the_run_as_on_the_control_
     thread's tick fails: the run stops with its exception, rather than the camera thread
     counting it and carrying on."""
     rt, fc, gcs, _ = _runtime(tmp_path)
+    here = threading.current_thread()  # this test plays the camera thread
     tick = rt.tick
 
-    def failing_tick():
-        raise RuntimeError("tick failed")
+    def tick_failing_here():
+        if threading.current_thread() is here:
+            raise RuntimeError("tick failed")
+        tick()
 
-    rt.tick = failing_tick
-    rt._tick_here(time.perf_counter())  # as _fuse_on_arrival does on the camera thread
-    rt.tick = tick
-    assert rt.stats()["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == 1
+    rt.tick = tick_failing_here
+    errors: list[Exception] = []
+
+    def run():
+        try:
+            rt.run(duration_s=5.0)
+        except RuntimeError as exc:
+            errors.append(exc)
+
+    th = threading.Thread(target=run)
+    th.start()
     try:
-        with pytest.raises(RuntimeError, match="tick failed"):
-            rt.run(duration_s=0.5)
-        assert rt.stats()["ticks"] <= 1  # it stopped at its first wake-up
+        start, end = None, time.monotonic() + 3.0
+        while start is None and time.monotonic() < end:
+            time.sleep(0.001)
+            with rt._loop_lock:  # as _fuse_on_arrival, right after a fusion
+                start = rt.scheduler.tick_here()  # None while the control thread is awake
+                if start is not None:
+                    rt._tick_here(start)
+        assert start is not None
+        th.join(3.0)
+        assert not th.is_alive()
+        assert [str(e) for e in errors] == ["tick failed"]
+        assert rt.stats()["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == 1
     finally:
+        rt.stop()
+        th.join(3.0)
         for link in (fc, gcs):
             link.close()

@@ -296,6 +296,78 @@ def test_other_threads_wait_while_the_fusing_thread_ticks():
     assert log == ["tick here over", "helper"]
 
 
+def test_a_tick_on_the_fusing_thread_that_overran_is_a_stall_not_a_burst():
+    clock = FakeClock()
+    sched = _scheduler(clock)
+
+    def fused() -> None:
+        sched.tick_here()
+        clock.work(0.012)  # 2.4 periods
+        sched.tick_here_done()
+
+    clock.at(100.0072, fused)
+    t = [s for s, _ in _run(clock, sched, 4)]
+    assert t[:2] == pytest.approx([0.0, 0.005], abs=1e-5)
+    assert t[2] == pytest.approx(0.0192, abs=1e-5)  # afresh from its end: no tick at 12.2 ms
+    assert t[3] - t[2] == pytest.approx(P, abs=1e-5)
+    assert sched.stalls == 1 and sched.ticks_here == 1
+
+
+def test_the_control_thread_waits_out_a_tick_on_another_thread_asleep():
+    """Its deadline coming while another thread's tick runs, the control thread sleeps until
+    that tick is over (a handful of clock readings), then ticks: never spins against it."""
+    import time
+
+    reads = [0]
+
+    def clock() -> float:
+        reads[0] += 1
+        return time.perf_counter()
+
+    sched = PeriodicScheduler(P, clock=clock)
+    starts: list[float] = []
+    sched.start()
+    try:
+        sched.wait()
+        sched.served()
+        sched.after_tick()
+        time.sleep(0.0015)  # past the minimum gap
+        t0 = sched.tick_here()
+        assert t0 is not None
+        th = threading.Thread(target=lambda: starts.append(sched.wait()))
+        th.start()
+        time.sleep(0.008)  # a tick of 8 ms on this thread: past the new deadline
+        n = reads[0]
+        sched.tick_here_done()
+        th.join(2.0)
+    finally:
+        sched.stop()
+    assert n < 100, n  # asleep (spinning read the clock thousands of times)
+    assert len(starts) == 1 and starts[0] >= t0 + 0.008
+
+
+def test_no_tick_starts_on_another_thread_while_the_slack_collects_garbage():
+    import gc
+
+    clock = FakeClock()
+    sched = _scheduler(clock)
+    offered = []
+
+    def during_collection(phase, _info) -> None:
+        if phase == "start":
+            offered.append(sched.tick_here())
+            if offered[-1] is not None:  # (it should not have started: end it at once)
+                sched.tick_here_done()
+
+    gc.callbacks.append(during_collection)
+    try:
+        _run(clock, sched, 120, work_s=0.0012)  # a young collection in the slack after 0.5 s
+    finally:
+        gc.callbacks.remove(during_collection)
+    assert sched.gc_runs >= 1 and offered and all(o is None for o in offered)
+    assert sched.ticks_here == 0
+
+
 def test_timing_keeps_early_ticks_out_of_the_jitter_and_counts_overruns():
     timing = LoopTiming(P, keep=100)
     for start, early, work in [

@@ -303,7 +303,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 loop.on_detection(ev.detection)
                 fused = bool(loop.fuse_detections())
                 if fused and self.config.early_tick:
-                    start = sched.tick_here()
+                    # after a failed tick here the control thread raises it at its wake-up
+                    start = None if self._tick_failure is not None else sched.tick_here()
                     if start is None:  # the control thread is awake: it ticks at once
                         sched.request_tick()
                     else:
@@ -323,11 +324,13 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         except Exception as exc:
             self._tick_failure = exc
         finally:
-            now = time.perf_counter()
-            work = now - start
-            overran = self.timing.tick_done(work, time.thread_time() - cpu0)
-            self.sender.flush()
-            self.scheduler.tick_here_done()
+            try:
+                now = time.perf_counter()
+                work = now - start
+                overran = self.timing.tick_done(work, time.thread_time() - cpu0)
+                self.sender.flush()
+            finally:
+                self.scheduler.tick_here_done()
         self._report_overrun(overran, work, now)
 
     def _report_overrun(self, overran: bool, work_s: float, now: float) -> None:
@@ -549,6 +552,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def run(self, duration_s: float | None = None) -> int:
         sched = self.scheduler
+        self._tick_failure = None
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)

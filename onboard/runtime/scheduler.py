@@ -186,6 +186,7 @@ class PeriodicScheduler:
         self._running = False
         self._busy = False  # the control thread is awake (spinning to a deadline or ticking)
         self._ticking_here = False  # or another thread ticks (tick_here)
+        self._collecting = False  # after_tick collects garbage: no tick_here meanwhile
         self._done = threading.Condition(threading.Lock())
         self._ticks_done = 0
 
@@ -234,6 +235,7 @@ class PeriodicScheduler:
             if (
                 not self._running
                 or self._busy
+                or self._collecting
                 or self._requested
                 or now < self._last_start_s + self.min_gap_s
                 or self._next_s - now <= self.spin_s + self.rehearse_lead_s
@@ -247,9 +249,12 @@ class PeriodicScheduler:
             return now
 
     def tick_here_done(self) -> None:
-        """The tick :meth:`tick_here` started is over: the threads waiting for slack go."""
-        self._ticking_here = False
-        self._tick_over()
+        """The tick :meth:`tick_here` started is over: the control thread, if it is waiting for
+        it, and the threads waiting for slack go."""
+        with self._wake:  # both at once: the control thread claims _busy under this lock
+            self._ticking_here = self._busy = False
+            self._wake.notify_all()
+        self._tick_over(release_busy=False)
 
     def input_begins(self) -> None:
         """From the requesting thread, before it takes the lock to hand an input over (a
@@ -292,38 +297,38 @@ class PeriodicScheduler:
         period = self.period_s
         early = False
         woken_as = ON_THE_GRID
-        with self._wake:
-            now = clock()
-            stalled = now > self._next_s + period and not self._ticking_here
-            if stalled:
-                self._busy = True
+        lead = self.spin_s + self.rehearse_lead_s
+        slept = False
+        while True:
+            # again after each sleep: a tick on another thread (tick_here) re-anchors the grid
+            with self._wake:
+                while self._ticking_here:  # one is running: wait it out, asleep
+                    self._wake.wait()
+                now = clock()
+                deadline = self._next_s
+                stalled = now > deadline + period
+                if stalled:
+                    self._busy = True
+                    break
+            earliest = self._last_start_s + self.min_gap_s  # of an early tick
+            target = deadline
+            self._block_saw_request = self._requested
+            if self._block_saw_request and earliest < deadline:
+                target = earliest if earliest > now else now
+            if target - now <= lead:
+                with self._wake:  # awake: from here on tick_here leaves the tick to us
+                    if self._next_s == deadline and not self._ticking_here:
+                        self._busy = True
+                        break
+                continue
+            self._block(target - now - lead)
+            slept = True
         if stalled:
             self.stalls += 1
             start = now
             woken_as = STALL
         else:
             waited_from = None
-            lead = self.spin_s + self.rehearse_lead_s
-            slept = False
-            while True:
-                # read afresh after each sleep: a tick on another thread (tick_here)
-                # re-anchors the grid
-                deadline = self._next_s
-                earliest = self._last_start_s + self.min_gap_s  # of an early tick
-                target = deadline
-                self._block_saw_request = self._requested
-                if self._block_saw_request and earliest < deadline:
-                    target = earliest if earliest > now else now
-                if target - now <= lead:
-                    with self._wake:  # awake: from here on tick_here leaves the tick to us
-                        if self._next_s == deadline and not self._ticking_here:
-                            self._busy = True
-                            break
-                    now = clock()
-                    continue
-                self._block(target - now - lead)
-                slept = True
-                now = clock()
             give_up = deadline + MAX_INPUT_WAIT_FRACTION * period
             if slept and not self._requested:
                 self.wake_overshoot_s.append(now - (deadline - lead))
@@ -378,22 +383,28 @@ class PeriodicScheduler:
 
     def after_tick(self) -> None:
         """Let the threads waiting for slack go; collect garbage if due and there is slack
-        before the next deadline."""
-        self._tick_over()
+        before the next deadline (no tick starts on another thread meanwhile: tick_here)."""
         now = self._clock()
         if now < self._next_young_s or self._next_s - now < GC_MIN_SLACK_S:
+            self._tick_over()
             return
         self._next_young_s = now + GC_YOUNG_EVERY_S
-        if now >= self._next_older_s:
-            self._next_older_s = now + GC_OLDER_EVERY_S
-            gc.collect(1)
-        else:
-            gc.collect(0)
+        self._collecting = True
+        self._tick_over()
+        try:
+            if now >= self._next_older_s:
+                self._next_older_s = now + GC_OLDER_EVERY_S
+                gc.collect(1)
+            else:
+                gc.collect(0)
+        finally:
+            self._collecting = False
         self.gc_runs += 1
 
-    def _tick_over(self) -> None:
+    def _tick_over(self, release_busy: bool = True) -> None:
         with self._done:
-            self._busy = False
+            if release_busy:
+                self._busy = False
             self._ticks_done += 1
             self._done.notify_all()
 
@@ -412,10 +423,11 @@ class PeriodicScheduler:
         thread wakes), None when the scheduler is not running."""
         if not self._running:
             return None
-        if not self._busy and not self._requested:
+        with self._wake:  # as one: a tick starting on another thread moves both
+            free = not self._busy and not self._requested
             slack = self.slack_s() - SLACK_LEAD_S
-            if slack >= 0.0:
-                return slack
+        if free and slack >= 0.0:
+            return slack
         with self._done:
             n = self._ticks_done
             self._done.wait_for(
