@@ -325,18 +325,22 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self._tick_failure = exc
         finally:
             try:
-                now = time.perf_counter()
-                work = now - start
-                overran = self.timing.tick_done(work, time.thread_time() - cpu0)
-                self.sender.flush()
+                self._tick_ended(start, cpu0)
             finally:
                 self.scheduler.tick_here_done()
-        self._report_overrun(overran, work, now)
 
-    def _report_overrun(self, overran: bool, work_s: float, now: float) -> None:
+    def _tick_ended(self, start: float, cpu0: float) -> float:
+        """After a tick begun at ``start`` (perf_counter, s) on a thread whose CPU time was
+        ``cpu0`` then: its work recorded, what it handed off given to the sender thread, an
+        overrun reported (at most every 5 s). Returns when it ended."""
+        now = time.perf_counter()
+        work = now - start
+        overran = self.timing.tick_done(work, time.thread_time() - cpu0)
         if overran and now - self._last_overrun_report > 5.0:
             self._last_overrun_report = now
-            self._event("warning", f"loop overrun: tick took {1000 * work_s:.1f} ms")
+            self._event("warning", f"loop overrun: tick took {1000 * work:.1f} ms")
+        self.sender.flush()
+        return now
 
     # ------------------------------------------------------------------ timing figures
     @property
@@ -592,11 +596,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                     self.timing.lock_waited(time.perf_counter() - start)
                     sched.served()  # a detection fused before this point is in this tick
                     self.tick()
-                now = time.perf_counter()
-                work = now - start
-                overran = self.timing.tick_done(work, time.thread_time() - cpu0)
-                self.sender.flush()  # what the tick handed off, to the sender thread now
-                self._report_overrun(overran, work, now)
+                now = self._tick_ended(start, cpu0)
                 if end is not None and now >= end:
                     break
                 sched.after_tick()

@@ -300,27 +300,23 @@ class PeriodicScheduler:
         lead = self.spin_s + self.rehearse_lead_s
         slept = False
         while True:
-            # again after each sleep: a tick on another thread (tick_here) re-anchors the grid
+            # read afresh after each sleep (a tick on another thread, tick_here, re-anchors
+            # the grid) and, once awake, claimed under the same lock: from then on tick_here
+            # leaves the tick to this thread
             with self._wake:
                 while self._ticking_here:  # one is running: wait it out, asleep
                     self._wake.wait()
                 now = clock()
                 deadline = self._next_s
                 stalled = now > deadline + period
-                if stalled:
+                earliest = self._last_start_s + self.min_gap_s  # of an early tick
+                target = deadline
+                self._block_saw_request = self._requested
+                if self._block_saw_request and earliest < deadline:
+                    target = earliest if earliest > now else now
+                if stalled or target - now <= lead:
                     self._busy = True
                     break
-            earliest = self._last_start_s + self.min_gap_s  # of an early tick
-            target = deadline
-            self._block_saw_request = self._requested
-            if self._block_saw_request and earliest < deadline:
-                target = earliest if earliest > now else now
-            if target - now <= lead:
-                with self._wake:  # awake: from here on tick_here leaves the tick to us
-                    if self._next_s == deadline and not self._ticking_here:
-                        self._busy = True
-                        break
-                continue
             self._block(target - now - lead)
             slept = True
         if stalled:
