@@ -127,3 +127,25 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
     assert "ended median 0.061 ms, p99 0.412 ms after the time asked" in out
     # what the tail is made of, the kind with most of the slowest 1 % first
     assert "early tick 213, 0.19 / 0.91, 70; rehearsed 9773, 0.09 / 0.31, 40" in out
+
+
+def test_the_setpoint_send_line_says_how_much_of_the_slowest_ticks_it_took(capsys):
+    from groundstation.bench.sitl import _print_figures
+
+    fig = collections.defaultdict(lambda: None)
+    fig.update(
+        seconds=60,
+        camera_delay_s=0.08,
+        load_average_1min_before_after=[0.5, 0.5],
+        setpoint_send_median_ms=0.043,
+        setpoint_send_p99_ms=0.251,
+        slowest_1pc_send_mean_ms=0.168,
+        slowest_1pc_work_mean_ms=0.512,
+    )
+    _print_figures(fig)
+    out = capsys.readouterr().out
+    assert "the setpoint's send" in out
+    assert "median 0.043 ms, p99 0.251 ms; in the slowest 1 % of ticks 0.168 of their 0.512" in out
+    fig["setpoint_send_p99_ms"] = None  # an onboard run from before the send was timed
+    _print_figures(fig)
+    assert "the setpoint's send" not in capsys.readouterr().out

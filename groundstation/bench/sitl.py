@@ -256,6 +256,10 @@ def _fly(
         "tick_work_by_kind": stats.get("tick_work_by_kind"),
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
+        "setpoint_send_median_ms": stats.get("setpoint_send_median_ms"),
+        "setpoint_send_p99_ms": stats.get("setpoint_send_p99_ms"),
+        "slowest_1pc_work_mean_ms": stats.get("slowest_1pc_work_mean_ms"),
+        "slowest_1pc_send_mean_ms": stats.get("slowest_1pc_send_mean_ms"),
         "overruns": stats.get("overruns"),
         "attitude_jumps": stats.get("attitude_jumps"),
         "stale_attitude_ticks": stats.get("stale_attitude_ticks"),
@@ -338,6 +342,15 @@ def _print_figures(figures: dict) -> None:
         f"    of which the control thread's CPU time: median {f(figures['tick_cpu_median_ms'])}"
         f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
     )
+    if figures.get("setpoint_send_p99_ms") is not None:
+        print(
+            f"    of which the setpoint's send (packed, then one system call that delivers it on "
+            f"loopback and wakes the SITL on the other CPU): median "
+            f"{f(figures['setpoint_send_median_ms'], 3)} ms, p99 "
+            f"{f(figures['setpoint_send_p99_ms'], 3)} ms; in the slowest 1 % of ticks "
+            f"{f(figures['slowest_1pc_send_mean_ms'], 3)} of their "
+            f"{f(figures['slowest_1pc_work_mean_ms'], 3)} ms on average"
+        )
     if figures.get("early_tick_work_median_ms") is not None:
         print(
             f"    of which the early ticks' (ticked as a fusion came in): median "

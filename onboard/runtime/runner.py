@@ -457,8 +457,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         if decision.request_streams:  # none of these requests feeds the command: after the tick
             self.sender.submit(self._request_streams)
         if decision.output is not Output.NONE and tel is not None:
+            before = self.clock.now()
             self._send_command(tel.command.body_rates_flu_rad_s, tel.command.thrust_normalised, now)
             sent_at = self.clock.now()
+            self.timing.setpoint_sent(sent_at - before)
             if tel.mode is LoopMode.TRACKING and loop.last_fusion:
                 for cap, rec, det in self._pending_latency:
                     self.timing.command_sent(sent_at, cap, rec, det)

@@ -5,6 +5,7 @@ overruns and the capture-to-command latency (``onboard run --stats``, ``groundst
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 EARLY_TICK = "early tick"  # brought forward by a fused detection (scheduler.py "Early ticks")
@@ -55,6 +56,9 @@ class LoopTiming:
         self._early = False  # the tick running was brought forward
         self._kind = ON_THE_GRID
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the ticking thread's CPU time
+        # the setpoint's send in each tick (NaN: none sent), in step with tick_work_s
+        self.send_s: deque[float] = deque(maxlen=keep)
+        self._send_s = math.nan
         self.latency_total_s: deque[float] = deque(maxlen=keep)
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
@@ -70,6 +74,7 @@ class LoopTiming:
         the grid), its work figures kept apart by it."""
         self._early = early
         self._kind = kind if kind is not None else (EARLY_TICK if early else ON_THE_GRID)
+        self._send_s = math.nan
         if self._last_start is not None:
             per = start_s - self._last_start
             if early:
@@ -87,12 +92,20 @@ class LoopTiming:
         sender's DKF state holding it); part of its work."""
         self.lock_waits_s.append(s)
 
+    def setpoint_sent(self, took_s: float) -> None:
+        """The running tick's setpoint took ``took_s`` (wall time) to pack and hand to the
+        link: part of its work (on a UDP link, the system call delivers the datagram and wakes
+        the process waiting for it)."""
+        self._send_s = took_s
+
     def tick_done(self, work_s: float, cpu_s: float | None = None) -> bool:
         """Record a tick's work (wall time, and the control thread's CPU time in it: the
         difference is waiting for the GIL, a lock or the CPU); True when it overran its
         period."""
         self.tick_work_s.append(work_s)
         self.tick_kinds.append(self._kind)
+        self.send_s.append(self._send_s)
+        self._send_s = math.nan
         if cpu_s is not None:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
@@ -141,6 +154,24 @@ class LoopTiming:
             for kind, ws in by.items()
         }
 
+    def send_in_tail(self) -> dict:
+        """The setpoint's send: its median and p99 over the ticks that sent one, and in the
+        run's slowest 1 % of ticks (at or above the p99 of their work) the mean work and the
+        mean part of it the send took (ms): how much of the tail is the send."""
+        sends = [s for s in self.send_s if not math.isnan(s)]
+        works = list(self.tick_work_s)
+        tail_from = percentile(works, 0.99)
+        tail = [(w, s) for w, s in zip(works, self.send_s, strict=False) if w >= tail_from]
+        n = len(tail)
+        return {
+            "setpoint_send_median_ms": to_ms(percentile(sends, 0.5)),
+            "setpoint_send_p99_ms": to_ms(percentile(sends, 0.99)),
+            "slowest_1pc_work_mean_ms": to_ms(sum(w for w, _ in tail) / n) if n else None,
+            "slowest_1pc_send_mean_ms": (
+                to_ms(sum(0.0 if math.isnan(s) else s for _, s in tail) / n) if n else None
+            ),
+        }
+
     def figures(self) -> dict:
         per = self.periods_all
         jit = [abs(p - self.period_s) for p in per]
@@ -156,11 +187,13 @@ class LoopTiming:
             "jitter_max_ms": None if not jit else 1000 * max(jit),
             "tick_work_median_ms": to_ms(percentile(self.tick_work_s, 0.5)),
             "tick_work_p99_ms": to_ms(percentile(self.tick_work_s, 0.99)),
+            "tick_work_max_ms": to_ms(max(self.tick_work_s, default=None)),
             "early_tick_work_median_ms": to_ms(percentile(early, 0.5)),
             "early_tick_work_p99_ms": to_ms(percentile(early, 0.99)),
             "tick_work_by_kind": by_kind,
             "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
+            **self.send_in_tail(),
             "overruns": self.overruns,
             "early_ticks": self.early_ticks,
             "lock_wait_p99_ms": to_ms(percentile(self.lock_waits_s, 0.99)),
