@@ -92,12 +92,12 @@ def run_sitl_bench(
 
 
 def summarise_runs(flights: list[dict]) -> dict:
-    """Per target of #16 (jitter p99, tick work p99, overruns, capture-to-command beyond the
-    camera p99): each run's value, their median and worst, and in how many runs it was met
-    (a run without the figure does not meet it)."""
+    """Per target of #16 (jitter p99, tick work p99 of the ticks that flew the vehicle,
+    overruns, capture-to-command beyond the camera p99): each run's value, their median and
+    worst, and in how many runs it was met (a run without the figure does not meet it)."""
     targets = {
         "jitter_p99_ms": TARGETS_MS["jitter_p99"],
-        "tick_work_p99_ms": TARGETS_MS["tick_work_p99"],
+        "flying_tick_work_p99_ms": TARGETS_MS["tick_work_p99"],
         "overruns": 0,
         "beyond_camera_p99_ms": TARGETS_MS["beyond_camera_p99"],
     }
@@ -121,7 +121,7 @@ def _print_summary(summary: dict) -> None:
           "run's figure meets it):")  # fmt: skip
     names = {
         "jitter_p99_ms": "period jitter p99 (ms)",
-        "tick_work_p99_ms": "tick work p99 (ms)",
+        "flying_tick_work_p99_ms": "tick work p99, the ticks that flew the vehicle (ms)",
         "overruns": "overruns",
         "beyond_camera_p99_ms": "capture-to-command beyond the camera p99 (ms)",
     }
@@ -256,6 +256,10 @@ def _fly(
         "tick_work_by_kind": stats.get("tick_work_by_kind"),
         "tick_cpu_median_ms": stats.get("tick_cpu_median_ms"),
         "tick_cpu_p99_ms": stats.get("tick_cpu_p99_ms"),
+        "flying_ticks": stats.get("flying_ticks"),
+        "flying_tick_work_median_ms": stats.get("flying_tick_work_median_ms"),
+        "flying_tick_work_p99_ms": stats.get("flying_tick_work_p99_ms"),
+        "flying_tick_work_max_ms": stats.get("flying_tick_work_max_ms"),
         "setpoint_send_median_ms": stats.get("setpoint_send_median_ms"),
         "setpoint_send_p99_ms": stats.get("setpoint_send_p99_ms"),
         "slowest_1pc_work_mean_ms": stats.get("slowest_1pc_work_mean_ms"),
@@ -294,6 +298,8 @@ def _fly(
 
 
 def _print_figures(figures: dict) -> None:
+    from onboard.runtime.runner import RuntimeConfig
+
     seconds, realtime_priority = figures["seconds"], figures["realtime_priority"]
     delay_s, peak = figures["camera_delay_s"], figures["peak_rss_mb"]
     cpu_share, timesync_error_ms = figures["cpu_share_of_one_core"], figures["timesync_error_ms"]
@@ -316,7 +322,9 @@ def _print_figures(figures: dict) -> None:
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
     )
-    print(f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target 200")
+    print(
+        f"  loop rate {f(figures['loop_rate_hz'], 1)} Hz  target {RuntimeConfig.control_rate_hz:g}"
+    )
     if figures["early_ticks"] is not None:
         print(
             f"  early ticks (a detection fused, the grid re-anchored) {figures['early_ticks']}, "
@@ -333,10 +341,21 @@ def _print_figures(figures: dict) -> None:
         f"  period jitter p99 {f(figures['jitter_p99_ms'])} ms (max {f(figures['jitter_max_ms'])})"
         + verdict(figures["jitter_p99_ms"], TARGETS_MS["jitter_p99"])
     )
+    period_s = 1.0 / RuntimeConfig.control_rate_hz  # the onboard run's default, flown here
+    flying = figures.get("flying_ticks")
     print(
-        f"  tick work median {f(figures['tick_work_median_ms'])} ms, p99 "
+        f"  tick work, the ticks that flew the vehicle (a setpoint sent: "
+        f"{'—' if flying is None else flying} ticks, "
+        f"{'—' if flying is None else format(flying * period_s, '.1f')} s): median "
+        f"{f(figures.get('flying_tick_work_median_ms'))} ms, p99 "
+        f"{f(figures.get('flying_tick_work_p99_ms'))} ms (max "
+        f"{f(figures.get('flying_tick_work_max_ms'))})"
+        + verdict(figures.get("flying_tick_work_p99_ms"), TARGETS_MS["tick_work_p99"])
+    )
+    print(
+        f"    all ticks, with those before the start and after the end (the loop runs on, "
+        f"sending nothing): median {f(figures['tick_work_median_ms'])} ms, p99 "
         f"{f(figures['tick_work_p99_ms'])} ms"
-        + verdict(figures["tick_work_p99_ms"], TARGETS_MS["tick_work_p99"])
     )
     print(
         f"    of which the control thread's CPU time: median {f(figures['tick_cpu_median_ms'])}"
@@ -347,7 +366,7 @@ def _print_figures(figures: dict) -> None:
             f"    of which the setpoint's send (packed, then one system call that delivers it on "
             f"loopback and wakes the SITL on the other CPU): median "
             f"{f(figures['setpoint_send_median_ms'], 3)} ms, p99 "
-            f"{f(figures['setpoint_send_p99_ms'], 3)} ms; in the slowest 1 % of ticks "
+            f"{f(figures['setpoint_send_p99_ms'], 3)} ms; in the slowest 1 % of the flying ticks "
             f"{f(figures['slowest_1pc_send_mean_ms'], 3)} of their "
             f"{f(figures['slowest_1pc_work_mean_ms'], 3)} ms on average"
         )

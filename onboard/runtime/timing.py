@@ -56,7 +56,7 @@ class LoopTiming:
         self._early = False  # the tick running was brought forward
         self._kind = ON_THE_GRID
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the ticking thread's CPU time
-        # the setpoint's send in each tick (NaN: none sent), in step with tick_work_s
+        # the setpoint's send in each tick (NaN: none sent: not flying), in step with tick_work_s
         self.send_s: deque[float] = deque(maxlen=keep)
         self._send_s = math.nan
         self.latency_total_s: deque[float] = deque(maxlen=keep)
@@ -155,21 +155,26 @@ class LoopTiming:
         }
 
     def send_in_tail(self) -> dict:
-        """The setpoint's send: its median and p99 over the ticks that sent one, and in the
-        run's slowest 1 % of ticks (at or above the p99 of their work) the mean work and the
-        mean part of it the send took (ms): how much of the tail is the send."""
-        sends = [s for s in self.send_s if not math.isnan(s)]
-        works = list(self.tick_work_s)
+        """The setpoint's send and the ticks that flew the vehicle (sent a setpoint: the sortie,
+        not the ticks before the start or after the end, when the loop runs on and sends
+        nothing), in ms: the send's median and p99; the flying ticks' count, work median, p99
+        and max; and in the slowest 1 % of the flying ticks (at or above their p99) the mean
+        work and the mean part of it the send took: how much of the tail is the send."""
+        flying = [(w, s) for w, s in zip(self.tick_work_s, self.send_s, strict=False) if s == s]
+        works = [w for w, _ in flying]
+        sends = [s for _, s in flying]
         tail_from = percentile(works, 0.99)
-        tail = [(w, s) for w, s in zip(works, self.send_s, strict=False) if w >= tail_from]
+        tail = [(w, s) for w, s in flying if w >= tail_from]
         n = len(tail)
         return {
             "setpoint_send_median_ms": to_ms(percentile(sends, 0.5)),
             "setpoint_send_p99_ms": to_ms(percentile(sends, 0.99)),
+            "flying_ticks": len(flying),
+            "flying_tick_work_median_ms": to_ms(percentile(works, 0.5)),
+            "flying_tick_work_p99_ms": to_ms(tail_from),
+            "flying_tick_work_max_ms": to_ms(max(works, default=None)),
             "slowest_1pc_work_mean_ms": to_ms(sum(w for w, _ in tail) / n) if n else None,
-            "slowest_1pc_send_mean_ms": (
-                to_ms(sum(0.0 if math.isnan(s) else s for _, s in tail) / n) if n else None
-            ),
+            "slowest_1pc_send_mean_ms": to_ms(sum(s for _, s in tail) / n) if n else None,
         }
 
     def figures(self) -> dict:
