@@ -160,7 +160,8 @@ class LoopTiming:
         nothing), in ms: the send's median and p99; the flying ticks' count, work median, p99
         and max; and in the slowest 1 % of the flying ticks (at or above their p99) the mean
         work and the mean part of it the send took: how much of the tail is the send."""
-        flying = [(w, s) for w, s in zip(self.tick_work_s, self.send_s, strict=False) if s == s]
+        pairs = zip(self.tick_work_s, self.send_s, strict=False)
+        flying = [(w, s) for w, s in pairs if not math.isnan(s)]  # NaN: nothing sent
         works = [w for w, _ in flying]
         sends = [s for _, s in flying]
         tail_from = percentile(works, 0.99)
