@@ -100,16 +100,21 @@ def test_rehearse_reaches_each_flight(monkeypatch, flag, expected):
     assert printed[0]["rehearsals"] == 9773
 
 
+def _printable(**given) -> collections.defaultdict:
+    """A flight's figures as ``_print_figures`` takes them: ``given`` and the run's frame, the
+    figures a test's lines do not need absent (None)."""
+    fig = collections.defaultdict(lambda: None)
+    fig.update(seconds=60, camera_delay_s=0.08, load_average_1min_before_after=[0.5, 0.5])
+    fig.update(given)
+    return fig
+
+
 def test_the_rehearsal_line_names_what_was_skipped(capsys):
     """A rehearsed flight's printout says how many rehearsals ran, how long they took, how
     many were skipped and why; the early ticks' work is printed apart."""
     from groundstation.bench.sitl import _print_figures
 
-    fig = collections.defaultdict(lambda: None)  # the figures this line does not need: absent
-    fig.update(
-        seconds=60,
-        camera_delay_s=0.08,
-        load_average_1min_before_after=[0.5, 0.5],
+    fig = _printable(
         rehearse=True,
         rehearsals=9773,
         rehearsals_skipped={"early tick": 213, "fusion": 2, "woken late": 2102},
@@ -144,11 +149,7 @@ def test_the_tick_work_target_is_judged_on_the_ticks_that_flew_the_vehicle(capsy
     send line says how much of the slowest flying ticks the send took."""
     from groundstation.bench.sitl import _print_figures
 
-    fig = collections.defaultdict(lambda: None)
-    fig.update(
-        seconds=60,
-        camera_delay_s=0.08,
-        load_average_1min_before_after=[0.5, 0.5],
+    fig = _printable(
         flying_ticks=1292,
         flying_tick_work_median_ms=0.167,
         flying_tick_work_p99_ms=0.576,
