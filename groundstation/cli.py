@@ -338,6 +338,14 @@ def _build_parser() -> argparse.ArgumentParser:
         help="--sitl: onboard run --rehearse on|off (default: the runtime's, on)",
     )
     b.add_argument(
+        "--sitl-placement",
+        choices=("apart", "shared"),
+        default="apart",
+        help="--sitl: apart (default) keeps the SITL off the CPU left to the control thread and "
+        "under SCHED_BATCH, so its wake-ups never preempt the onboard run's threads, as a flight "
+        "controller of its own; shared leaves it where the system puts it",
+    )
+    b.add_argument(
         "--video",
         action="store_true",
         help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
@@ -604,6 +612,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     early_tick=None if args.early_tick is None else args.early_tick == "on",
                     reserve_cpu=None if args.reserve_cpu is None else args.reserve_cpu == "on",
                     rehearse=None if args.rehearse is None else args.rehearse == "on",
+                    sitl_placement=args.sitl_placement,
                     runs=args.runs,
                 )
             if args.recording:

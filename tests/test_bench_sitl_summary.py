@@ -4,6 +4,7 @@ wake-cost figure it prints times only the tick, not the sleep before it."""
 from __future__ import annotations
 
 import collections
+import os
 
 import pytest
 
@@ -87,7 +88,7 @@ def test_rehearse_reaches_each_flight(monkeypatch, flag, expected):
     }
 
     def fly(*args):
-        asked.append(args[-1])
+        asked.append(args[6])  # _fly(seconds, realtime, video, foxglove, early, reserve, rehearse
         return dict(figures)
 
     printed = []
@@ -98,6 +99,64 @@ def test_rehearse_reaches_each_flight(monkeypatch, flag, expected):
     assert main(argv) == 0
     assert asked == [expected]
     assert printed[0]["rehearsals"] == 9773
+
+
+@pytest.mark.parametrize(("flag", "expected"), [(None, "apart"), ("shared", "shared")])
+def test_sitl_placement_reaches_each_flight(monkeypatch, flag, expected):
+    """``bench --sitl --sitl-placement apart|shared`` is handed to each flight (apart by
+    default) and named in the printout's first line."""
+    import groundstation.bench.core as core
+    import groundstation.bench.sitl as sitl
+
+    asked = []
+
+    def fly(*args):
+        asked.append(args[7])
+        return {"overruns": 0, "sitl_placement": args[7]}
+
+    monkeypatch.setattr(core, "wake_cost_ms", lambda: {})
+    monkeypatch.setattr(sitl, "_fly", fly)
+    monkeypatch.setattr(sitl, "_print_figures", lambda fig: None)
+    argv = ["bench", "--sitl", "--seconds", "1", "--runs", "2"]
+    argv += [] if flag is None else ["--sitl-placement", flag]
+    assert main(argv) == 0
+    assert asked == [expected, expected]
+
+
+def test_the_sitl_placed_apart_runs_off_the_control_cpu_under_sched_batch():
+    """What ``sitl_apart`` does to the SITL's process: the CPUs the onboard run does not leave
+    to its control thread (the highest-numbered), SCHED_BATCH (a woken SITL never preempts the
+    thread that woke it)."""
+    import subprocess
+    import sys
+
+    from groundstation.bench.sitl import sitl_apart
+
+    probe = "import os; print(os.sched_getscheduler(0), sorted(os.sched_getaffinity(0)))"
+    cpus = os.sched_getaffinity(0)
+    out = subprocess.run(
+        [sys.executable, "-c", probe], preexec_fn=sitl_apart(), capture_output=True, text=True,
+        check=True,
+    ).stdout.split(maxsplit=1)  # fmt: skip
+    assert int(out[0]) == os.SCHED_BATCH
+    expected = sorted(cpus)[:-1] if len(cpus) > 1 else sorted(cpus)
+    assert out[1].strip() == str(expected)
+    # on one CPU there is nothing to keep it off: only the policy changes
+    place_one = sitl_apart({min(cpus)})
+    out = subprocess.run(
+        [sys.executable, "-c", probe], preexec_fn=place_one, capture_output=True, text=True,
+        check=True,
+    ).stdout.split(maxsplit=1)  # fmt: skip
+    assert int(out[0]) == os.SCHED_BATCH and out[1].strip() == str(sorted(cpus))
+
+
+def test_the_first_line_names_the_sitl_placement(capsys):
+    from groundstation.bench.sitl import _print_figures
+
+    _print_figures(_printable(sitl_placement="apart", reserved_cpu=1))
+    assert "the SITL off that CPU and under SCHED_BATCH" in capsys.readouterr().out
+    _print_figures(_printable(sitl_placement="shared", reserved_cpu=1))
+    assert "the SITL where the system puts it" in capsys.readouterr().out
 
 
 def _printable(**given) -> collections.defaultdict:

@@ -41,6 +41,23 @@ def _fifo(priority: int):
     return set_policy
 
 
+def sitl_apart(cpus: set[int] | None = None):
+    """A ``preexec_fn`` placing the SITL as a flight controller of its own would be: on the
+    CPUs ``onboard run`` does not leave to its control thread (``split_cpus``; all of them on
+    one CPU) and under SCHED_BATCH, so that its thread, woken by each setpoint, never preempts
+    the thread that sent it (it still takes its fair share of those CPUs). Linux only."""
+    from onboard.runtime.scheduler import split_cpus
+
+    split = split_cpus(os.sched_getaffinity(0) if cpus is None else cpus)
+
+    def place() -> None:
+        if split is not None:
+            os.sched_setaffinity(0, split[1])
+        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+
+    return place
+
+
 def run_sitl_bench(
     seconds: float = 20.0,
     as_json: bool = False,
@@ -51,6 +68,7 @@ def run_sitl_bench(
     reserve_cpu: bool | None = None,
     runs: int = 1,
     rehearse: bool | None = None,
+    sitl_placement: str = "apart",
 ) -> int:
     """``onboard run`` against ``groundstation sitl`` on loopback, one intercept
     (cv-top-to-bottom, started as soon as the target is seen), telemetry to a ground link
@@ -65,7 +83,11 @@ def run_sitl_bench(
     its channels (``--foxglove``) to a Foxglove WebSocket client here subscribed to all of
     them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
     or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``,
-    ``rehearse`` ``--rehearse``.
+    ``rehearse`` ``--rehearse``. ``sitl_placement``: "apart" (default; :func:`sitl_apart`:
+    the SITL off the control thread's CPU, its wake-ups never preempting the onboard run's
+    threads, as a flight controller of its own) or "shared" (where the system puts it: its
+    thread, woken by a setpoint, then often preempted the thread that sent it; README
+    "Session 18"). Under ``realtime_priority`` the SITL runs under SCHED_FIFO instead.
     ``runs``: fly that many times, print each run's figures, then each target's per-run
     values and in how many runs it was met (:func:`summarise_runs`)."""
     from .core import wake_cost_ms
@@ -74,8 +96,9 @@ def run_sitl_bench(
     flights = []
     for n in range(runs):
         figures = _fly(
-            seconds, realtime_priority, video, foxglove, early_tick, reserve_cpu, rehearse
-        )
+            seconds, realtime_priority, video, foxglove, early_tick, reserve_cpu, rehearse,
+            sitl_placement,
+        )  # fmt: skip
         figures["host_wake_cost"] = host
         flights.append(figures)
         if not as_json:
@@ -147,6 +170,7 @@ def _fly(
     early_tick: bool | None,
     reserve_cpu: bool | None,
     rehearse: bool | None = None,
+    sitl_placement: str = "apart",
 ) -> dict:
     """One flight of :func:`run_sitl_bench`: its figures."""
     import socket
@@ -182,7 +206,10 @@ def _fly(
             [sys.executable, "-m", "groundstation", "sitl", "cv-top-to-bottom",
              "--mavlink", f"udpin:127.0.0.1:{fc}", "--camera-port", str(cam)],
             stdout=sitl_log.open("w"), stderr=subprocess.STDOUT,
-            preexec_fn=None if realtime_priority is None else _fifo(realtime_priority),
+            preexec_fn=(
+                _fifo(realtime_priority) if realtime_priority is not None
+                else sitl_apart() if sitl_placement == "apart" else None
+            ),
         )  # fmt: skip
         rt_args = [] if realtime_priority is None else ["--realtime", str(realtime_priority)]
         load_before = os.getloadavg()
@@ -237,6 +264,7 @@ def _fly(
         "early_tick": stats.get("early_tick"),
         "reserved_cpu": stats.get("reserved_cpu"),
         "rehearse": stats.get("rehearse"),
+        "sitl_placement": "SCHED_FIFO" if realtime_priority is not None else sitl_placement,
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
@@ -318,6 +346,10 @@ def _print_figures(figures: dict) -> None:
     cpu = figures["reserved_cpu"]
     rt += ", no CPU reserved" if cpu is None else f", CPU {cpu} left to the control thread"
     rt += {True: ", ticks rehearsed", False: ", no rehearsal"}.get(figures.get("rehearse"), "")
+    rt += {
+        "apart": ", the SITL off that CPU and under SCHED_BATCH (a flight controller of its own)",
+        "shared": ", the SITL where the system puts it",
+    }.get(figures.get("sitl_placement"), "")
     print(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
