@@ -396,7 +396,7 @@ def _print_figures(figures: dict) -> None:
     if figures.get("setpoint_send_p99_ms") is not None:
         print(
             f"    of which the setpoint's send (packed, then one system call that delivers it on "
-            f"loopback and wakes the SITL on the other CPU): median "
+            f"loopback and wakes the SITL): median "
             f"{f(figures['setpoint_send_median_ms'], 3)} ms, p99 "
             f"{f(figures['setpoint_send_p99_ms'], 3)} ms; in the slowest 1 % of the flying ticks "
             f"{f(figures['slowest_1pc_send_mean_ms'], 3)} of their "
