@@ -342,8 +342,8 @@ def _build_parser() -> argparse.ArgumentParser:
         choices=("apart", "shared"),
         default="apart",
         help="--sitl: apart (default) keeps the SITL off the CPU left to the control thread and "
-        "under SCHED_BATCH, so its wake-ups never preempt the onboard run's threads, as a flight "
-        "controller of its own; shared leaves it where the system puts it",
+        "under SCHED_BATCH, so it does not preempt the onboard run's threads when it wakes, as "
+        "a flight controller of its own; shared leaves it where the system puts it",
     )
     b.add_argument(
         "--video",

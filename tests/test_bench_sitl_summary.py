@@ -123,40 +123,90 @@ def test_sitl_placement_reaches_each_flight(monkeypatch, flag, expected):
     assert asked == [expected, expected]
 
 
-def test_the_sitl_placed_apart_runs_off_the_control_cpu_under_sched_batch():
-    """What ``sitl_apart`` does to the SITL's process: the CPUs the onboard run does not leave
-    to its control thread (the highest-numbered), SCHED_BATCH (a woken SITL never preempts the
-    thread that woke it)."""
+needs_sched = pytest.mark.skipif(
+    not (hasattr(os, "sched_setaffinity") and hasattr(os, "SCHED_BATCH")),
+    reason="no CPU affinity or SCHED_BATCH here (not Linux)",
+)
+
+
+def _child_runs_as(preexec) -> str:
+    """How a child process started with ``preexec`` runs (``sitl_placement_of`` it)."""
     import subprocess
     import sys
 
+    from groundstation.bench.sitl import sitl_placement_of
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(5)"],
+                             preexec_fn=preexec)  # fmt: skip
+    try:
+        return sitl_placement_of(child.pid)
+    finally:
+        child.kill()
+        child.wait()
+
+
+@needs_sched
+def test_the_sitl_placed_apart_runs_off_the_control_cpu_under_sched_batch():
+    """What ``sitl_apart`` does to the SITL's process: the CPUs the onboard run does not leave
+    to its control thread (all but the highest-numbered), SCHED_BATCH (a woken SITL does not
+    preempt the thread that woke it); read back as the bench prints it."""
     from groundstation.bench.sitl import sitl_apart
 
-    probe = "import os; print(os.sched_getscheduler(0), sorted(os.sched_getaffinity(0)))"
-    cpus = os.sched_getaffinity(0)
-    out = subprocess.run(
-        [sys.executable, "-c", probe], preexec_fn=sitl_apart(), capture_output=True, text=True,
-        check=True,
-    ).stdout.split(maxsplit=1)  # fmt: skip
-    assert int(out[0]) == os.SCHED_BATCH
-    expected = sorted(cpus)[:-1] if len(cpus) > 1 else sorted(cpus)
-    assert out[1].strip() == str(expected)
-    # on one CPU there is nothing to keep it off: only the policy changes
-    place_one = sitl_apart({min(cpus)})
-    out = subprocess.run(
-        [sys.executable, "-c", probe], preexec_fn=place_one, capture_output=True, text=True,
-        check=True,
-    ).stdout.split(maxsplit=1)  # fmt: skip
-    assert int(out[0]) == os.SCHED_BATCH and out[1].strip() == str(sorted(cpus))
+    cpus = sorted(os.sched_getaffinity(0))
+    kept = cpus[:-1] if len(cpus) > 1 else cpus
+    assert _child_runs_as(sitl_apart()) == f"SCHED_BATCH on CPUs {', '.join(map(str, kept))}"
+    # on one CPU, or with the onboard run's --reserve-cpu off, only the policy changes
+    every = ", ".join(map(str, cpus))
+    assert _child_runs_as(sitl_apart({cpus[0]})) == f"SCHED_BATCH on CPUs {every}"
+    assert _child_runs_as(sitl_apart(keep_off_control=False)) == f"SCHED_BATCH on CPUs {every}"
+    assert _child_runs_as(None) == f"SCHED_OTHER on CPUs {every}"
+
+
+@needs_sched
+def test_a_refused_placement_leaves_the_sitl_running_as_it_was():
+    """CPUs this process may not use: the child is left as it was (the bench reads back and
+    prints what took effect) instead of failing to start."""
+    from groundstation.bench.sitl import sitl_apart
+
+    missing = max(os.sched_getaffinity(0)) + 64
+    every = ", ".join(map(str, sorted(os.sched_getaffinity(0))))
+    runs_as = _child_runs_as(sitl_apart({missing, missing + 1}))
+    assert runs_as == f"SCHED_OTHER on CPUs {every}"
+
+
+def test_the_sitl_preexec_follows_realtime_then_the_placement(monkeypatch):
+    """--realtime puts the SITL under SCHED_FIFO whatever the placement; "apart" keeps it off
+    the control thread's CPU unless --reserve-cpu off; "shared" places nothing."""
+    import groundstation.bench.sitl as sitl
+
+    asked = []
+    monkeypatch.setattr(sitl, "_fifo", lambda prio: ("fifo", prio))
+    monkeypatch.setattr(
+        sitl, "sitl_apart", lambda keep_off_control: asked.append(keep_off_control) or "apart"
+    )
+    assert sitl._sitl_preexec(50, "apart", None) == ("fifo", 50)
+    assert sitl._sitl_preexec(50, "shared", None) == ("fifo", 50)
+    assert sitl._sitl_preexec(None, "shared", None) is None
+    assert sitl._sitl_preexec(None, "apart", None) == "apart"
+    assert sitl._sitl_preexec(None, "apart", False) == "apart"
+    assert asked == [True, False]
 
 
 def test_the_first_line_names_the_sitl_placement(capsys):
     from groundstation.bench.sitl import _print_figures
 
-    _print_figures(_printable(sitl_placement="apart", reserved_cpu=1))
-    assert "the SITL off that CPU and under SCHED_BATCH" in capsys.readouterr().out
-    _print_figures(_printable(sitl_placement="shared", reserved_cpu=1))
-    assert "the SITL where the system puts it" in capsys.readouterr().out
+    _print_figures(
+        _printable(sitl_placement="apart", sitl_runs_as="SCHED_BATCH on CPUs 0", reserved_cpu=1)
+    )
+    out = capsys.readouterr().out
+    assert "CPU 1 left to the control thread" in out
+    assert "the SITL apart (a flight controller of its own): SCHED_BATCH on CPUs 0" in out
+    _print_figures(_printable(sitl_placement="shared", sitl_runs_as="SCHED_OTHER on CPUs 0, 1"))
+    assert "the SITL shared (where the system puts it): SCHED_OTHER on CPUs 0, 1" in (
+        capsys.readouterr().out
+    )
+    _print_figures(_printable(sitl_placement="SCHED_FIFO", realtime_priority=50))
+    assert "the SITL under SCHED_FIFO (--realtime)" in capsys.readouterr().out
 
 
 def _printable(**given) -> collections.defaultdict:

@@ -172,12 +172,12 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     here = stats["early_ticks_on_camera_thread"]
     assert 0 < here <= stats["early_ticks"], stats
     assert stats["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == here, stats
-    # each setpoint's send is timed within its tick: the ticks that sent one flew the vehicle
+    # each setpoint's send is timed within its tick: every tick that sent one is a flying tick
+    # and no other (on loopback no send is refused: each one counted as sent)
     fly = stats["flying_ticks"]
-    assert 0 < fly < stats["ticks"], stats  # none before the start, nor after the end
-    send_p99, work_max = stats["setpoint_send_p99_ms"], stats["flying_tick_work_max_ms"]
-    assert 0.0 < stats["setpoint_send_median_ms"] <= send_p99 <= work_max, stats
-    assert stats["flying_tick_work_p99_ms"] <= stats["slowest_1pc_work_mean_ms"] <= work_max
+    assert fly == stats["commands_sent"], stats
+    assert fly < stats["ticks"] + stats["early_ticks"], stats  # those before the start sent none
+    assert 0.0 < stats["setpoint_send_median_ms"] <= stats["setpoint_send_p99_ms"], stats
     assert 0.0 < stats["slowest_1pc_send_mean_ms"] < stats["slowest_1pc_work_mean_ms"], stats
 
 

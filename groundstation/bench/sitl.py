@@ -41,21 +41,56 @@ def _fifo(priority: int):
     return set_policy
 
 
-def sitl_apart(cpus: set[int] | None = None):
-    """A ``preexec_fn`` placing the SITL as a flight controller of its own would be: on the
-    CPUs ``onboard run`` does not leave to its control thread (``split_cpus``; all of them on
-    one CPU) and under SCHED_BATCH, so that its thread, woken by each setpoint, never preempts
-    the thread that sent it (it still takes its fair share of those CPUs). Linux only."""
+def sitl_apart(cpus: set[int] | None = None, keep_off_control: bool = True):
+    """A ``preexec_fn`` placing the SITL as a flight controller of its own would be, or None
+    where this system has no such calls (not Linux): under SCHED_BATCH, so that its threads,
+    woken by a setpoint, do not preempt the thread that sent it (the scheduler's tick still
+    may; they take their fair share of the CPU), and with ``keep_off_control`` on the CPUs
+    ``onboard run --reserve-cpu on`` does not leave to its control thread (``split_cpus`` of
+    ``cpus``, by default this process's; nothing to keep it off on one CPU). A refusal in the
+    child leaves it as it was (:func:`sitl_placement_of` reads back what took effect)."""
     from onboard.runtime.scheduler import split_cpus
 
+    if not (hasattr(os, "sched_setaffinity") and hasattr(os, "SCHED_BATCH")):
+        return None
     split = split_cpus(os.sched_getaffinity(0) if cpus is None else cpus)
+    others = split[1] if split is not None and keep_off_control else None
 
-    def place() -> None:
-        if split is not None:
-            os.sched_setaffinity(0, split[1])
-        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+    def place() -> None:  # in the child, before exec: system calls only
+        try:
+            if others is not None:
+                os.sched_setaffinity(0, others)
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        except OSError:
+            pass
 
     return place
+
+
+def sitl_placement_of(pid: int) -> str:
+    """How the process ``pid`` runs, as the bench's first line says it: its policy and the
+    CPUs it may use ("SCHED_BATCH on CPUs 0"), or "unknown" off Linux or once it is gone."""
+    names = {
+        getattr(os, n): n for n in ("SCHED_OTHER", "SCHED_BATCH", "SCHED_FIFO", "SCHED_IDLE")
+        if hasattr(os, n)
+    }  # fmt: skip
+    try:
+        policy = names.get(os.sched_getscheduler(pid), "another policy")
+        cpus = ", ".join(str(c) for c in sorted(os.sched_getaffinity(pid)))
+    except (AttributeError, OSError):
+        return "unknown"
+    return f"{policy} on CPUs {cpus}"
+
+
+def _sitl_preexec(realtime_priority: int | None, placement: str, reserve_cpu: bool | None):
+    """The SITL's ``preexec_fn``: SCHED_FIFO under ``realtime_priority`` (whatever the
+    placement), else :func:`sitl_apart` for "apart" (kept off the control thread's CPU unless
+    ``onboard run --reserve-cpu off``), else None ("shared")."""
+    if realtime_priority is not None:
+        return _fifo(realtime_priority)
+    if placement == "apart":
+        return sitl_apart(keep_off_control=reserve_cpu is not False)
+    return None
 
 
 def run_sitl_bench(
@@ -84,7 +119,7 @@ def run_sitl_bench(
     them: what that costs the control tick. ``early_tick``: ``onboard run --early-tick on``
     or ``off`` (None: the runtime's default); ``reserve_cpu`` likewise ``--reserve-cpu``,
     ``rehearse`` ``--rehearse``. ``sitl_placement``: "apart" (default; :func:`sitl_apart`:
-    the SITL off the control thread's CPU, its wake-ups never preempting the onboard run's
+    the SITL off the control thread's CPU, its wake-ups not preempting the onboard run's
     threads, as a flight controller of its own) or "shared" (where the system puts it: its
     thread, woken by a setpoint, then often preempted the thread that sent it; README
     "Session 18"). Under ``realtime_priority`` the SITL runs under SCHED_FIFO instead.
@@ -206,11 +241,9 @@ def _fly(
             [sys.executable, "-m", "groundstation", "sitl", "cv-top-to-bottom",
              "--mavlink", f"udpin:127.0.0.1:{fc}", "--camera-port", str(cam)],
             stdout=sitl_log.open("w"), stderr=subprocess.STDOUT,
-            preexec_fn=(
-                _fifo(realtime_priority) if realtime_priority is not None
-                else sitl_apart() if sitl_placement == "apart" else None
-            ),
+            preexec_fn=_sitl_preexec(realtime_priority, sitl_placement, reserve_cpu),
         )  # fmt: skip
+        sitl_runs_as = sitl_placement_of(sitl.pid)  # what took effect
         rt_args = [] if realtime_priority is None else ["--realtime", str(realtime_priority)]
         load_before = os.getloadavg()
         ground = MavLink(f"udpin:127.0.0.1:{gcs}", 255, 190)
@@ -265,6 +298,7 @@ def _fly(
         "reserved_cpu": stats.get("reserved_cpu"),
         "rehearse": stats.get("rehearse"),
         "sitl_placement": "SCHED_FIFO" if realtime_priority is not None else sitl_placement,
+        "sitl_runs_as": sitl_runs_as,
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
@@ -346,10 +380,14 @@ def _print_figures(figures: dict) -> None:
     cpu = figures["reserved_cpu"]
     rt += ", no CPU reserved" if cpu is None else f", CPU {cpu} left to the control thread"
     rt += {True: ", ticks rehearsed", False: ", no rehearsal"}.get(figures.get("rehearse"), "")
-    rt += {
-        "apart": ", the SITL off that CPU and under SCHED_BATCH (a flight controller of its own)",
-        "shared": ", the SITL where the system puts it",
-    }.get(figures.get("sitl_placement"), "")
+    placement = {
+        "apart": "apart (a flight controller of its own)",
+        "shared": "shared (where the system puts it)",
+        "SCHED_FIFO": "under SCHED_FIFO (--realtime)",
+    }.get(figures.get("sitl_placement"))
+    if placement is not None:
+        runs_as = figures.get("sitl_runs_as")
+        rt += f", the SITL {placement}" + ("" if runs_as is None else f": {runs_as}")
     print(
         f"onboard run vs groundstation sitl, {seconds:g} s, one cv-top-to-bottom intercept"
         f"{rt}; load average {la[0]:.1f} -> {la[1]:.1f} on {os.cpu_count()} CPUs"
@@ -390,7 +428,7 @@ def _print_figures(figures: dict) -> None:
         f"{f(figures['tick_work_p99_ms'])} ms"
     )
     print(
-        f"    of which the control thread's CPU time: median {f(figures['tick_cpu_median_ms'])}"
+        f"    all ticks' CPU time (the ticking thread's): median {f(figures['tick_cpu_median_ms'])}"
         f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
     )
     if figures.get("setpoint_send_p99_ms") is not None:
@@ -435,7 +473,7 @@ def _print_figures(figures: dict) -> None:
     if by_kind:
         slowest = sorted(by_kind.items(), key=lambda kv: -kv[1]["in_slowest_1pc"])
         print(
-            "    by how the tick was woken (ticks, median / p99 ms, of the slowest 1 %): "
+            "    all ticks by how the tick was woken (ticks, median / p99 ms, of the slowest 1 %): "
             + "; ".join(
                 f"{kind} {v['ticks']}, {f(v['median_ms'])} / {f(v['p99_ms'])}, "
                 f"{v['in_slowest_1pc']}"
