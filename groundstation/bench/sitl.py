@@ -422,15 +422,6 @@ def _print_figures(figures: dict) -> None:
         f"{f(figures.get('flying_tick_work_max_ms'))})"
         + verdict(figures.get("flying_tick_work_p99_ms"), TARGETS_MS["tick_work_p99"])
     )
-    print(
-        f"    all ticks, with those before the start and after the end (the loop runs on, "
-        f"sending nothing): median {f(figures['tick_work_median_ms'])} ms, p99 "
-        f"{f(figures['tick_work_p99_ms'])} ms"
-    )
-    print(
-        f"    all ticks' CPU time (the ticking thread's): median {f(figures['tick_cpu_median_ms'])}"
-        f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
-    )
     if figures.get("setpoint_send_p99_ms") is not None:
         print(
             f"    of which the setpoint's send (packed, then one system call that delivers it on "
@@ -440,6 +431,15 @@ def _print_figures(figures: dict) -> None:
             f"{f(figures['slowest_1pc_send_mean_ms'], 3)} of their "
             f"{f(figures['slowest_1pc_work_mean_ms'], 3)} ms on average"
         )
+    print(
+        f"    all ticks, with those before the start and after the end (the loop runs on, "
+        f"sending nothing): median {f(figures['tick_work_median_ms'])} ms, p99 "
+        f"{f(figures['tick_work_p99_ms'])} ms"
+    )
+    print(
+        f"    all ticks' CPU time (the ticking thread's): median {f(figures['tick_cpu_median_ms'])}"
+        f" ms, p99 {f(figures['tick_cpu_p99_ms'])} ms (the rest waits for the GIL or the CPU)"
+    )
     if figures.get("early_tick_work_median_ms") is not None:
         print(
             f"    of which the early ticks' (ticked as a fusion came in): median "
