@@ -82,6 +82,15 @@ def _run(clock: FakeClock, sched: PeriodicScheduler, n: int, work_s: float = 0.0
     return starts
 
 
+def _tick(sched, clock, work_s: float = 0.0) -> None:
+    """One tick on the control thread: woken, served, ``work_s`` of work, its slack begun."""
+    sched.wait()
+    sched.served()
+    if work_s:
+        clock.work(work_s)
+    sched.after_tick()
+
+
 def test_a_request_ticks_at_once_and_re_anchors_the_grid():
     clock = FakeClock()
     sched = _scheduler(clock)
@@ -201,18 +210,13 @@ def test_other_threads_wait_while_an_early_tick_is_pending():
     log: list[str] = []
     sched.start()
     try:
-        sched.wait()
-        sched.served()
-        clock.work(0.0003)
-        sched.after_tick()
+        _tick(sched, clock, 0.0003)
         sched.wait_for_slack()  # asleep with 4.7 ms to go: at once
         log.append("slack")
         sched.request_tick()
         th = _waiting_for_slack(sched, log)  # still held: the early tick has not run
         log.append("early tick")
-        sched.wait()
-        sched.served()
-        sched.after_tick()
+        _tick(sched, clock)
         th.join(2.0)
     finally:
         sched.stop()
@@ -266,9 +270,7 @@ def test_a_pending_request_is_left_to_the_control_thread():
     sched = _scheduler(clock)
     sched.start()
     try:
-        sched.wait()
-        sched.served()
-        sched.after_tick()
+        _tick(sched, clock)
         sched.request_tick()
         assert sched.tick_here() is None  # the control thread is waking for it
     finally:
@@ -281,10 +283,7 @@ def test_other_threads_wait_while_the_fusing_thread_ticks():
     log: list[str] = []
     sched.start()
     try:
-        sched.wait()
-        sched.served()
-        clock.work(0.0003)
-        sched.after_tick()
+        _tick(sched, clock, 0.0003)
         clock.work(0.002)  # asleep, 2.7 ms to go
         assert sched.tick_here() is not None
         th = _waiting_for_slack(sched, log)  # held while the tick runs
@@ -328,9 +327,7 @@ def test_the_control_thread_waits_out_a_tick_on_another_thread_asleep():
     starts: list[float] = []
     sched.start()
     try:
-        sched.wait()
-        sched.served()
-        sched.after_tick()
+        _tick(sched, clock)
         time.sleep(0.0015)  # past the minimum gap
         t0 = sched.tick_here()
         assert t0 is not None

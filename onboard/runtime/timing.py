@@ -154,7 +154,7 @@ class LoopTiming:
             for kind, ws in by.items()
         }
 
-    def send_in_tail(self) -> dict:
+    def flying_figures(self) -> dict:
         """The setpoint's send and the ticks that flew the vehicle (sent a setpoint: the sortie,
         not the ticks before the start or after the end, when the loop runs on and sends
         nothing), in ms: the send's median and p99; the flying ticks' count, work median, p99
@@ -199,7 +199,7 @@ class LoopTiming:
             "tick_work_by_kind": by_kind,
             "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
-            **self.send_in_tail(),
+            **self.flying_figures(),
             "overruns": self.overruns,
             "early_ticks": self.early_ticks,
             "lock_wait_p99_ms": to_ms(percentile(self.lock_waits_s, 0.99)),
