@@ -376,13 +376,117 @@ def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked
         t = threading.Thread(target=hold_the_lock)
         t.start()
         held.wait(5.0)
-        rt._rehearse()  # skipped, not waited for
+        # waited for no longer than REHEARSAL_LOCK_WAIT_S (the holder lets go only after)
+        assert rt._rehearse() is False
         release.set()
         t.join(5.0)
         assert rh.runs == 1
         stats = rt.stats()
         assert stats["rehearse"] is True and stats["rehearsals"] == 1
         assert stats["shadow_refreshes"] == 1 and stats["rehearsal_errors"] == 0
+    finally:
+        rt.fc.close()
+
+
+def test_the_rehearsal_waits_for_a_batch_holding_the_lock_but_not_into_the_spin(
+    tmp_path, monkeypatch
+):
+    """A receiver's batch that ran into the wake-up holds the loop's lock: the rehearsal waits
+    for it asleep (the holder then ends its batch) and runs, rather than declining and leaving
+    the tick to wait for the lock; never past the start of the spin to the deadline."""
+    import onboard.runtime.runner as runner
+
+    rt = _runtime(tmp_path)
+    try:
+        rh, sched = rt.rehearsal, rt.scheduler
+        sched._next_s = time.perf_counter() + 10.0
+        rt._refresh_shadow()
+        monkeypatch.setattr(runner, "REHEARSAL_LOCK_WAIT_S", 5.0)  # the bound under test below
+        held, waiting = threading.Event(), threading.Event()
+
+        def batch() -> None:
+            with rt._loop_lock:
+                held.set()
+                waiting.wait(5.0)
+                time.sleep(0.02)  # the rest of the batch, after the rehearsal began to wait
+
+        t = threading.Thread(target=batch)
+        t.start()
+        held.wait(5.0)
+        lock = rt._loop_lock
+
+        class Telling:  # the loop's lock, telling the batch when the rehearsal asks for it
+            def acquire(self, blocking=True, timeout=-1):
+                waiting.set()
+                return lock.acquire(blocking, timeout)
+
+            def release(self):
+                lock.release()
+
+        rt._loop_lock = Telling()
+        assert rt._rehearse() is True  # waited for the batch, then rehearsed
+        t.join(5.0)
+        assert rh.runs == 1
+
+        # the spin to the deadline has begun: no waiting, declined at once
+        rt._loop_lock = lock
+        release = threading.Event()
+        held.clear()
+
+        def long_batch() -> None:
+            with rt._loop_lock:
+                held.set()
+                release.wait(5.0)
+
+        t = threading.Thread(target=long_batch)
+        t.start()
+        held.wait(5.0)
+        sched._next_s = time.perf_counter() + sched.spin_s / 2  # spinning already
+        assert rt._rehearse() is False  # the holder lets go only after it returns
+        release.set()
+        t.join(5.0)
+        assert rh.runs == 1
+        assert rt.stats()["rehearsals_declined_lock_held"] == 1
+    finally:
+        rt.fc.close()
+
+
+def test_the_rehearsal_steps_a_copy_of_the_state_machine_on_the_shadows_result(
+    tmp_path, monkeypatch
+):
+    """The rest of the tick's code is rehearsed too: a copy of the state machine steps on what
+    the shadow's tick gave, with the inputs the tick would build; the real one is untouched."""
+    from onboard.runtime.state_machine import OffboardStateMachine, State
+
+    rt = _runtime(tmp_path)
+    try:
+        rt.scheduler._next_s = time.perf_counter() + 10.0
+        rt._refresh_shadow()
+        f = rt.fcs
+        f.heartbeat_rx_s = f.last_rx_s = rt.clock.now()
+        f.armed, f.custom_mode = True, 6 << 16  # armed, offboard
+        rt.sm.state = State.INTERCEPT
+        rt.target_size_frac = 0.3  # the pass is done once the track goes stale
+        before = dict(vars(rt.sm))
+        stepped = []
+        plain_step = OffboardStateMachine.step
+
+        def step(self, inputs):
+            stepped.append((self is rt.sm, inputs))
+            return plain_step(self, inputs)
+
+        monkeypatch.setattr(OffboardStateMachine, "step", step)
+        assert rt._rehearse() is True
+        assert len(stepped) == 1
+        is_real, inputs = stepped[0]
+        assert not is_real and vars(rt.sm) == before  # a copy stepped
+        assert inputs.armed and inputs.offboard and inputs.target_size_frac == 0.3
+        assert inputs.speed_m_s == pytest.approx(float(np.linalg.norm(f.vel_enu_m_s)))
+        assert inputs.tracking == (rt.rehearsal.shadow.mode is LoopMode.TRACKING)
+        assert rt.rehearsal.errors == 0
+        rt.tick()  # the tick builds the same inputs for the real one
+        assert [real for real, _ in stepped] == [False, True]
+        assert stepped[1][1].armed and stepped[1][1].target_size_frac == 0.3
     finally:
         rt.fc.close()
 

@@ -76,6 +76,48 @@ def test_other_threads_wait_for_the_tick_to_be_over():
     assert sched.wait_for_slack() is None  # stopped: at once
 
 
+def test_work_that_would_run_into_the_wake_up_waits_for_the_tick():
+    """A piece of work of ``need_s`` goes at once only when it ends before the control thread
+    wakes (less the lead); one that would run into the wake-up waits for the tick to be over
+    (it would hold the GIL, or the loop's lock, as the thread wakes to rehearse and tick)."""
+    from onboard.runtime.scheduler import SLACK_LEAD_S
+
+    from .test_runtime_early_tick import FakeClock, P
+
+    clock = FakeClock()
+    lead = 0.0003
+    sched = PeriodicScheduler(
+        P, clock=clock.now, block=clock.block, rehearse=lambda: True, rehearse_lead_s=lead
+    )
+    sched.start()
+    log: list[str] = []
+    try:
+        sched.wait()
+        sched.after_tick()
+        clock.t += 0.001  # 1 ms into the period
+        wake_in = sched._next_s - sched.spin_s - lead - clock.t
+        fits = wake_in - SLACK_LEAD_S - 0.0005  # 0.5 ms of work still ends before the lead
+        assert sched.wait_for_slack(0.0005) == pytest.approx(fits, abs=1e-5)
+        assert sched.wait_for_slack() == pytest.approx(fits + 0.0005, abs=1e-5)
+        too_long = wake_in  # would end after the wake-up
+
+        def helper() -> None:
+            sched.wait_for_slack(too_long)
+            log.append("helper")
+
+        t = threading.Thread(target=helper)
+        t.start()
+        t.join(0.2)
+        assert t.is_alive() and log == []  # held, not let into the wake-up
+        sched.wait()
+        log.append("tick")
+        sched.after_tick()
+        t.join(2.0)
+    finally:
+        sched.stop()
+    assert log == ["tick", "helper"]
+
+
 def test_collection_is_held_during_the_loop_and_handed_back():
     enabled = gc.isenabled()
     interval = sys.getswitchinterval()

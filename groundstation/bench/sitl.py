@@ -11,6 +11,12 @@ from pathlib import Path
 from ..scenario import load_scenario
 
 
+def _lock_held(n: int | None) -> str:
+    """The part of the declined rehearsals whose loop's lock stayed taken (another thread's
+    batch ran into the wake-up); the rest had nothing to rehearse on yet."""
+    return "" if not n else f" ({n} of them: the loop's lock stayed taken)"
+
+
 def _proc_cpu_s(pid: int) -> float | None:
     try:
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -301,6 +307,7 @@ def _fly(
         "sitl_runs_as": sitl_runs_as,
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
+        "rehearsals_declined_lock_held": stats.get("rehearsals_declined_lock_held"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
         "wake_overshoot_median_ms": stats.get("wake_overshoot_median_ms"),
         "wake_overshoot_p99_ms": stats.get("wake_overshoot_p99_ms"),
@@ -460,6 +467,7 @@ def _print_figures(figures: dict) -> None:
             f"{figures['rehearsals']} run, median {f(figures['rehearsal_median_ms'])} ms, p99 "
             f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
             + ", ".join(f"{n} {why}" for why, n in skipped.items())
+            + _lock_held(figures.get("rehearsals_declined_lock_held"))
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
         )
     if figures.get("wake_overshoot_p99_ms") is not None:

@@ -5,9 +5,9 @@ code and data, not its instructions: on the 2-core virtual machine here the loop
 0.023 ms back to back and 0.16-0.31 ms after a 5 ms sleep (``groundstation bench --sitl``,
 "this machine"). So the control thread wakes :data:`REHEARSE_LEAD_S` earlier than it otherwise
 would and runs the tick's expensive part once on a copy: the shadow, a deep copy of the
-interception loop, ticks the vehicle's current state, and the setpoint frame its command would
-make is packed, not sent. At the deadline the same code runs again on the real loop with it in
-the caches.
+interception loop, ticks the vehicle's current state, a copy of the offboard state machine
+steps on its result, and the setpoint frame its command would make is packed, not sent. At the
+deadline the same code runs again on the real loop with it in the caches.
 
 Nothing of the rehearsal reaches the vehicle: the shadow is a deep copy (no object shared with
 the loop) and its result is dropped, so the commands flown are those flown without it, to the
@@ -25,8 +25,9 @@ rehearsed: they start as soon as the fusion asks for them.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 
-from ..datatypes import VehicleState
+from ..datatypes import ControlTelemetry, VehicleState
 from ..link.px4 import ONBOARD_COMPONENT_ID, VEHICLE_SYSTEM_ID
 from ..loop import InterceptionLoop
 from .fc_side import SET_ATTITUDE_TARGET, setpoint_fields
@@ -60,16 +61,25 @@ class Rehearsal:
         self._age_ticks = 0
         self.refreshes += 1
 
-    def run(self, state: VehicleState, hold_s: float | None) -> bytes | None:
-        """Tick the shadow at ``state`` (its command held ``hold_s``) and pack the setpoint
-        frame of its command. Returns the frame, which must not be sent (None without a
-        shadow, when the output guard refuses the command, or when the tick raised)."""
+    def run(
+        self,
+        state: VehicleState,
+        hold_s: float | None,
+        then: Callable[[ControlTelemetry], object] | None = None,
+    ) -> bytes | None:
+        """Tick the shadow at ``state`` (its command held ``hold_s``), hand its telemetry to
+        ``then`` (the runtime steps a copy of its state machine on it: the rest of the tick's
+        code) and pack the setpoint frame of its command. Returns the frame, which must not
+        be sent (None without a shadow, when the output guard refuses the command, or when
+        the tick or ``then`` raised)."""
         shadow = self.shadow
         if shadow is None:
             return None
         self.runs += 1
         try:
             tel = shadow.tick(state, False, hold_s)
+            if then is not None:
+                then(tel)
             cmd = tel.command
             fields = setpoint_fields(cmd.body_rates_flu_rad_s, cmd.thrust_normalised, state.time_s)
             if fields is None:

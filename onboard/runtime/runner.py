@@ -19,6 +19,7 @@ All MAVLink goes through :mod:`onboard.link.px4`; the maths stays in :mod:`onboa
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -27,6 +28,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from ..camera_model import CameraModel
@@ -66,6 +68,13 @@ from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
 
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
+# the other threads' work sized to the slack (scheduler.wait_for_slack; README "Work sized to
+# the slack"): begun no later than this before the control thread wakes, it is done by then
+RECEIVE_BUDGET_S = 0.0004  # a receiver's batch parsed and taken: p99 0.33 ms (bench --sitl)
+SEND_BUDGET_S = 0.0005  # a sender's item, telemetry the dearest: p99 0.47 ms (bench --sitl)
+# the rehearsal waits this long at most for the loop's lock held by another thread taking a
+# batch (asleep, the GIL let go, so that thread ends it) rather than leave the tick to wait
+REHEARSAL_LOCK_WAIT_S = 0.00015
 SHADOW_MIN_SLACK_S = 0.002  # the shadow is copied (about 0.5 ms) only with this much slack left
 
 
@@ -142,6 +151,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
         self._gcs_waiting: deque = deque()
         self.rehearsal = Rehearsal() if config.rehearse else None
+        self.rehearsals_lock_held = 0  # declined: the loop's lock stayed taken (_rehearse)
         self.scheduler = PeriodicScheduler(
             self.period_s,
             realtime_priority=config.realtime_priority,
@@ -150,7 +160,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         )
         # run(): telemetry, events, heartbeats and TIMESYNC requests sent after the tick
         self.sender = Sender(
-            on_error=lambda msg: self._event("error", msg), gate=self.scheduler.wait_for_slack
+            on_error=lambda msg: self._event("error", msg),
+            gate=partial(self.scheduler.wait_for_slack, SEND_BUDGET_S),
         )
         self.camera = CameraThread(
             lambda: open_source(config.camera, self.clock, self.params.runtime.CAM_LAT_S),
@@ -395,6 +406,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "rehearse": rh is not None,
             "rehearsals": None if rh is None else rh.runs,
             "rehearsals_skipped": None if rh is None else sched.rehearsals_skipped,
+            "rehearsals_declined_lock_held": None if rh is None else self.rehearsals_lock_held,
             "rehearsal_median_ms": to_ms(percentile(took, 0.5)),
             "rehearsal_p99_ms": to_ms(percentile(took, 0.99)),
             "shadow_refreshes": None if rh is None else rh.refreshes,
@@ -437,21 +449,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.video_overlay = overlay_of(
                 self._last_det, tel and tel.e_est_px, loop and loop.camera, now
             )
-        silence = None if f.heartbeat_rx_s is None else now - f.last_rx_s
-        tracking = tel is not None and tel.mode is LoopMode.TRACKING
-        decision = self.sm.step(
-            Inputs(
-                now_s=now,
-                fc_silence_s=silence,
-                armed=f.armed,
-                offboard=f.offboard,
-                tracking=tracking,
-                target_lost=tel is not None and tel.mode is LoopMode.LOST,
-                target_stale=tel is not None and tel.mode in _STALE_MODES,
-                target_size_frac=self.target_size_frac,
-                speed_m_s=0.0 if f.vel_enu_m_s is None else math.hypot(*f.vel_enu_m_s.tolist()),
-            )
-        )
+        inputs = self._sm_inputs(now, tel)
+        tracking = inputs.tracking
+        decision = self.sm.step(inputs)
         for ev in decision.events:
             self._event(*ev)
         if decision.request_streams:  # none of these requests feeds the command: after the tick
@@ -505,12 +505,46 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.sender.submit(self._flush_events)
         self._tick_n += 1
 
+    def _sm_inputs(self, now: float, tel) -> Inputs:
+        """What the state machine is told at a tick at ``now`` whose loop gave ``tel`` (None:
+        no loop tick): the flight controller's state, the loop's mode, the target's size."""
+        f = self.fcs
+        mode = None if tel is None else tel.mode
+        return Inputs(
+            now_s=now,
+            fc_silence_s=None if f.heartbeat_rx_s is None else now - f.last_rx_s,
+            armed=f.armed,
+            offboard=f.offboard,
+            tracking=mode is LoopMode.TRACKING,
+            target_lost=mode is LoopMode.LOST,
+            target_stale=mode in _STALE_MODES,
+            target_size_frac=self.target_size_frac,
+            speed_m_s=0.0 if f.vel_enu_m_s is None else math.hypot(*f.vel_enu_m_s.tolist()),
+        )
+
+    def _rehearse_step(self, now: float, tel) -> None:
+        """The rehearsal's state machine step: a copy of it (the real one untouched) steps on
+        the shadow's telemetry, so the tick finds that code in the caches too (after a 5 ms
+        sleep the step took about 0.023 ms here, rehearsed 0.006, back to back 0.005)."""
+        copy.copy(self.sm).step(self._sm_inputs(now, tel))
+
     def _rehearse(self) -> bool:
         """On the control thread, just before a deadline (rehearsal.py): the shadow loop ticks
-        the vehicle's state as of now. Skipped (False) while the loop's lock is taken (a fusion
-        is running: an early tick is coming), before the state is known or without a shadow."""
+        the vehicle's state as of now. Skipped (False) before the state is known, without a
+        shadow, or when the loop's lock stays taken (another thread taking a batch that ran
+        into the wake-up) for ``REHEARSAL_LOCK_WAIT_S`` or until the spin: waiting for it
+        asleep lets that thread end its batch with the GIL, where declining at once left the
+        tick to wait for it, spinning with the GIL in between."""
         f, rh = self.fcs, self.rehearsal
-        if rh.shadow is None or not self._loop_lock.acquire(blocking=False):
+        if rh.shadow is None:
+            return False
+        wait_s = min(REHEARSAL_LOCK_WAIT_S, self.scheduler.spin_in_s())
+        if wait_s > 0.0:
+            taken = self._loop_lock.acquire(timeout=wait_s)
+        else:
+            taken = self._loop_lock.acquire(blocking=False)
+        if not taken:
+            self.rehearsals_lock_held += 1
             return False
         try:
             if f.pos_enu_m is None or f.q_wxyz is None:
@@ -518,7 +552,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             state = state_at(f, self.clock.now())
         finally:
             self._loop_lock.release()
-        rh.run(state, self._hold_s)
+        rh.run(state, self._hold_s, partial(self._rehearse_step, state.time_s))
         return True
 
     def _refresh_shadow(self) -> None:
@@ -565,7 +599,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         realtime = self.config.realtime_priority is not None and note is None
         # PX4's stream and the ground's messages parsed and taken between ticks
         on_error = lambda msg: self._event("error", msg)  # noqa: E731
-        gate = sched.wait_for_slack
+        gate = partial(sched.wait_for_slack, RECEIVE_BUDGET_S)
         self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error, gate)
         self._fc_rx.start()
         if self.gcs is not None:

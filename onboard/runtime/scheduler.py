@@ -408,20 +408,28 @@ class PeriodicScheduler:
         """Seconds left before the control thread wakes for the next tick (negative: late)."""
         return self._next_s - self.spin_s - self.rehearse_lead_s - self._clock()
 
-    def wait_for_slack(self) -> float | None:
-        """For the other threads, before a piece of work: return at once while the control
-        thread sleeps with more than ``SLACK_LEAD_S`` to go before it wakes (``spin_s`` before
-        its deadline) and no early tick is pending; otherwise when its tick is over. Their work
+    def spin_in_s(self) -> float:
+        """Seconds left before the spin to the next deadline begins (negative: spinning)."""
+        return self._next_s - self.spin_s - self._clock()
+
+    def wait_for_slack(self, need_s: float = 0.0) -> float | None:
+        """For the other threads, before a piece of work that takes up to ``need_s`` (s):
+        return at once while the control thread sleeps with more than ``SLACK_LEAD_S`` plus
+        ``need_s`` to go before it wakes (``spin_s`` and the rehearsal's lead before its
+        deadline) and no early tick is pending; otherwise when its tick is over. Their work
         then falls in the tick's slack, not at its start: under SCHED_FIFO a thread of the same
         priority is not preempted, so work begun just before the wake-up would delay the tick
-        by its length. Returns how long the slack lasts from now (s, less ``SLACK_LEAD_S``:
+        by its length, and otherwise the waking thread waits for the GIL (up to the switch
+        interval) or for the loop's lock the work holds (README "Work sized to the slack").
+        Returns how long the slack lasts from now (s, less ``SLACK_LEAD_S`` and ``need_s``:
         how long the caller may block on its own input and still be done before the control
         thread wakes), None when the scheduler is not running."""
         if not self._running:
             return None
+        margin = SLACK_LEAD_S + max(need_s, 0.0)
         with self._wake:  # as one: a tick starting on another thread moves both
             free = not self._busy and not self._requested
-            slack = self.slack_s() - SLACK_LEAD_S
+            slack = self.slack_s() - margin
         if free and slack >= 0.0:
             return slack
         with self._done:
@@ -430,7 +438,7 @@ class PeriodicScheduler:
                 lambda: self._ticks_done != n or not self._running,
                 timeout=MAX_HOLD_OFF_S,
             )
-        return max(self.slack_s() - SLACK_LEAD_S, 0.0) if self._running else None
+        return max(self.slack_s() - margin, 0.0) if self._running else None
 
     def stop(self) -> None:
         """Hand collection back to the interpreter (and let any waiting thread go)."""
