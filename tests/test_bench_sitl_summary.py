@@ -228,6 +228,8 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
         rehearsals=9773,
         rehearsals_skipped={"early tick": 213, "fusion": 2, "woken late": 2102, "declined": 9},
         rehearsals_declined_lock_held=3,
+        rehearsal_lock_waits=5,
+        rehearsal_lock_wait_max_ms=0.12,
         rehearsal_median_ms=0.13,
         rehearsal_p99_ms=0.35,
         shadow_refreshes=72,
@@ -245,7 +247,9 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
     out = capsys.readouterr().out
     assert "ticks rehearsed" in out
     assert "9773 run, median 0.13 ms, p99 0.35 ms" in out
-    assert "2102 woken late, 9 declined (3 of them: the loop's lock stayed taken)" in out
+    assert "213 early tick, 2 fusion, 2102 woken late, 9 declined" in out
+    assert "9 declined (3 of them: the loop's lock stayed taken)" in out
+    assert "5 waited for the loop's lock first (at most 0.12 ms, in their times)" in out
     assert "copies taken 72, errors 0" in out
     assert "early ticks' (ticked as a fusion came in): median 0.19 ms, p99 0.91 ms" in out
     assert "ended median 0.061 ms, p99 0.412 ms after the time asked" in out

@@ -155,6 +155,42 @@ def test_px4_messages_that_find_the_loop_busy_wait_in_order_for_the_next_tick(tm
             link.close()
 
 
+def test_a_batch_that_would_hold_the_lock_at_the_wake_up_is_left_to_the_tick(tmp_path):
+    """A receiver's batch taken under the loop's lock must be done before the control thread
+    wakes (TAKE_BUDGET_S): closer to the wake-up it waits, in order, for the tick to take it
+    at its start, rather than hold the lock the rehearsal and the tick need."""
+    from onboard.runtime.runner import TAKE_BUDGET_S
+
+    rt, fc, gcs, _ = _runtime(tmp_path)
+    px4 = mavlink.MAVLink(None, 1, 1)
+
+    def position(x_m: float):
+        msg = px4.local_position_ned_encode(int(1000 * x_m), x_m, 0.0, 0.0, 0.0, 0.0, 0.0)
+        msg.pack(px4)
+        return msg
+
+    sched = rt.scheduler
+    wake_lead_s = sched.spin_s + sched.rehearse_lead_s
+    try:
+        sched._running = True  # as in run(), without its threads
+        sched._next_s = time.perf_counter() + wake_lead_s + TAKE_BUDGET_S / 2  # wakes soon
+        assert not sched.time_for(TAKE_BUDGET_S)
+        rt._take_fc_batch([position(1.0)])
+        rt._take_fc_batch([position(2.0)])
+        assert rt.fcs.pos_enu_m is None  # waiting, not taken
+        rt.tick()
+        assert rt.fcs.pos_enu_m[1] == 2.0  # both taken by the tick, in order
+        sched._next_s = time.perf_counter() + 1.0  # the wake-up far: taken at once
+        assert sched.time_for(TAKE_BUDGET_S)
+        rt._take_fc_batch([position(3.0)])
+        assert rt.fcs.pos_enu_m[1] == 3.0
+    finally:
+        sched._running = False
+        rt.camera.stop()
+        for link in (fc, gcs, rt.fc, rt.gcs):
+            link.close()
+
+
 def _affinity_while_running(tmp_path, **kw) -> dict:
     """The control thread's CPUs and the runtime's other threads' (by name), seen in a tick,
     with the runtime's lines."""

@@ -352,7 +352,7 @@ def _runtime(tmp_path, rehearse: bool = True):
     return rt
 
 
-def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked(tmp_path):
+def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_with_the_lock(tmp_path):
     rt = _runtime(tmp_path)
     try:
         rh, sched = rt.rehearsal, rt.scheduler
@@ -369,7 +369,7 @@ def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked
         release = threading.Event()
 
         def hold_the_lock() -> None:
-            with rt._loop_lock:  # a fusion on the camera thread
+            with rt._loop_lock:  # another thread's batch, long
                 held.set()
                 release.wait(5.0)
 
@@ -388,12 +388,30 @@ def test_the_runtime_copies_its_loop_only_with_slack_and_rehearses_only_unlocked
         rt.fc.close()
 
 
+def _hold_lock(rt, release: threading.Event, then_s: float = 0.0) -> threading.Thread:
+    """Another thread's batch holding the loop's lock until ``release`` is set, then
+    ``then_s`` more (s); returns once it holds it."""
+    held = threading.Event()
+
+    def batch() -> None:
+        with rt._loop_lock:
+            held.set()
+            release.wait(5.0)
+            time.sleep(then_s)
+
+    t = threading.Thread(target=batch)
+    t.start()
+    held.wait(5.0)
+    return t
+
+
 def test_the_rehearsal_waits_for_a_batch_holding_the_lock_but_not_into_the_spin(
     tmp_path, monkeypatch
 ):
     """A receiver's batch that ran into the wake-up holds the loop's lock: the rehearsal waits
     for it asleep (the holder then ends its batch) and runs, rather than declining and leaving
-    the tick to wait for the lock; never past the start of the spin to the deadline."""
+    the tick to wait for the lock; never past the start of the spin to the deadline, and not
+    when an input came meanwhile (its early tick goes first)."""
     import onboard.runtime.runner as runner
 
     rt = _runtime(tmp_path)
@@ -401,52 +419,64 @@ def test_the_rehearsal_waits_for_a_batch_holding_the_lock_but_not_into_the_spin(
         rh, sched = rt.rehearsal, rt.scheduler
         sched._next_s = time.perf_counter() + 10.0
         rt._refresh_shadow()
-        monkeypatch.setattr(runner, "REHEARSAL_LOCK_WAIT_S", 5.0)  # the bound under test below
-        held, waiting = threading.Event(), threading.Event()
-
-        def batch() -> None:
-            with rt._loop_lock:
-                held.set()
-                waiting.wait(5.0)
-                time.sleep(0.02)  # the rest of the batch, after the rehearsal began to wait
-
-        t = threading.Thread(target=batch)
-        t.start()
-        held.wait(5.0)
+        monkeypatch.setattr(runner, "REHEARSAL_LOCK_WAIT_S", 5.0)  # the spin bounds it below
         lock = rt._loop_lock
+        release = threading.Event()
 
-        class Telling:  # the loop's lock, telling the batch when the rehearsal asks for it
+        class Telling:  # the loop's lock, letting the batch go when the rehearsal waits for it
             def acquire(self, blocking=True, timeout=-1):
-                waiting.set()
+                if blocking:
+                    release.set()
                 return lock.acquire(blocking, timeout)
 
             def release(self):
                 lock.release()
 
+        t = _hold_lock(rt, release, then_s=0.02)  # the rest of the batch, 20 ms
         rt._loop_lock = Telling()
         assert rt._rehearse() is True  # waited for the batch, then rehearsed
         t.join(5.0)
         assert rh.runs == 1
-
-        # the spin to the deadline has begun: no waiting, declined at once
+        stats = rt.stats()
+        assert stats["rehearsal_lock_waits"] == 1 and stats["rehearsal_lock_wait_max_ms"] >= 15.0
+        assert stats["rehearsals_declined_lock_held"] == 0
         rt._loop_lock = lock
-        release = threading.Event()
-        held.clear()
 
-        def long_batch() -> None:
-            with rt._loop_lock:
-                held.set()
-                release.wait(5.0)
+        # the spin 0.1 s away: waited for that long at most, then declined (not into the spin)
+        release.clear()
+        t = _hold_lock(rt, release)
+        sched._next_s = time.perf_counter() + sched.spin_s + 0.1
+        asked = time.perf_counter()
+        assert rt._rehearse() is False  # the holder lets go only after it returns
+        waited = time.perf_counter() - asked
+        release.set()
+        t.join(5.0)
+        assert 0.05 < waited < 2.0  # bounded by the spin, not the 5 s allowed
+        assert rh.runs == 1 and rt.stats()["rehearsals_declined_lock_held"] == 1
 
-        t = threading.Thread(target=long_batch)
-        t.start()
-        held.wait(5.0)
-        sched._next_s = time.perf_counter() + sched.spin_s / 2  # spinning already
+        # spinning already: declined at once
+        release.clear()
+        t = _hold_lock(rt, release)
+        sched._next_s = time.perf_counter() + sched.spin_s / 2
         assert rt._rehearse() is False  # the holder lets go only after it returns
         release.set()
         t.join(5.0)
+        assert rh.runs == 1 and rt.stats()["rehearsals_declined_lock_held"] == 2
+
+        # the lock got after a fusion began meanwhile: its early tick first, not a rehearsal
+        sched._next_s = time.perf_counter() + 10.0
+        release.clear()
+        t = _hold_lock(rt, release, then_s=0.02)
+        rt._loop_lock = Telling()
+        sched.input_begins()
+        try:
+            assert rt._rehearse() is False
+        finally:
+            sched.input_done()
+            rt._loop_lock = lock
+        t.join(5.0)
         assert rh.runs == 1
-        assert rt.stats()["rehearsals_declined_lock_held"] == 1
+        assert rt.stats()["rehearsals_declined_lock_held"] == 2  # not a batch's
     finally:
         rt.fc.close()
 
@@ -455,7 +485,8 @@ def test_the_rehearsal_steps_a_copy_of_the_state_machine_on_the_shadows_result(
     tmp_path, monkeypatch
 ):
     """The rest of the tick's code is rehearsed too: a copy of the state machine steps on what
-    the shadow's tick gave, with the inputs the tick would build; the real one is untouched."""
+    the shadow's tick gave, with the inputs the tick would build; the real one is untouched
+    (here PX4 has left offboard: the copy starts its grace time, the real one does not)."""
     from onboard.runtime.state_machine import OffboardStateMachine, State
 
     rt = _runtime(tmp_path)
@@ -464,29 +495,31 @@ def test_the_rehearsal_steps_a_copy_of_the_state_machine_on_the_shadows_result(
         rt._refresh_shadow()
         f = rt.fcs
         f.heartbeat_rx_s = f.last_rx_s = rt.clock.now()
-        f.armed, f.custom_mode = True, 6 << 16  # armed, offboard
+        f.armed, f.custom_mode = True, 4 << 16  # armed, PX4 in auto (not offboard)
         rt.sm.state = State.INTERCEPT
-        rt.target_size_frac = 0.3  # the pass is done once the track goes stale
+        rt.target_size_frac = 0.3
         before = dict(vars(rt.sm))
         stepped = []
         plain_step = OffboardStateMachine.step
 
         def step(self, inputs):
-            stepped.append((self is rt.sm, inputs))
+            stepped.append((self, inputs))
             return plain_step(self, inputs)
 
         monkeypatch.setattr(OffboardStateMachine, "step", step)
         assert rt._rehearse() is True
         assert len(stepped) == 1
-        is_real, inputs = stepped[0]
-        assert not is_real and vars(rt.sm) == before  # a copy stepped
-        assert inputs.armed and inputs.offboard and inputs.target_size_frac == 0.3
+        copy_, inputs = stepped[0]
+        assert copy_ is not rt.sm and copy_._offboard_gone_s is not None  # the copy stepped
+        assert vars(rt.sm) == before and rt.sm._offboard_gone_s is None  # the real one did not
+        assert inputs.armed and not inputs.offboard and inputs.target_size_frac == 0.3
         assert inputs.speed_m_s == pytest.approx(float(np.linalg.norm(f.vel_enu_m_s)))
         assert inputs.tracking == (rt.rehearsal.shadow.mode is LoopMode.TRACKING)
         assert rt.rehearsal.errors == 0
         rt.tick()  # the tick builds the same inputs for the real one
-        assert [real for real, _ in stepped] == [False, True]
-        assert stepped[1][1].armed and stepped[1][1].target_size_frac == 0.3
+        real, inputs = stepped[1]
+        assert real is rt.sm and rt.sm._offboard_gone_s is not None
+        assert inputs.armed and not inputs.offboard and inputs.target_size_frac == 0.3
     finally:
         rt.fc.close()
 

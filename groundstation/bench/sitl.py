@@ -17,6 +17,14 @@ def _lock_held(n: int | None) -> str:
     return "" if not n else f" ({n} of them: the loop's lock stayed taken)"
 
 
+def _lock_waits(n: int | None, max_ms: float | None) -> str:
+    """The rehearsals that waited for another thread's batch to let the loop's lock go (their
+    times above include the wait)."""
+    if not n:
+        return ""
+    return f"; {n} waited for the loop's lock first (at most {max_ms:.2f} ms, in their times)"
+
+
 def _proc_cpu_s(pid: int) -> float | None:
     try:
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -308,6 +316,8 @@ def _fly(
         "rehearsals": stats.get("rehearsals"),
         "rehearsals_skipped": stats.get("rehearsals_skipped"),
         "rehearsals_declined_lock_held": stats.get("rehearsals_declined_lock_held"),
+        "rehearsal_lock_waits": stats.get("rehearsal_lock_waits"),
+        "rehearsal_lock_wait_max_ms": stats.get("rehearsal_lock_wait_max_ms"),
         "rehearsal_median_ms": stats.get("rehearsal_median_ms"),
         "wake_overshoot_median_ms": stats.get("wake_overshoot_median_ms"),
         "wake_overshoot_p99_ms": stats.get("wake_overshoot_p99_ms"),
@@ -468,6 +478,9 @@ def _print_figures(figures: dict) -> None:
             f"{f(figures['rehearsal_p99_ms'])} ms; not rehearsed: "
             + ", ".join(f"{n} {why}" for why, n in skipped.items())
             + _lock_held(figures.get("rehearsals_declined_lock_held"))
+            + _lock_waits(
+                figures.get("rehearsal_lock_waits"), figures.get("rehearsal_lock_wait_max_ms")
+            )
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
         )
     if figures.get("wake_overshoot_p99_ms") is not None:

@@ -32,7 +32,7 @@ from functools import partial
 from pathlib import Path
 
 from ..camera_model import CameraModel
-from ..datatypes import GRAVITY_M_S2, LoopMode, VehicleParams
+from ..datatypes import GRAVITY_M_S2, ControlTelemetry, LoopMode, VehicleParams
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.param_meta import FILE_NAMES, component_files
@@ -68,12 +68,12 @@ from .video import Overlay, VideoConfig, overlay_of, runtime_streamer
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
 
 TIMESYNC_EVERY_S = 0.1  # TIMESYNC requests to PX4 at 10 Hz
-# the other threads' work sized to the slack (scheduler.wait_for_slack; README "Work sized to
-# the slack"): begun no later than this before the control thread wakes, it is done by then
-RECEIVE_BUDGET_S = 0.0004  # a receiver's batch parsed and taken: p99 0.33 ms (bench --sitl)
+# the other threads' work sized to the slack (README "Work sized to the slack"): begun no
+# later than this before the control thread wakes, it is done by then
+TAKE_BUDGET_S = 0.0002  # a receiver's batch taken under the loop's lock: p99 0.16 ms (bench)
 SEND_BUDGET_S = 0.0005  # a sender's item, telemetry the dearest: p99 0.47 ms (bench --sitl)
-# the rehearsal waits this long at most for the loop's lock held by another thread taking a
-# batch (asleep, the GIL let go, so that thread ends it) rather than leave the tick to wait
+# the rehearsal waits this long at most for the loop's lock held by another thread's batch
+# (asleep, the GIL let go, so that thread ends it) rather than leave the tick to wait for it
 REHEARSAL_LOCK_WAIT_S = 0.00015
 SHADOW_MIN_SLACK_S = 0.002  # the shadow is copied (about 0.5 ms) only with this much slack left
 
@@ -151,7 +151,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
         self._gcs_waiting: deque = deque()
         self.rehearsal = Rehearsal() if config.rehearse else None
-        self.rehearsals_lock_held = 0  # declined: the loop's lock stayed taken (_rehearse)
+        self.rehearsals_declined_lock_held = 0  # the loop's lock stayed taken (_rehearse)
+        self.rehearsal_lock_waits = 0  # rehearsals that waited for it and got it
+        self.rehearsal_lock_wait_max_s = 0.0
         self.scheduler = PeriodicScheduler(
             self.period_s,
             realtime_priority=config.realtime_priority,
@@ -261,7 +263,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         """On a receiver thread (run()): PX4's messages taken as they arrive, under the loop's
         lock, so a tick sees each of them entirely or not at all. When the lock is taken (a
         tick, a fusion) they wait in order for whoever has it next, the next tick at the
-        latest: a late control thread running tick after tick must not leave them behind."""
+        latest: a late control thread running tick after tick must not leave them behind. So
+        they do when taking them here would still hold the lock when the control thread wakes
+        (``TAKE_BUDGET_S``): the tick takes them at its start."""
         self._offer(self._fc_waiting, msgs)
 
     def _take_gcs_batch(self, msgs: list) -> None:
@@ -270,6 +274,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     def _offer(self, waiting: deque, msgs: list) -> None:
         waiting.extend(msgs)
+        if not self.scheduler.time_for(TAKE_BUDGET_S):
+            return  # the take would still hold the lock at the wake-up: the tick takes them
         if self._loop_lock.acquire(blocking=False):
             try:
                 self._take_waiting(self.clock.now())
@@ -406,7 +412,13 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "rehearse": rh is not None,
             "rehearsals": None if rh is None else rh.runs,
             "rehearsals_skipped": None if rh is None else sched.rehearsals_skipped,
-            "rehearsals_declined_lock_held": None if rh is None else self.rehearsals_lock_held,
+            "rehearsals_declined_lock_held": None
+            if rh is None
+            else self.rehearsals_declined_lock_held,
+            "rehearsal_lock_waits": None if rh is None else self.rehearsal_lock_waits,
+            "rehearsal_lock_wait_max_ms": None
+            if rh is None
+            else to_ms(self.rehearsal_lock_wait_max_s),
             "rehearsal_median_ms": to_ms(percentile(took, 0.5)),
             "rehearsal_p99_ms": to_ms(percentile(took, 0.99)),
             "shadow_refreshes": None if rh is None else rh.refreshes,
@@ -505,7 +517,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             self.sender.submit(self._flush_events)
         self._tick_n += 1
 
-    def _sm_inputs(self, now: float, tel) -> Inputs:
+    def _sm_inputs(self, now: float, tel: ControlTelemetry | None) -> Inputs:
         """What the state machine is told at a tick at ``now`` whose loop gave ``tel`` (None:
         no loop tick): the flight controller's state, the loop's mode, the target's size."""
         f = self.fcs
@@ -522,7 +534,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             speed_m_s=0.0 if f.vel_enu_m_s is None else math.hypot(*f.vel_enu_m_s.tolist()),
         )
 
-    def _rehearse_step(self, now: float, tel) -> None:
+    def _rehearse_step(self, now: float, tel: ControlTelemetry) -> None:
         """The rehearsal's state machine step: a copy of it (the real one untouched) steps on
         the shadow's telemetry, so the tick finds that code in the caches too (after a 5 ms
         sleep the step took about 0.023 ms here, rehearsed 0.006, back to back 0.005)."""
@@ -531,21 +543,27 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     def _rehearse(self) -> bool:
         """On the control thread, just before a deadline (rehearsal.py): the shadow loop ticks
         the vehicle's state as of now. Skipped (False) before the state is known, without a
-        shadow, or when the loop's lock stays taken (another thread taking a batch that ran
-        into the wake-up) for ``REHEARSAL_LOCK_WAIT_S`` or until the spin: waiting for it
-        asleep lets that thread end its batch with the GIL, where declining at once left the
-        tick to wait for it, spinning with the GIL in between."""
-        f, rh = self.fcs, self.rehearsal
+        shadow, or when the loop's lock stays taken (another thread's batch that ran into the
+        wake-up) for ``REHEARSAL_LOCK_WAIT_S`` or until the spin: waiting for it asleep lets
+        that thread end its batch with the GIL, where declining at once left the tick to wait
+        for it, spinning with the GIL in between. Skipped too when the wait ended in the spin
+        or with an input on its way (a fusion began meanwhile: its early tick comes first)."""
+        f, rh, sched = self.fcs, self.rehearsal, self.scheduler
         if rh.shadow is None:
             return False
-        wait_s = min(REHEARSAL_LOCK_WAIT_S, self.scheduler.spin_in_s())
-        if wait_s > 0.0:
-            taken = self._loop_lock.acquire(timeout=wait_s)
-        else:
-            taken = self._loop_lock.acquire(blocking=False)
-        if not taken:
-            self.rehearsals_lock_held += 1
-            return False
+        if not self._loop_lock.acquire(blocking=False):
+            wait_s = min(REHEARSAL_LOCK_WAIT_S, sched.spin_in_s())
+            asked = time.perf_counter()
+            if wait_s <= 0.0 or not self._loop_lock.acquire(timeout=wait_s):
+                if not sched.input_pending():  # else a fusion's, not a batch's
+                    self.rehearsals_declined_lock_held += 1
+                return False
+            self.rehearsal_lock_waits += 1
+            waited_s = time.perf_counter() - asked
+            self.rehearsal_lock_wait_max_s = max(self.rehearsal_lock_wait_max_s, waited_s)
+            if sched.spin_in_s() <= 0.0 or sched.input_pending():
+                self._loop_lock.release()
+                return False
         try:
             if f.pos_enu_m is None or f.q_wxyz is None:
                 return False
@@ -599,7 +617,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         realtime = self.config.realtime_priority is not None and note is None
         # PX4's stream and the ground's messages parsed and taken between ticks
         on_error = lambda msg: self._event("error", msg)  # noqa: E731
-        gate = partial(sched.wait_for_slack, RECEIVE_BUDGET_S)
+        gate = sched.wait_for_slack
         self._fc_rx = LinkReceiver(self.fc, self._take_fc_batch, on_error, gate)
         self._fc_rx.start()
         if self.gcs is not None:

@@ -408,6 +408,24 @@ class PeriodicScheduler:
         """Seconds left before the control thread wakes for the next tick (negative: late)."""
         return self._next_s - self.spin_s - self.rehearse_lead_s - self._clock()
 
+    def _slack_for(self, margin_s: float) -> float | None:
+        """The slack left after ``margin_s`` (s) while the control thread sleeps with more than
+        that to go and no early tick is pending, else None."""
+        with self._wake:  # as one: a tick starting on another thread moves both
+            free = not self._busy and not self._requested
+            slack = self.slack_s() - margin_s
+        return slack if free and slack >= 0.0 else None
+
+    def time_for(self, need_s: float) -> bool:
+        """Would work of ``need_s`` (s) begun now on another thread end ``SLACK_LEAD_S`` before
+        the control thread wakes (and no tick is pending or running)? Always True when the
+        scheduler is not running."""
+        return not self._running or self._slack_for(SLACK_LEAD_S + max(need_s, 0.0)) is not None
+
+    def input_pending(self) -> bool:
+        """Is an input being handed over (:meth:`input_begins`) or an early tick asked for?"""
+        return self._inputting or self._requested
+
     def spin_in_s(self) -> float:
         """Seconds left before the spin to the next deadline begins (negative: spinning)."""
         return self._next_s - self.spin_s - self._clock()
@@ -427,10 +445,8 @@ class PeriodicScheduler:
         if not self._running:
             return None
         margin = SLACK_LEAD_S + max(need_s, 0.0)
-        with self._wake:  # as one: a tick starting on another thread moves both
-            free = not self._busy and not self._requested
-            slack = self.slack_s() - margin
-        if free and slack >= 0.0:
+        slack = self._slack_for(margin)
+        if slack is not None:
             return slack
         with self._done:
             n = self._ticks_done
