@@ -263,9 +263,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         """On a receiver thread (run()): PX4's messages taken as they arrive, under the loop's
         lock, so a tick sees each of them entirely or not at all. When the lock is taken (a
         tick, a fusion) they wait in order for whoever has it next, the next tick at the
-        latest: a late control thread running tick after tick must not leave them behind. So
-        they do when taking them here would still hold the lock when the control thread wakes
-        (``TAKE_BUDGET_S``): the tick takes them at its start."""
+        latest: a late control thread running tick after tick must not leave them behind. They
+        wait likewise when taking them here would still hold the lock when the control thread
+        wakes (``TAKE_BUDGET_S``): the tick takes them at its start."""
         self._offer(self._fc_waiting, msgs)
 
     def _take_gcs_batch(self, msgs: list) -> None:

@@ -441,7 +441,7 @@ class PeriodicScheduler:
         interval) or for the loop's lock the work holds (README "Work sized to the slack").
         Returns how long the slack lasts from now (s, less ``SLACK_LEAD_S`` and ``need_s``:
         how long the caller may block on its own input and still be done before the control
-        thread wakes), None when the scheduler is not running."""
+        thread wakes; 0 after a tick that left less), None when the scheduler is not running."""
         if not self._running:
             return None
         margin = SLACK_LEAD_S + max(need_s, 0.0)
