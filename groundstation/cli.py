@@ -343,7 +343,9 @@ def _build_parser() -> argparse.ArgumentParser:
         default="apart",
         help="--sitl: apart (default) keeps the SITL off the CPU left to the control thread and "
         "under SCHED_BATCH, so it does not preempt the onboard run's threads when it wakes, as "
-        "a flight controller of its own; shared leaves it where the system puts it",
+        "a flight controller of its own, and polls the ground link under SCHED_IDLE while it "
+        "flies, as a ground station on a computer of its own; shared leaves both where the "
+        "system puts them",
     )
     b.add_argument(
         "--video",

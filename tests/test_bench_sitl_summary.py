@@ -209,6 +209,38 @@ def test_the_first_line_names_the_sitl_placement(capsys):
     assert "the SITL under SCHED_FIFO (--realtime)" in capsys.readouterr().out
 
 
+def test_the_first_line_names_how_the_bench_itself_polls(capsys):
+    from groundstation.bench.sitl import _print_figures
+
+    _print_figures(_printable(sitl_placement="apart", bench_runs_as="SCHED_IDLE"))
+    assert "the bench's own polling under SCHED_IDLE" in capsys.readouterr().out
+    _print_figures(_printable(sitl_placement="shared"))
+    assert "the bench's own polling" not in capsys.readouterr().out
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
+def test_the_bench_polls_under_sched_idle_while_it_flies_and_is_put_back(monkeypatch):
+    """With the SITL apart the bench's own polling (the ground station's stand-in) runs under
+    SCHED_IDLE while the flight lasts and as before afterwards; not asked, or refused, it is
+    left as it was and the printout says nothing."""
+    from groundstation.bench.sitl import _idle_while
+
+    before = os.sched_getscheduler(0)
+    with _idle_while(True) as runs_as:
+        assert runs_as == "SCHED_IDLE" and os.sched_getscheduler(0) == os.SCHED_IDLE
+    assert os.sched_getscheduler(0) == before
+    with _idle_while(False) as runs_as:
+        assert runs_as is None and os.sched_getscheduler(0) == before
+
+    def refuse(*_args):
+        raise PermissionError("not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    with _idle_while(True) as runs_as:
+        assert runs_as is None
+    assert os.sched_getscheduler(0) == before
+
+
 def _printable(**given) -> collections.defaultdict:
     """A flight's figures as ``_print_figures`` takes them: ``given`` and the run's frame, the
     figures a test's lines do not need absent (None)."""
