@@ -47,6 +47,15 @@ class Rehearsal:
         self.runs = 0  # rehearsals run
         self.refreshes = 0  # shadows taken
         self.errors = 0  # rehearsals that raised (their shadow dropped)
+        # the runtime's wait for the loop's lock before a rehearsal (runner._rehearse)
+        self.lock_declines = 0  # declined: another thread's batch kept it
+        self.lock_waits = 0  # waited for it, then rehearsed
+        self.lock_wait_max_s = 0.0
+
+    def lock_waited(self, waited_s: float) -> None:
+        """Count a wait of ``waited_s`` (s) for the loop's lock that ended with it taken."""
+        self.lock_waits += 1
+        self.lock_wait_max_s = max(self.lock_wait_max_s, waited_s)
 
     def needs_refresh(self, loop: InterceptionLoop) -> bool:
         """After a tick of ``loop``: whether the shadow is missing, of another mode than the

@@ -151,9 +151,6 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._fc_waiting: deque = deque()  # parsed, not taken yet (_take_fc_batch)
         self._gcs_waiting: deque = deque()
         self.rehearsal = Rehearsal() if config.rehearse else None
-        self.rehearsals_declined_lock_held = 0  # the loop's lock stayed taken (_rehearse)
-        self.rehearsal_lock_waits = 0  # rehearsals that waited for it and got it
-        self.rehearsal_lock_wait_max_s = 0.0
         self.scheduler = PeriodicScheduler(
             self.period_s,
             realtime_priority=config.realtime_priority,
@@ -412,13 +409,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "rehearse": rh is not None,
             "rehearsals": None if rh is None else rh.runs,
             "rehearsals_skipped": None if rh is None else sched.rehearsals_skipped,
-            "rehearsals_declined_lock_held": None
-            if rh is None
-            else self.rehearsals_declined_lock_held,
-            "rehearsal_lock_waits": None if rh is None else self.rehearsal_lock_waits,
-            "rehearsal_lock_wait_max_ms": None
-            if rh is None
-            else to_ms(self.rehearsal_lock_wait_max_s),
+            "rehearsals_declined_lock_held": None if rh is None else rh.lock_declines,
+            "rehearsal_lock_waits": None if rh is None else rh.lock_waits,
+            "rehearsal_lock_wait_max_ms": None if rh is None else to_ms(rh.lock_wait_max_s),
             "rehearsal_median_ms": to_ms(percentile(took, 0.5)),
             "rehearsal_p99_ms": to_ms(percentile(took, 0.99)),
             "shadow_refreshes": None if rh is None else rh.refreshes,
@@ -556,11 +549,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             asked = time.perf_counter()
             if wait_s <= 0.0 or not self._loop_lock.acquire(timeout=wait_s):
                 if not sched.input_pending():  # else a fusion's, not a batch's
-                    self.rehearsals_declined_lock_held += 1
+                    rh.lock_declines += 1
                 return False
-            self.rehearsal_lock_waits += 1
-            waited_s = time.perf_counter() - asked
-            self.rehearsal_lock_wait_max_s = max(self.rehearsal_lock_wait_max_s, waited_s)
+            rh.lock_waited(time.perf_counter() - asked)
             if sched.spin_in_s() <= 0.0 or sched.input_pending():
                 self._loop_lock.release()
                 return False
