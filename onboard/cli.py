@@ -16,8 +16,9 @@ _RUNTIME_SWITCHES = {
     "early_tick": "tick as soon as the camera thread has fused a detection, not at the next "
     "deadline (default %(default)s)",
     "reserve_cpu": "leave one CPU to the control thread: the runtime's other threads "
-    "(receivers, sender, camera, video) kept off it, so their wake-ups do not preempt a tick "
-    "(default %(default)s; nothing to do on one CPU or under --realtime)",
+    "(receivers, sender, camera, video) kept off it, so their wake-ups do not preempt a tick, "
+    "and the control thread bound to it (freed for 10 s at a time while another program keeps "
+    "it waiting there) (default %(default)s; nothing to do on one CPU or under --realtime)",
     "rehearse": "wake a little earlier and tick a copy of the loop (its result dropped) just "
     "before each deadline, so the tick finds its code and data in the caches (default "
     "%(default)s)",

@@ -199,7 +199,7 @@ def test_the_first_line_names_the_sitl_placement(capsys):
         _printable(sitl_placement="apart", sitl_runs_as="SCHED_BATCH on CPUs 0", reserved_cpu=1)
     )
     out = capsys.readouterr().out
-    assert "CPU 1 left to the control thread" in out
+    assert "CPU 1 left to the control thread," in out  # a runtime that did not say (older)
     assert "the SITL apart (a flight controller of its own): SCHED_BATCH on CPUs 0" in out
     _print_figures(_printable(sitl_placement="shared", sitl_runs_as="SCHED_OTHER on CPUs 0, 1"))
     assert "the SITL shared (where the system puts it): SCHED_OTHER on CPUs 0, 1" in (
@@ -321,3 +321,29 @@ def test_the_tick_work_target_is_judged_on_the_ticks_that_flew_the_vehicle(capsy
     fig["setpoint_send_p99_ms"] = None  # an onboard run from before the send was timed
     _print_figures(fig)
     assert "the setpoint's send" not in capsys.readouterr().out
+
+
+def test_the_first_line_says_whether_the_control_thread_stayed_bound(capsys):
+    from groundstation.bench.sitl import _print_figures
+
+    def first_line(**given) -> str:
+        _print_figures(_printable(reserved_cpu=1, rehearse=True, **given))
+        return capsys.readouterr().out.splitlines()[0]
+
+    assert "CPU 1 left to the control thread and bound to it, ticks" in first_line(
+        control_thread_bound=True, binding_escapes=0, binding_wait_max_fraction=0.01
+    )
+    assert (
+        "CPU 1 left to the control thread and bound to it (freed 6 times while another program "
+        "kept it waiting there, up to 31 % of the time), ticks"
+    ) in first_line(control_thread_bound=True, binding_escapes=6, binding_wait_max_fraction=0.31)
+    assert (
+        "bound to it (freed 1 time while another program kept it waiting there, up to 8 % of "
+        "the time; free at the end), ticks"
+    ) in first_line(control_thread_bound=False, binding_escapes=1, binding_wait_max_fraction=0.08)
+    assert "CPU 1 left to the control thread (not bound to it: no run delay to watch it by)," in (
+        first_line(control_thread_bound=False, binding_escapes=None)
+    )
+    assert "CPU 1 left to the control thread, ticks" in first_line()  # an older runtime
+    _print_figures(_printable(reserved_cpu=None, rehearse=True))
+    assert ", no CPU reserved, ticks" in capsys.readouterr().out

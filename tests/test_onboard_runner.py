@@ -3,8 +3,10 @@ protocol and PX4's messages taken off the tick, against sockets this test reads.
 
 import math
 import os
+import re
 import threading
 import time
+from functools import partial
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from onboard.link.params import PARAM_SPECS
 from onboard.link.px4 import MavLink, mavlink
 from onboard.runtime import runner
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
-from onboard.runtime.scheduler import keep_off
+from onboard.runtime.scheduler import BindingWatch, keep_off
 
 from .sitl_rig import free_port
 
@@ -191,26 +193,37 @@ def test_a_batch_that_would_hold_the_lock_at_the_wake_up_is_left_to_the_tick(tmp
             link.close()
 
 
-def _affinity_while_running(tmp_path, **kw) -> dict:
-    """The control thread's CPUs and the runtime's other threads' (by name), seen in a tick,
-    with the runtime's lines."""
+def _run_looking(tmp_path, look, duration_s: float, **kw):
+    """Run a 100 Hz runtime for ``duration_s`` calling ``look(rt)`` on the control thread
+    after each of its ticks; returns the runtime and its lines."""
     rt, fc, gcs, lines = _runtime(tmp_path, control_rate_hz=100.0, **kw)
-    seen: dict = {"lines": lines}
     tick = rt.tick
 
     def tick_and_look():
         tick()
+        look(rt)
+
+    rt.tick = tick_and_look
+    try:
+        rt.run(duration_s=duration_s)
+    finally:
+        for link in (fc, gcs):
+            link.close()
+    return rt, lines
+
+
+def _affinity_while_running(tmp_path, **kw) -> dict:
+    """The control thread's CPUs and the runtime's other threads' (by name), seen in a tick,
+    with the runtime's lines."""
+    seen: dict = {}
+
+    def look(rt):
         if "control" not in seen:
             seen["control"] = os.sched_getaffinity(0)
             threads = (rt._fc_rx, rt._gcs_rx, rt.sender, rt.camera)  # this runtime's own
             seen["others"] = {t.name: os.sched_getaffinity(t.native_id) for t in threads}
 
-    rt.tick = tick_and_look
-    try:
-        rt.run(duration_s=0.3)
-    finally:
-        for link in (fc, gcs):
-            link.close()
+    rt, seen["lines"] = _run_looking(tmp_path, look, 0.3, **kw)
     seen["stats"] = rt.stats()
     return seen
 
@@ -228,15 +241,79 @@ def test_one_cpu_is_left_to_the_control_thread_and_given_back(tmp_path):
     cpus = os.sched_getaffinity(0)
     top = max(cpus)
     seen = _affinity_while_running(tmp_path)
-    assert seen["control"] == cpus  # the control thread itself may run anywhere
+    assert seen["control"] == {top}  # the control thread bound to it
     # the two links' receivers, the sender and the camera thread: every CPU but that one
     assert len(seen["others"]) == 4, seen["others"]
     assert all(c == cpus - {top} for c in seen["others"].values()), seen["others"]
     assert seen["stats"]["reserved_cpu"] == top
+    assert seen["stats"]["control_thread_bound"] is True
+    assert seen["stats"]["binding_escapes"] == 0
     assert os.sched_getaffinity(0) == cpus
     off = _affinity_while_running(tmp_path, reserve_cpu=False)
     assert off["stats"]["reserved_cpu"] is None
     assert all(c == cpus for c in off["others"].values())
+
+
+@pytest.mark.skipif(not _PLACEABLE, reason="one CPU, or placement not allowed here")
+def test_a_control_thread_kept_waiting_on_its_cpu_is_freed_then_bound_again(tmp_path, monkeypatch):
+    # another program on the CPU left to it (here a run delay of half the time, made up): a
+    # bound thread could not leave, so it is freed for a while, then bound again and looked at
+    cpus = os.sched_getaffinity(0)
+    top = max(cpus)
+    monkeypatch.setattr(runner, "run_delay_s", lambda: 0.5 * time.perf_counter())
+    monkeypatch.setattr(
+        runner, "BindingWatch", partial(BindingWatch, check_every_s=0.05, unbound_for_s=0.15)
+    )
+    affinity: list[set[int]] = []
+
+    def look(_rt):
+        cpus_now = os.sched_getaffinity(0)
+        if not affinity or affinity[-1] != cpus_now:
+            affinity.append(cpus_now)
+
+    rt, lines = _run_looking(tmp_path, look, 0.6)
+    assert affinity[:4] == [{top}, cpus, {top}, cpus], affinity  # bound, freed, bound, freed
+    stats = rt.stats()
+    assert stats["binding_escapes"] >= 2
+    assert stats["binding_wait_max_fraction"] == pytest.approx(0.5, abs=0.02)
+    freed = [line for line in lines if "free to run on any CPU" in line]
+    assert len(freed) == stats["binding_escapes"]
+    assert re.search(rf"waited (49|50|51) % of the time for CPU {top} .*for 0.15 s", freed[0])
+    assert freed[1].endswith("for 0.3 s")  # still there after it was bound again: twice as long
+    assert os.sched_getaffinity(0) == cpus  # every thread given back its CPUs
+
+
+@pytest.mark.skipif(not _PLACEABLE, reason="one CPU, or placement not allowed here")
+def test_without_its_run_delay_to_watch_the_control_thread_is_not_bound(tmp_path, monkeypatch):
+    cpus = os.sched_getaffinity(0)
+    top = max(cpus)
+    monkeypatch.setattr(runner, "run_delay_s", lambda: None)  # no /proc schedstat
+    seen = _affinity_while_running(tmp_path)
+    assert seen["control"] == cpus  # free: a bound thread could not leave another program
+    assert all(c == cpus - {top} for c in seen["others"].values()), seen["others"]
+    assert seen["stats"]["reserved_cpu"] == top
+    assert seen["stats"]["control_thread_bound"] is False
+    assert seen["stats"]["binding_escapes"] is None
+
+
+@pytest.mark.skipif(not _PLACEABLE, reason="one CPU, or placement not allowed here")
+def test_a_refused_binding_is_a_warning_and_puts_every_thread_back(tmp_path, monkeypatch):
+    cpus = os.sched_getaffinity(0)
+    top = max(cpus)
+    real = os.sched_setaffinity
+
+    def refuse_binding(pid, cpu_set):
+        if pid == 0 and set(cpu_set) == {top}:
+            raise PermissionError("test")
+        real(pid, cpu_set)
+
+    monkeypatch.setattr(os, "sched_setaffinity", refuse_binding)
+    seen = _affinity_while_running(tmp_path)
+    assert any("CPU placement refused (test)" in line for line in seen["lines"])
+    assert seen["control"] == cpus
+    assert all(c == cpus for c in seen["others"].values()), seen["others"]
+    assert seen["stats"]["reserved_cpu"] is None
+    assert seen["stats"]["control_thread_bound"] is None
 
 
 @pytest.mark.skipif(not _PLACEABLE, reason="one CPU, or placement not allowed here")
@@ -263,6 +340,8 @@ def test_a_refused_reservation_is_a_warning_and_puts_the_threads_back(tmp_path, 
     seen = _affinity_while_running(tmp_path)
     assert any("CPU placement refused" in line for line in seen["lines"])
     assert seen["stats"]["reserved_cpu"] is None
+    assert seen["stats"]["control_thread_bound"] is None
+    assert seen["control"] == cpus
     assert all(c == cpus for c in seen["others"].values()), seen["others"]
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gc
 import os
+import subprocess
 import sys
 import threading
 import time
@@ -193,3 +194,68 @@ def test_every_other_thread_is_kept_off_and_put_back():
         keep_off(cpus, -1)
         go.set()
     assert os.sched_getaffinity(0) == cpus
+
+
+def test_the_binding_is_let_go_while_the_control_thread_waits_for_its_cpu_and_taken_again():
+    from onboard.runtime.scheduler import BindingWatch
+
+    w = BindingWatch(check_every_s=0.5, max_wait_fraction=0.05, unbound_for_s=10.0,
+                     unbound_max_s=40.0)  # fmt: skip
+    assert w.due(0.0) and w.step(0.0, 3.0) is None  # the first look starts a window
+    assert w.bound and not w.due(0.49) and w.step(0.49, 9.0) is None  # not yet
+    assert w.step(0.5, 3.0 + 0.024) is None  # 4.8 % of the half second waiting: stays bound
+    assert w.last_wait_fraction == pytest.approx(0.048)
+    assert w.step(1.0, 3.024 + 0.026) is False  # 5.2 %: to be freed ...
+    assert w.bound and w.escapes == 0  # ... once the runtime has done it
+    w.applied(False, 1.0, 3.05)
+    assert not w.bound and w.escapes == 1 and w.max_wait_fraction_seen == pytest.approx(0.052)
+    assert not w.due(10.99) and w.step(10.99, 5.0) is None  # free for ten seconds
+    assert w.step(11.0, 5.0) is True  # then to be bound again
+    w.applied(True, 11.0, 5.0)  # looked at afresh from there: what it waited free not counted
+    assert w.bound and w.step(11.5, 5.0 + 0.5) is False  # the program still there
+    w.applied(False, 11.5, 5.5)
+    assert w.unbound_for_s == 20.0 and w.escapes == 2  # free twice as long
+    assert not w.due(31.49) and w.step(31.5, 6.0) is True
+    w.applied(True, 31.5, 6.0)
+    assert w.step(32.0, 6.5) is False
+    w.applied(False, 32.0, 6.5)
+    assert w.unbound_for_s == 40.0  # and again, up to the longest
+    assert w.step(72.0, 7.0) is True
+    w.applied(True, 72.0, 7.0)
+    assert w.step(72.5, 7.5) is False
+    w.applied(False, 72.5, 7.5)
+    assert w.unbound_for_s == 40.0 and w.escapes == 4
+    assert w.step(112.5, 7.5) is True
+    w.applied(True, 112.5, 7.5)
+    assert w.step(113.0, 7.5 + 0.001) is None  # gone: bound, and back to ten seconds
+    assert w.unbound_for_s == 10.0 and w.bound
+
+
+@pytest.mark.skipif(
+    not os.path.exists("/proc/thread-self/schedstat")
+    or not hasattr(os, "sched_setaffinity")
+    or keep_off(os.sched_getaffinity(0), -1) is not None,  # placement allowed here
+    reason="Linux's schedstat and CPU placement",
+)
+def test_the_run_delay_is_the_time_this_thread_waited_for_its_cpu():
+    from onboard.runtime.scheduler import run_delay_s
+
+    cpus = os.sched_getaffinity(0)
+    cpu = min(cpus)
+    spin = (
+        f"import os, time\nos.sched_setaffinity(0, {{{cpu}}})\n"
+        "end = time.time() + 0.6\nwhile time.time() < end: pass"
+    )
+    os.sched_setaffinity(0, {cpu})
+    try:
+        before = run_delay_s()
+        hog = subprocess.Popen([sys.executable, "-c", spin])  # spins on this thread's CPU
+        end = time.perf_counter() + 0.4
+        while time.perf_counter() < end:
+            sum(range(1000))
+        after = run_delay_s()
+        hog.wait()
+    finally:
+        os.sched_setaffinity(0, cpus)
+    assert before is not None and after is not None
+    assert after - before > 0.02  # 0.4 s sharing one CPU with a spinning process

@@ -337,6 +337,9 @@ def _fly(
         "realtime_priority": realtime_priority,
         "early_tick": stats.get("early_tick"),
         "reserved_cpu": stats.get("reserved_cpu"),
+        "control_thread_bound": stats.get("control_thread_bound"),
+        "binding_escapes": stats.get("binding_escapes"),
+        "binding_wait_max_fraction": stats.get("binding_wait_max_fraction"),
         "rehearse": stats.get("rehearse"),
         "sitl_placement": "SCHED_FIFO" if realtime_priority is not None else sitl_placement,
         "sitl_runs_as": sitl_runs_as,
@@ -424,6 +427,20 @@ def _print_figures(figures: dict) -> None:
     rt += {True: ", early tick on", False: ", early tick off"}.get(figures["early_tick"], "")
     cpu = figures["reserved_cpu"]
     rt += ", no CPU reserved" if cpu is None else f", CPU {cpu} left to the control thread"
+    escapes = figures.get("binding_escapes")
+    if cpu is not None and escapes is not None:
+        rt += " and bound to it"
+        if escapes:
+            waited = figures.get("binding_wait_max_fraction")
+            rt += (
+                f" (freed {escapes} time{'s' * (escapes != 1)} while another program kept it"
+                " waiting there"
+                + ("" if waited is None else f", up to {100 * waited:.0f} % of the time")
+                + ("; free at the end" if figures["control_thread_bound"] is False else "")
+                + ")"
+            )
+    elif cpu is not None and figures.get("control_thread_bound") is False:
+        rt += " (not bound to it: no run delay to watch it by)"
     rt += {True: ", ticks rehearsed", False: ", no rehearsal"}.get(figures.get("rehearse"), "")
     placement = {
         "apart": "apart (a flight controller of its own)",

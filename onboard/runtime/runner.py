@@ -58,7 +58,7 @@ from .fc_state import FcState, state_at
 from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
 from .rehearsal import REHEARSE_LEAD_S, Rehearsal
-from .scheduler import PeriodicScheduler, keep_off, split_cpus
+from .scheduler import BindingWatch, PeriodicScheduler, keep_off, run_delay_s, split_cpus
 from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
 from .timing import EARLY_TICK_HERE, LoopTiming, percentile, to_ms
@@ -92,7 +92,8 @@ class RuntimeConfig:
     realtime_priority: int | None = None  # SCHED_FIFO priority of the control thread (1-99)
     video: VideoConfig | None = None  # the camera as H.264/RTP (onboard run --video)
     foxglove: tuple[str, int] | None = None  # (host, port): Foxglove live (onboard run --foxglove)
-    # one CPU left to the control thread: the process's other threads kept off it (onboard run
+    # one CPU left to the control thread: the process's other threads kept off it and the control
+    # thread bound to it, freed while another program keeps it waiting there (onboard run
     # --reserve-cpu; scheduler.py "CPU placement"); not under an accepted realtime_priority
     reserve_cpu: bool = True
     # tick as soon as a detection is fused, not at the next deadline (onboard run --early-tick).
@@ -182,6 +183,9 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         self._last_overrun_report = -1e9
         self._tick_failure: Exception | None = None  # of a tick on the camera thread
         self.reserved_cpu: int | None = None  # run(): the CPU left to the control thread
+        self.binding: BindingWatch | None = None  # run(): whether it stays bound there
+        self.control_bound: bool | None = None  # run(): bound to it (None: no CPU left to it)
+        self._cpus: set[int] = set()  # run(): the process's CPUs
         # ten minutes of figures, not the whole day
         self.timing = LoopTiming(self.period_s, keep=int(600 * config.control_rate_hz))
         self._pending_latency: list[tuple[float, float, float]] = []
@@ -386,6 +390,13 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "guard_trips": None if self.loop is None else self.loop.guard_trips,
             "realtime_priority": self.config.realtime_priority,
             "reserved_cpu": self.reserved_cpu,
+            # the control thread bound to it at the flight's end, the times it was freed and the
+            # most it waited for it (a fraction of a look's half second)
+            "control_thread_bound": self.control_bound,
+            "binding_escapes": None if self.binding is None else self.binding.escapes,
+            "binding_wait_max_fraction": None
+            if self.binding is None
+            else self.binding.max_wait_fraction_seen,
             "bad_frames_fc": self.fc.bad_frames,
             "bad_frames_gcs": None if self.gcs is None else self.gcs.bad_frames,
             "state": self.sm.state.value,
@@ -577,24 +588,64 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
 
     # ------------------------------------------------------------------ run
     def _reserve_cpu(self) -> set[int] | None:
-        """Leave one CPU to the control thread (scheduler.py "CPU placement"): every other
-        thread of the process off it. Returns the CPUs the process had (to put the threads
-        back at the end), or None when there was nothing to do or it was refused (a warning
-        event; the threads are put back)."""
+        """On the control thread, the other threads started: leave one CPU to it (scheduler.py
+        "CPU placement"): every other thread of the process off that CPU and the control thread
+        bound to it (:meth:`_watch_binding` frees it while another program keeps it waiting
+        there; without its run delay to watch by it is left free). Returns the CPUs the process
+        had (to put the threads back at the end), or None when there was nothing to do or it
+        was refused (a warning event; the threads are put back)."""
+        self.reserved_cpu, self.binding, self.control_bound = None, None, None
         if not hasattr(os, "sched_getaffinity"):
             return None
         cpus = os.sched_getaffinity(0)
         split = split_cpus(cpus)
         if split is None:
             return None
-        control = threading.get_native_id()
-        note = keep_off(split[1], control)
+        note = keep_off(split[1], threading.get_native_id())
+        watchable = run_delay_s() is not None
+        if note is None and watchable:
+            try:
+                os.sched_setaffinity(0, split[0])
+            except OSError as exc:
+                note = f"CPU placement refused ({exc}): threads left where the system puts them"
         if note:
             self._event("warning", note)
-            keep_off(cpus, control)
+            keep_off(cpus, -1)
             return None
         self.reserved_cpu = next(iter(split[0]))
+        self._cpus = cpus
+        self.control_bound = watchable
+        if watchable:
+            self.binding = BindingWatch()
         return cpus
+
+    def _watch_binding(self) -> None:
+        """On the control thread, in the slack after a tick: free it from its CPU while
+        another program keeps it waiting there, bind it again later (``BindingWatch``)."""
+        watch, now = self.binding, time.perf_counter()
+        if watch is None or not watch.due(now):
+            return
+        delay = run_delay_s()
+        if delay is None:
+            return
+        bind = watch.step(now, delay)
+        if bind is None:
+            return
+        try:
+            os.sched_setaffinity(0, {self.reserved_cpu} if bind else self._cpus)
+        except OSError as exc:  # left as it is, and no longer watched
+            self.binding = None
+            self._event("warning", f"control thread's CPU binding left as it is ({exc})")
+            return
+        watch.applied(bind, now, delay)
+        self.control_bound = bind
+        if not bind:
+            self._event(
+                "warning",
+                f"control thread waited {100 * watch.last_wait_fraction:.0f} % of the time "
+                f"for CPU {self.reserved_cpu} (another program there): free to run on any "
+                f"CPU for {watch.unbound_for_s:g} s",
+            )
 
     def stop(self) -> None:
         self._stop.set()
@@ -646,6 +697,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                     break
                 sched.after_tick()
                 self._refresh_shadow()
+                self._watch_binding()
         except KeyboardInterrupt:
             pass
         finally:

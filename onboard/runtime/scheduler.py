@@ -16,13 +16,17 @@ the control thread sleeps and otherwise waits, without the GIL, until its tick i
 CPU placement (``onboard run --reserve-cpu``, on by default): one CPU (the highest-numbered
 the process may use) is left to the control thread: every other thread of the process (the
 links' receivers, the sender, the camera thread, the video and Foxglove threads, the libraries'
-own) is kept off it, while the control thread itself may still run anywhere (hard-pinning it
-left it waiting up to 5.7 ms behind another process on its one CPU while the other was free).
-A thread woken on the control thread's CPU (a PX4 datagram arriving, a frame detected) would
-otherwise preempt a tick: traced on a 2-core machine, such wake-ups were most of the tick-work
-tail beyond its CPU time (README "CPU placement"). Not under SCHED_FIFO (``--realtime``): there
-a woken thread of the same priority does not preempt a running one, and the others would only
-be crowded onto fewer CPUs. :func:`split_cpus` chooses, :func:`keep_off` applies.
+own) is kept off it, and the control thread is bound to it. A thread woken on the control
+thread's CPU (a PX4 datagram arriving, a frame detected) would otherwise preempt a tick: traced
+on a 2-core machine, such wake-ups were most of the tick-work tail beyond its CPU time; and an
+unbound control thread ran nearly always on the other CPU, with those threads (README "CPU
+placement"). Bound, it cannot leave its CPU when another program runs there (it once waited
+5.7 ms behind one while the other CPU was free), so :class:`BindingWatch` frees it while it
+waits there for more than 5 % of the time, for ten seconds at a time (longer while the other
+program stays); without the run delay to watch by (no /proc schedstat) it is not bound. Not
+under SCHED_FIFO (``--realtime``): there a woken thread of the same priority does not preempt
+a running one, and the others would only be crowded onto fewer CPUs. :func:`split_cpus`
+chooses, :func:`keep_off` applies.
 
 Rehearsal (``rehearse``, :mod:`.rehearsal`): the control thread wakes ``rehearse_lead_s``
 earlier still and calls ``rehearse`` (the tick's expensive part on a copy, so the tick finds its
@@ -73,6 +77,13 @@ MAX_HOLD_OFF_S = 1.0  # wait_for_slack never holds another thread longer than th
 SLACK_LEAD_S = 0.0002  # nor lets one start work this close to the control thread's wake-up
 MIN_GAP_FRACTION = 0.2  # an early tick starts no sooner than this many periods after the last
 MAX_INPUT_WAIT_FRACTION = 0.5  # a due tick waits at most this many periods for an input
+# the control thread bound to the CPU left to it, unless it waits there (BindingWatch): looked
+# at every half second; more than 5 % of it waiting for the CPU (another program there) frees
+# it for ten seconds, then it is bound again (freed at once again: twice as long, up to 160 s)
+BINDING_CHECK_EVERY_S = 0.5
+BINDING_MAX_WAIT_FRACTION = 0.05
+BINDING_UNBOUND_FOR_S = 10.0
+BINDING_UNBOUND_MAX_S = 160.0
 REHEARSALS_KEPT = 120_000  # the last ten minutes' rehearsal times at 200 Hz
 
 
@@ -96,6 +107,87 @@ def set_timer_slack_ns(ns: int) -> int | None:
     if before < 0 or prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), zero, zero, zero) != 0:
         return None
     return before
+
+
+def run_delay_s() -> float | None:
+    """How long this thread has waited, runnable, for a CPU since it began (s; Linux's
+    /proc/thread-self/schedstat), or None where that is not available."""
+    try:
+        with open("/proc/thread-self/schedstat", "rb") as f:
+            return int(f.read().split()[1]) * 1e-9
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+class BindingWatch:
+    """Whether the control thread should stay bound to the CPU left to it (pure logic; the
+    runtime reads the clock and the run delay, applies the answer and says so with
+    :meth:`applied`). Bound, a thread cannot leave its CPU when another program runs there: so
+    every ``check_every_s`` it looks at how long the thread waited for that CPU, and when that
+    was more than ``max_wait_fraction`` of the time it frees it (free to run on any CPU, as the
+    system puts it) for ``unbound_for_s``, then binds it again and looks afresh. Freed again in
+    the first look after being bound again (the program is still there), it stays free twice
+    as long each time, up to ``unbound_max_s``; a look that finds it waiting no more than that
+    brings the time back to ``unbound_for_s``."""
+
+    def __init__(
+        self,
+        check_every_s: float = BINDING_CHECK_EVERY_S,
+        max_wait_fraction: float = BINDING_MAX_WAIT_FRACTION,
+        unbound_for_s: float = BINDING_UNBOUND_FOR_S,
+        unbound_max_s: float = BINDING_UNBOUND_MAX_S,
+    ) -> None:
+        self.check_every_s = check_every_s
+        self.max_wait_fraction = max_wait_fraction
+        self.unbound_base_s = unbound_for_s
+        self.unbound_max_s = max(unbound_max_s, unbound_for_s)
+        self.unbound_for_s = unbound_for_s  # the next freeing's
+        self.bound = True
+        self.escapes = 0  # times freed
+        self.last_wait_fraction = 0.0  # of the last look, bound
+        self.max_wait_fraction_seen = 0.0
+        self._since_s: float | None = None  # the look's window start (or the freeing)
+        self._delay_at_start_s = 0.0
+        self._just_bound = False  # no look since it was bound again
+
+    def due(self, now_s: float) -> bool:
+        """Whether :meth:`step` has something to do at ``now_s`` (s)."""
+        if self._since_s is None:
+            return True
+        limit = self.check_every_s if self.bound else self.unbound_for_s
+        return now_s - self._since_s >= limit
+
+    def step(self, now_s: float, run_delay_s: float) -> bool | None:
+        """At ``now_s`` (s) with the thread's total ``run_delay_s`` (s): True to bind it
+        again, False to free it, None to leave it as it is. A change is the runtime's to
+        apply; it calls :meth:`applied` once it has."""
+        if self._since_s is None:
+            self._since_s, self._delay_at_start_s = now_s, run_delay_s
+            return None
+        if not self.due(now_s):
+            return None
+        if not self.bound:
+            return True
+        fraction = (run_delay_s - self._delay_at_start_s) / (now_s - self._since_s)
+        self.last_wait_fraction = fraction
+        self.max_wait_fraction_seen = max(self.max_wait_fraction_seen, fraction)
+        self._since_s, self._delay_at_start_s = now_s, run_delay_s
+        if fraction > self.max_wait_fraction:
+            return False
+        self._just_bound = False
+        self.unbound_for_s = self.unbound_base_s
+        return None
+
+    def applied(self, bound: bool, now_s: float, run_delay_s: float) -> None:
+        """The runtime bound (True) or freed (False) the thread at ``now_s`` (s), its total
+        run delay then ``run_delay_s`` (s)."""
+        if not bound:
+            self.escapes += 1
+            if self._just_bound:  # still there: free for longer
+                self.unbound_for_s = min(2.0 * self.unbound_for_s, self.unbound_max_s)
+        self.bound = bound
+        self._just_bound = bound
+        self._since_s, self._delay_at_start_s = now_s, run_delay_s
 
 
 def split_cpus(cpus: Iterable[int]) -> tuple[set[int], set[int]] | None:
