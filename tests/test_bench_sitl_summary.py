@@ -266,6 +266,7 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
         rehearsal_p99_ms=0.35,
         shadow_refreshes=72,
         rehearsal_errors=0,
+        rehearsed_sends=9650,
         early_tick_work_median_ms=0.19,
         early_tick_work_p99_ms=0.91,
         wake_overshoot_median_ms=0.061,
@@ -282,7 +283,10 @@ def test_the_rehearsal_line_names_what_was_skipped(capsys):
     assert "213 early tick, 2 fusion, 2102 woken late, 9 declined" in out
     assert "9 declined (3 of them: the loop's lock stayed taken)" in out
     assert "5 waited for the loop's lock first (at most 0.12 ms, in their times)" in out
-    assert "copies taken 72, errors 0" in out
+    assert "copies taken 72, errors 0; the setpoint's send rehearsed 9650 times (to a socket" in out
+    fig["rehearsed_sends"] = None  # an older runtime's figures: no word of it
+    _print_figures(fig)
+    assert "copies taken 72, errors 0\n" in capsys.readouterr().out
     assert "early ticks' (ticked as a fusion came in): median 0.19 ms, p99 0.91 ms" in out
     assert "ended median 0.061 ms, p99 0.412 ms after the time asked" in out
     # what the tail is made of, the kind with most of the slowest 1 % first
@@ -347,3 +351,24 @@ def test_the_first_line_says_whether_the_control_thread_stayed_bound(capsys):
     assert "CPU 1 left to the control thread, ticks" in first_line()  # an older runtime
     _print_figures(_printable(reserved_cpu=None, rehearse=True))
     assert ", no CPU reserved, ticks" in capsys.readouterr().out
+
+
+def test_the_overrun_line_says_which_ticks_overran_and_how_much_was_cpu(capsys):
+    from groundstation.bench.sitl import _print_figures
+
+    _print_figures(_printable(overruns=0, scheduler_stalls=0, overran_ticks=[]))
+    assert "overruns 0, stalls re-anchored 0  target 0 in 60 s: met\n" in capsys.readouterr().out
+    ticks = [
+        {
+            "woken_as": "early tick on the camera thread",
+            "at_s": 0.21,
+            "work_ms": 5.31,
+            "cpu_ms": 0.27,
+        },
+        {"woken_as": "rehearsed", "at_s": 31.0, "work_ms": 7.02, "cpu_ms": None},
+    ]
+    _print_figures(_printable(overruns=2, scheduler_stalls=1, overran_ticks=ticks))
+    assert (
+        "overruns 2, stalls re-anchored 1  target 0 in 60 s: NOT MET (early tick on the camera "
+        "thread at 0.2 s: 5.31 ms, 0.27 of it CPU; rehearsed at 31.0 s: 7.02 ms)"
+    ) in capsys.readouterr().out

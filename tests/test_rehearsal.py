@@ -7,7 +7,10 @@ no timing asserted)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import socket
+import sys
 import threading
 import time
 
@@ -16,11 +19,11 @@ import pytest
 
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
-from onboard.datatypes import LoopMode
+from onboard.datatypes import LoopMode, SharedWhenCopied
 from onboard.link.px4 import mavlink
 from onboard.loop import InterceptionLoop
 from onboard.runtime.rehearsal import Rehearsal
-from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
+from onboard.runtime.runner import REHEARSED_SEND_MIN_LEAD_S, OnboardRuntime, RuntimeConfig
 from onboard.runtime.scheduler import PeriodicScheduler
 from onboard.runtime.timing import LoopTiming
 
@@ -82,6 +85,45 @@ def test_the_shadow_is_taken_afresh_when_the_mode_moves_or_it_is_old():
     loop.mode = LoopMode.TRACKING if loop.mode is not LoopMode.TRACKING else LoopMode.COAST
     assert rh.needs_refresh(loop)
     assert rh.refreshes == 2
+
+
+def test_the_shadow_shares_the_loops_immutable_values_and_none_of_its_state():
+    """The gains, camera model, airframe and configurations are frozen values: the shadow
+    reads the loop's own (so the rehearsal leaves them in the caches for the tick), while
+    everything a tick changes is the shadow's (the to-the-bit test above flies it)."""
+    import copy
+
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    loop = sim.loop
+    rh = Rehearsal()
+    rh.refresh(loop)
+    sh = rh.shadow
+    values = (loop.gains, loop.camera, loop.vehicle, loop.dkf.config, loop.disturbance.config)
+    shared = (sh.gains, sh.camera, sh.vehicle, sh.dkf.config, sh.disturbance.config)
+    assert all(a is b for a, b in zip(values, shared, strict=True))
+    assert all(copy.copy(v) is v and copy.deepcopy(v) is v for v in values)
+    # shared only if immutable: frozen, and every attribute a number, a string, a tuple of
+    # them or a read-only array (the camera's mount rotation); every such class is here
+    # (by name: a slots dataclass leaves the class it was made from among the subclasses)
+    assert {c.__qualname__ for c in SharedWhenCopied.__subclasses__()} == {
+        type(v).__qualname__ for v in values
+    }
+
+    def immutable(x) -> bool:
+        if isinstance(x, tuple):
+            return all(immutable(y) for y in x)
+        if isinstance(x, np.ndarray):
+            return not x.flags.writeable
+        return isinstance(x, (int, float, str, type(None)))
+
+    for v in values:
+        assert type(v).__dataclass_params__.frozen, type(v)
+        attrs = {f.name: getattr(v, f.name) for f in dataclasses.fields(v)}
+        attrs.update(getattr(v, "__dict__", {}))
+        assert all(immutable(x) for x in attrs.values()), (type(v), attrs)
+    assert sh.dkf is not loop.dkf and sh.disturbance is not loop.disturbance
+    assert sh.dkf._P is not loop.dkf._P and sh.dkf._X is not loop.dkf._X
+    assert sh._R_hist is not loop._R_hist and sh._detections is not loop._detections
 
 
 def test_a_replaced_shadow_is_freed_without_the_collector():
@@ -337,9 +379,9 @@ def test_onboard_run_rehearse_flag_reaches_the_runtime(monkeypatch, flag, expect
 
 
 # ---------------------------------------------------------------------- the runtime
-def _runtime(tmp_path, rehearse: bool = True):
+def _runtime(tmp_path, rehearse: bool = True, fc_port: int | None = None):
     cfg = RuntimeConfig(
-        fc_url=f"udpout:127.0.0.1:{free_port()}",
+        fc_url=f"udpout:127.0.0.1:{fc_port or free_port()}",
         camera="sitl://127.0.0.1:9",  # never opened: run() is not called
         params_path=tmp_path / "params.toml",
         rehearse=rehearse,
@@ -534,3 +576,44 @@ def test_without_rehearsal_the_scheduler_wakes_at_the_spin(tmp_path):
         assert rt.stats()["rehearse"] is False and rt.stats()["rehearsals"] is None
     finally:
         rt.fc.close()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="libc's sendto and recv")
+def test_the_rehearsal_sends_its_frame_to_a_socket_of_its_own_never_to_px4(tmp_path):
+    """The setpoint's send rehearsed (MavLink.rehearse_send): the rehearsal's frame goes from
+    the link's socket to the runtime's own, read and dropped in the slack, and not once the
+    deadline is near; PX4 gets only the real setpoints, numbered as without the rehearsals."""
+    px4 = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    px4.bind(("127.0.0.1", 0))
+    px4.settimeout(0.2)
+    rt = _runtime(tmp_path, fc_port=px4.getsockname()[1])
+    try:
+        assert rt.fc.prepare_send_rehearsal() is None  # run() opens it before the loop
+        rt.scheduler._next_s = time.perf_counter() + 1.0
+        rt._refresh_shadow()
+        assert rt._send_command(np.array([0.0, 0.0, 0.0]), 0.5, 1.0)  # the first setpoint
+        assert rt._rehearse() and rt._rehearse()
+        assert rt.rehearsal.sends == 2 and rt.stats()["rehearsed_sends"] == 2
+        time.sleep(0.01)
+        assert rt.fc.drain_rehearsals() == 2  # they went to the runtime's own socket
+        rt.scheduler._next_s = time.perf_counter() + 0.25 * REHEARSED_SEND_MIN_LEAD_S
+        assert rt._rehearse() and rt.rehearsal.sends == 2 and rt.rehearsal.runs == 3  # too near
+        rt.scheduler._next_s = time.perf_counter() + 1.0
+        rt.scheduler.input_begins()  # a fusion coming in: its early tick comes first
+        assert rt._rehearse() and rt.rehearsal.sends == 2 and rt.rehearsal.runs == 4
+        rt.scheduler.input_done()
+        assert rt._send_command(np.array([0.1, -0.2, 0.3]), 0.55, 1.25)
+        got = [mavlink.MAVLink(None).parse_char(px4.recvfrom(2048)[0]) for _ in range(2)]
+        assert [m.get_type() for m in got] == ["SET_ATTITUDE_TARGET"] * 2
+        assert [(m.time_boot_ms, m.get_seq()) for m in got] == [(1000, 0), (1250, 1)]
+        # FLU -> FRD: the real command as it would have been without the rehearsals
+        m = got[1]
+        assert (m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate) == pytest.approx(
+            (0.1, 0.2, -0.3)
+        )
+        with pytest.raises(TimeoutError):
+            px4.recvfrom(2048)  # and nothing else reached PX4
+        assert rt.commands_sent == 2 and rt.rehearsal.errors == 0
+    finally:
+        rt.fc.close()
+        px4.close()

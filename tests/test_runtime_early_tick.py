@@ -375,9 +375,18 @@ def test_timing_keeps_early_ticks_out_of_the_jitter_and_counts_overruns():
         (0.0172, False, 0.0003),
     ]:
         timing.tick_started(start, early)
-        timing.tick_done(work)
+        timing.tick_done(work, 0.0002 if early else None)
     fig = timing.figures()
     assert fig["early_ticks"] == 1 and fig["overruns"] == 1
+    # which tick overran, and how little of it was its own CPU (the rest a wait)
+    assert fig["overran_ticks"] == [
+        {
+            "woken_as": "early tick",
+            "at_s": pytest.approx(0.0072),
+            "work_ms": pytest.approx(6.1),
+            "cpu_ms": pytest.approx(0.2),
+        }
+    ]
     assert fig["early_gap_median_ms"] == pytest.approx(2.2)
     assert fig["rate_hz"] == pytest.approx(200.0)
     assert fig["jitter_max_ms"] == pytest.approx(0.0, abs=1e-9)

@@ -12,6 +12,28 @@ from pathlib import Path
 from ..scenario import load_scenario
 
 
+def _overran(ticks: list[dict] | None) -> str:
+    """The overran ticks: how each was woken, when (s after the first tick), its work and how
+    much of it was the ticking thread's CPU (the rest: waiting for the GIL, the CPU or the
+    host)."""
+    if not ticks:
+        return ""
+
+    def one(t: dict) -> str:
+        cpu = "" if t["cpu_ms"] is None else f", {t['cpu_ms']:.2f} of it CPU"
+        return f"{t['woken_as']} at {t['at_s']:.1f} s: {t['work_ms']:.2f} ms{cpu}"
+
+    return " (" + "; ".join(one(t) for t in ticks) + ")"
+
+
+def _rehearsed_sends(n: int | None) -> str:
+    """The rehearsals whose setpoint frame went to the runtime's own socket (the kernel's send
+    path warmed for the real send; none where the link to PX4 is not UDP)."""
+    if n is None:
+        return ""
+    return f"; the setpoint's send rehearsed {n} times (to a socket of its own, never to PX4)"
+
+
 def _lock_held(n: int | None) -> str:
     """The part of the declined rehearsals whose loop's lock stayed taken (another thread's
     batch ran into the wake-up); the rest had nothing to rehearse on yet."""
@@ -355,6 +377,7 @@ def _fly(
         "rehearsal_p99_ms": stats.get("rehearsal_p99_ms"),
         "shadow_refreshes": stats.get("shadow_refreshes"),
         "rehearsal_errors": stats.get("rehearsal_errors"),
+        "rehearsed_sends": stats.get("rehearsed_sends"),
         "scheduler_stalls": stats.get("scheduler_stalls"),
         "loop_rate_hz": stats.get("rate_hz"),
         "jitter_p99_ms": stats.get("jitter_p99_ms"),
@@ -375,6 +398,7 @@ def _fly(
         "slowest_1pc_work_mean_ms": stats.get("slowest_1pc_work_mean_ms"),
         "slowest_1pc_send_mean_ms": stats.get("slowest_1pc_send_mean_ms"),
         "overruns": stats.get("overruns"),
+        "overran_ticks": stats.get("overran_ticks"),
         "attitude_jumps": stats.get("attitude_jumps"),
         "stale_attitude_ticks": stats.get("stale_attitude_ticks"),
         "early_ticks": stats.get("early_ticks"),
@@ -529,6 +553,7 @@ def _print_figures(figures: dict) -> None:
                 figures.get("rehearsal_lock_waits"), figures.get("rehearsal_lock_wait_max_ms")
             )
             + f"; copies taken {figures['shadow_refreshes']}, errors {figures['rehearsal_errors']}"
+            + _rehearsed_sends(figures.get("rehearsed_sends"))
         )
     if figures.get("wake_overshoot_p99_ms") is not None:
         print(
@@ -551,6 +576,7 @@ def _print_figures(figures: dict) -> None:
     print(
         f"  overruns {figures['overruns']}, stalls re-anchored {figures['scheduler_stalls']}"
         f"  target 0 in {seconds:g} s: {'met' if figures['overruns'] == 0 else 'NOT MET'}"
+        + _overran(figures.get("overran_ticks"))
     )
     print(
         f"    LOS changes re-based through the gyro: attitude jumps (a stale attitude replaced) "

@@ -36,7 +36,7 @@ from ..constants import (  # declared there, imported from here too
     PX4_SUB_AUTO_LOITER,
 )
 from ..geometry import quat_to_rotmat, rotmat_to_quat
-from .datagram import DatagramSender, sender_for
+from .datagram import DatagramSender, RehearsalSink, sender_for
 
 mavutil.set_dialect("common")
 mavlink = mavutil.mavlink
@@ -166,6 +166,7 @@ class MavLink:
             raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from None
         self.conn.first_byte = False  # never let a stray 0xFE switch us to MAVLink 1
         self._datagrams: DatagramSender | None = None  # send_fields's sends, the GIL held
+        self._rehearsal_sink: RehearsalSink | None = None  # prepare_send_rehearsal's
         if isinstance(self.conn, mavutil.mavudp):  # the kernel stamps each datagram's arrival
             with contextlib.suppress(AttributeError, OSError):
                 self.conn.port.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -361,22 +362,60 @@ class MavLink:
         took it). False when the kernel refused the datagram; other links, or a destination
         not yet an IPv4 address (pymavlink resolves it on its first write), go through
         pymavlink."""
-        conn, out = self.conn, self._datagrams
-        dest = None
-        if out is not None:
-            if conn.udp_server:
-                clients = conn.clients
-                if len(clients) == 1:  # else pymavlink's choice among them (timeouts)
-                    dest = next(iter(clients))
-            elif not conn.broadcast:
-                dest = conn.destination_addr
+        dest = self._datagram_dest()
         if dest is not None:
             try:
-                return out.send(frame, dest)
+                return self._datagrams.send(frame, dest)
             except ValueError:  # a hostname: resolved by pymavlink's write below
                 pass
         self.mav.file.write(frame)
         return True
+
+    def _datagram_dest(self) -> tuple | None:
+        """Where :meth:`_write_holding_gil` sends with libc's ``sendto``: a UDP link's one peer
+        (a listening link's only client, or the address an outgoing one sends to), or None
+        where pymavlink writes instead (not UDP, a listening link with no client or several,
+        a broadcast link)."""
+        conn, out = self.conn, self._datagrams
+        if out is None:
+            return None
+        if conn.udp_server:
+            clients = conn.clients
+            return next(iter(clients)) if len(clients) == 1 else None  # else pymavlink's pick
+        return None if conn.broadcast else conn.destination_addr
+
+    def prepare_send_rehearsal(self) -> str | None:
+        """Open the socket :meth:`rehearse_send` sends to (a :class:`RehearsalSink`), before
+        the loop runs. Returns why it could not (the setpoint then goes out unrehearsed), or
+        None (done, or nothing to do: not a UDP link)."""
+        if self._datagrams is None or self._rehearsal_sink is not None:
+            return None
+        try:
+            self._rehearsal_sink = RehearsalSink()
+        except OSError as exc:
+            return f"setpoint send not rehearsed: no socket of our own on 127.0.0.1 ({exc})"
+        return None
+
+    def rehearse_send(self, frame: bytes) -> bool:
+        """Rehearse a setpoint's send (onboard/runtime/rehearsal.py): ``frame`` sent as
+        :meth:`send_fields` would send it, the same system call on the same socket with the GIL
+        held, but to the socket :meth:`prepare_send_rehearsal` opened on 127.0.0.1, never to
+        the peer, so that path is in the caches for the real send that follows. Only where the
+        last setpoints took that path to the peer that would get this one (a UDP link, unsigned,
+        no send callback, its peer an IPv4 address already sent to); True when the kernel took
+        the datagram."""
+        sink, out, mav = self._rehearsal_sink, self._datagrams, self.mav
+        if sink is None or mav.signing.sign_outgoing or mav.send_callback is not None:
+            return False
+        dest = self._datagram_dest()
+        if dest is None or dest != out.address:
+            return False
+        return out.send_to(frame, sink.sockaddr)
+
+    def drain_rehearsals(self) -> int:
+        """Read and drop what :meth:`rehearse_send` sent (in the slack after a tick)."""
+        sink = self._rehearsal_sink
+        return 0 if sink is None else sink.drain()
 
     def send_frame(self, frame: bytes) -> bool:
         """Pass an already-encoded frame on as it is (another link's message forwarded)."""
@@ -401,6 +440,8 @@ class MavLink:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.conn.close()
+        if self._rehearsal_sink is not None:
+            self._rehearsal_sink.close()
 
 
 class FrameEncoder:

@@ -6,15 +6,19 @@ code and data, not its instructions: on the 2-core virtual machine here the loop
 "this machine"). So the control thread wakes :data:`REHEARSE_LEAD_S` earlier than it otherwise
 would and runs the tick's expensive part once on a copy: the shadow, a deep copy of the
 interception loop, ticks the vehicle's current state, a copy of the offboard state machine
-steps on its result, and the setpoint frame its command would make is packed, not sent. At the
-deadline the same code runs again on the real loop with it in the caches.
+steps on its result, and the setpoint frame its command would make is packed and, on a UDP
+link to PX4, sent from the same socket to one of the runtime's own on 127.0.0.1
+(``MavLink.rehearse_send``: the system call and the kernel's UDP and IP layers warmed; README
+"Session 21" under Measured), never to PX4. At the deadline the same code runs again on the
+real loop with it in the caches.
 
-Nothing of the rehearsal reaches the vehicle: the shadow is a deep copy (no object shared with
-the loop) and its result is dropped, so the commands flown are those flown without it, to the
-bit (``tests/test_rehearsal.py``). The shadow is refreshed in the slack after a tick (under the
-loop's lock) when the loop's mode differs from the shadow's, so the rehearsal runs the branch
-the tick will run (tracking, coasting, searching), and at least every
-:data:`SHADOW_MAX_AGE_TICKS` ticks. A rehearsal that raises drops its shadow (a new one is
+Nothing of the rehearsal reaches the vehicle: the shadow is a deep copy (no mutable object
+shared with the loop; the frozen gains, camera model and configurations are, a copy of one
+being the object itself) and its result is dropped, so the commands flown are those flown
+without it, to the bit (``tests/test_rehearsal.py``). The shadow is refreshed in the slack
+after a tick (under the loop's lock) when the loop's mode differs from the shadow's, so the
+rehearsal runs the branch the tick will run (tracking, coasting, searching), and at least
+every :data:`SHADOW_MAX_AGE_TICKS` ticks. A rehearsal that raises drops its shadow (a new one is
 taken after the next tick) and is counted; it never stops the loop.
 
 The cost: a second tick's CPU per period (the process's CPU in ``bench --sitl`` shows it) and
@@ -47,6 +51,7 @@ class Rehearsal:
         self.runs = 0  # rehearsals run
         self.refreshes = 0  # shadows taken
         self.errors = 0  # rehearsals that raised (their shadow dropped)
+        self.sends = 0  # rehearsals whose frame went to the runtime's own socket (``send``)
         # the runtime's wait for the loop's lock before a rehearsal (runner._rehearse)
         self.lock_declines = 0  # declined: another thread's batch kept it
         self.lock_waits = 0  # waited for it, then rehearsed
@@ -65,7 +70,7 @@ class Rehearsal:
         return sh is None or sh.mode is not loop.mode or self._age_ticks > self.max_age_ticks
 
     def refresh(self, loop: InterceptionLoop) -> None:
-        """Take a new shadow: a deep copy of ``loop`` (nothing shared with it)."""
+        """Take a new shadow: a deep copy of ``loop`` (no mutable object shared with it)."""
         self.shadow = copy.deepcopy(loop)
         self._age_ticks = 0
         self.refreshes += 1
@@ -75,12 +80,14 @@ class Rehearsal:
         state: VehicleState,
         hold_s: float | None,
         then: Callable[[ControlTelemetry], object] | None = None,
+        send: Callable[[bytes], bool] | None = None,
     ) -> bytes | None:
         """Tick the shadow at ``state`` (its command held ``hold_s``), hand its telemetry to
         ``then`` (the runtime steps a copy of its state machine on it: the rest of the tick's
-        code) and pack the setpoint frame of its command. Returns the frame, which must not
-        be sent (None without a shadow, when the output guard refuses the command, or when
-        the tick or ``then`` raised)."""
+        code), pack the setpoint frame of its command and hand it to ``send`` (the runtime's
+        ``MavLink.rehearse_send``: to a socket of its own; True when sent, counted). Returns
+        the frame, which must never reach PX4; None without a shadow, when the output guard
+        refuses the command, or when the tick, ``then`` or ``send`` raised."""
         shadow = self.shadow
         if shadow is None:
             return None
@@ -93,7 +100,10 @@ class Rehearsal:
             fields = setpoint_fields(cmd.body_rates_flu_rad_s, cmd.thrust_normalised, state.time_s)
             if fields is None:
                 return None
-            return SET_ATTITUDE_TARGET.frame(0, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, fields)
+            frame = SET_ATTITUDE_TARGET.frame(0, VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, fields)
+            if send is not None and send(frame):
+                self.sends += 1
+            return frame
         except Exception:  # a copy's failure is no reason to stop flying: count it, drop it
             self.errors += 1
             self.shadow = None

@@ -76,6 +76,9 @@ SEND_BUDGET_S = 0.0005  # a sender's item, telemetry the dearest: p99 0.47 ms (b
 # (asleep, the GIL let go, so that thread ends it) rather than leave the tick to wait for it
 REHEARSAL_LOCK_WAIT_S = 0.00015
 SHADOW_MIN_SLACK_S = 0.002  # the shadow is copied (about 0.5 ms) only with this much slack left
+# the rehearsal's setpoint frame goes to the runtime's own socket only this long or more before
+# the deadline: a send after a sleep took 0.036-0.064 ms here (README "Session 21")
+REHEARSED_SEND_MIN_LEAD_S = 0.0001
 
 
 @dataclass
@@ -427,6 +430,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             "rehearsal_p99_ms": to_ms(percentile(took, 0.99)),
             "shadow_refreshes": None if rh is None else rh.refreshes,
             "rehearsal_errors": None if rh is None else rh.errors,
+            "rehearsed_sends": None if rh is None else rh.sends,
         }
 
     # ------------------------------------------------------------------ the tick
@@ -572,8 +576,17 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             state = state_at(f, self.clock.now())
         finally:
             self._loop_lock.release()
-        rh.run(state, self._hold_s, partial(self._rehearse_step, state.time_s))
+        rh.run(state, self._hold_s, partial(self._rehearse_step, state.time_s), self._rehearse_send)
         return True
+
+    def _rehearse_send(self, frame: bytes) -> bool:
+        """The rehearsal's setpoint frame sent to the runtime's own socket
+        (``MavLink.rehearse_send``), unless the deadline is nearer than
+        ``REHEARSED_SEND_MIN_LEAD_S`` or a fusion is coming in (its early tick comes first)."""
+        sched = self.scheduler
+        if sched.deadline_in_s() < REHEARSED_SEND_MIN_LEAD_S or sched.input_pending():
+            return False
+        return self.fc.rehearse_send(frame)
 
     def _refresh_shadow(self) -> None:
         """After a tick, in the slack: a new shadow when the loop's mode moved away from it or
@@ -669,6 +682,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             )
             self._gcs_rx.start()
         self.sender.start()
+        if self.rehearsal is not None:
+            note = self.fc.prepare_send_rehearsal()
+            if note:
+                self._event("warning", note)
         self._fusing = True
         self.camera.start()
         if self.video is not None:
@@ -698,6 +715,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 sched.after_tick()
                 self._refresh_shadow()
                 self._watch_binding()
+                self.fc.drain_rehearsals()
         except KeyboardInterrupt:
             pass
         finally:

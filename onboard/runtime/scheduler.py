@@ -518,6 +518,10 @@ class PeriodicScheduler:
         """Is an input being handed over (:meth:`input_begins`) or an early tick asked for?"""
         return self._inputting or self._requested
 
+    def deadline_in_s(self) -> float:
+        """Seconds left before the next deadline (negative: past it)."""
+        return self._next_s - self._clock()
+
     def spin_in_s(self) -> float:
         """Seconds left before the spin to the next deadline begins (negative: spinning)."""
         return self._next_s - self.spin_s - self._clock()

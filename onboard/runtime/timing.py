@@ -65,6 +65,12 @@ class LoopTiming:
         self._last_start: float | None = None
         self.early_ticks = 0
         self.lock_waits_s: deque[float] = deque(maxlen=keep)  # tick start -> the loop's lock
+        # the overran ticks (the last 20): how each was woken, when (s after the first tick's
+        # start), its work and its CPU time (s; None where not measured): a wait (the GIL, the
+        # CPU, the host) or work of its own
+        self.overran: deque[tuple[str, float, float, float | None]] = deque(maxlen=20)
+        self._first_start: float | None = None
+        self._start = 0.0
         self.early_gaps_s: deque[float] = deque(maxlen=keep)  # previous tick -> early tick
 
     def tick_started(self, start_s: float, early: bool = False, kind: str | None = None) -> None:
@@ -74,6 +80,9 @@ class LoopTiming:
         the grid), its work figures kept apart by it."""
         self._early = early
         self._kind = kind if kind is not None else (EARLY_TICK if early else ON_THE_GRID)
+        self._start = start_s
+        if self._first_start is None:
+            self._first_start = start_s
         self._send_s = math.nan
         if self._last_start is not None:
             per = start_s - self._last_start
@@ -110,6 +119,7 @@ class LoopTiming:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
             self.overruns += 1
+            self.overran.append((self._kind, self._start - self._first_start, work_s, cpu_s))
             return True
         return False
 
@@ -201,6 +211,10 @@ class LoopTiming:
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
             **self.flying_figures(),
             "overruns": self.overruns,
+            "overran_ticks": [
+                {"woken_as": k, "at_s": at, "work_ms": to_ms(w), "cpu_ms": to_ms(c)}
+                for k, at, w, c in self.overran
+            ],
             "early_ticks": self.early_ticks,
             "lock_wait_p99_ms": to_ms(percentile(self.lock_waits_s, 0.99)),
             "lock_wait_max_ms": to_ms(max(self.lock_waits_s, default=None)),
