@@ -617,3 +617,50 @@ def test_the_rehearsal_sends_its_frame_to_a_socket_of_its_own_never_to_px4(tmp_p
     finally:
         rt.fc.close()
         px4.close()
+
+
+def test_the_loop_is_built_in_the_slack_once_the_camera_gives_its_size(tmp_path):
+    """The loop is built after a tick, in the slack, as soon as a frame gives the camera's
+    size (README "Session 21": a tick that built the loop overran once); its shadow is taken
+    in a later slack."""
+    from onboard.runtime.camera import Frame
+
+    cfg = RuntimeConfig(
+        fc_url=f"udpout:127.0.0.1:{free_port()}",
+        camera="sitl://127.0.0.1:9",  # never opened: run() is not called
+        params_path=tmp_path / "params.toml",
+    )
+    rt = OnboardRuntime(cfg, log=lambda _s: None)
+    try:
+        sched = rt.scheduler
+        sched._next_s = time.perf_counter() + 1.0
+        assert rt._prepare_loop() is False and rt.loop is None  # no frame: no size yet
+        now = rt.clock.now()
+        rt.camera.last_frame = Frame(1, now, now, np.zeros((360, 480, 3), np.uint8))
+        sched._next_s = time.perf_counter()  # the next wake-up is due: not now
+        assert rt._prepare_loop() is False and rt.loop is None
+        sched._next_s = time.perf_counter() + 1.0
+        assert rt._prepare_loop() is True
+        loop = rt.loop
+        assert loop is not None and (loop.camera.width_px, loop.camera.height_px) == (480, 360)
+        assert ("info", "camera 480x360, law png: loop ready") in list(rt._events)
+        assert rt._prepare_loop() is False and rt.loop is loop  # built once
+        rt._refresh_shadow()
+        assert rt.rehearsal.shadow is not None
+    finally:
+        rt.fc.close()
+
+
+def test_the_warm_up_flies_a_throwaway_loop_through_tracking_and_packs_its_setpoints():
+    """warm_up (run(), before the loop runs) takes the code's first runs on a throwaway loop:
+    it tracks (detections fused), every setpoint passes the output guard, and the runtime's
+    own loop is not touched (it does not exist yet)."""
+    from onboard.estimation.dkf import FusionResult
+    from onboard.runtime.rehearsal import WARM_UP_TICKS, warm_up
+
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 0, keep_records=False)
+    loop = sim.loop
+    assert warm_up(loop, 0.005) == WARM_UP_TICKS
+    assert loop.acquired and loop.mode is LoopMode.TRACKING
+    counts = loop.dkf.counts
+    assert counts[FusionResult.INITIALISED] == 1 and counts[FusionResult.ACCEPTED] == 3

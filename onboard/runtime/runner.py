@@ -57,7 +57,7 @@ from .fc_side import FlightControllerSide
 from .fc_state import FcState, state_at
 from .ground_side import DKF_FROM_LOOP, TELEMETRY_EVERY, GroundSide
 from .receiver import LinkReceiver
-from .rehearsal import REHEARSE_LEAD_S, Rehearsal
+from .rehearsal import REHEARSE_LEAD_S, Rehearsal, warm_up
 from .scheduler import BindingWatch, PeriodicScheduler, keep_off, run_delay_s, split_cpus
 from .sender import Sender
 from .state_machine import Inputs, OffboardStateMachine, Output, State
@@ -219,11 +219,12 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             )
 
     # ------------------------------------------------------------------ the loop object
-    def _build_loop(self, width: int, height: int) -> None:
+    def _new_loop(self, width: int, height: int) -> InterceptionLoop:
+        """An interception loop for a ``width`` x ``height`` (px) camera, as configured."""
         rt = self.params.runtime
         cam = CameraModel(width, height, rt.CAM_HFOV_DEG, rt.CAM_PITCH_DEG, rt.CAM_ROLL_DEG)
         vehicle = VehicleParams(mass_kg=1.0, max_thrust_n=GRAVITY_M_S2 / rt.HOVER_THR)
-        self.loop = InterceptionLoop(
+        return InterceptionLoop(
             cam,
             vehicle,
             self.params.gains,
@@ -231,10 +232,18 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             control_rate_hz=self.config.control_rate_hz,
             dkf_config=rt.dkf_config(),
         )
+
+    def _build_loop(self, width: int, height: int) -> None:
+        rt = self.params.runtime
+        self.loop = self._new_loop(width, height)
         self._event("info", f"camera {width}x{height}, law {rt.law}: loop ready")
         if self.foxglove is not None:
             self.foxglove.new_sortie(
-                self.clock.now(), rt.law, cam, self.params.gains, self.config.control_rate_hz
+                self.clock.now(),
+                rt.law,
+                self.loop.camera,
+                self.params.gains,
+                self.config.control_rate_hz,
             )
 
     def _latest_image(self):
@@ -588,6 +597,24 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
             return False
         return self.fc.rehearse_send(frame)
 
+    def _prepare_loop(self) -> bool:
+        """In the slack after a tick (run()): build the loop as soon as the camera's first
+        frame gives its size, so that no tick pays for it (its shadow is taken after the next
+        tick, :meth:`_refresh_shadow`; the code's first runs were paid by :func:`warm_up`). The
+        tick that built it took about 1 ms here, and a start-up tick, very likely that one,
+        5.5 ms once on a busy host: an overrun (README "Session 21"). :meth:`tick` still
+        builds it when called alone. True when it built it."""
+        if self.loop is not None or self.camera.last_frame is None:
+            return False
+        if self.scheduler.slack_s() < SHADOW_MIN_SLACK_S:
+            return False  # after a later tick
+        h, w = self.camera.last_frame.image.shape[:2]
+        with self._loop_lock:
+            if self.loop is not None:
+                return False
+            self._build_loop(w, h)
+        return True
+
     def _refresh_shadow(self) -> None:
         """After a tick, in the slack: a new shadow when the loop's mode moved away from it or
         it is old (rehearsal.py), unless the next wake-up is near."""
@@ -666,6 +693,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
     def run(self, duration_s: float | None = None) -> int:
         sched = self.scheduler
         self._tick_failure = None
+        if self.loop is None:  # the code's first runs paid before the loop runs (rehearsal.py)
+            warm_up(self._new_loop(640, 480), self.period_s)
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
@@ -713,7 +742,8 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
                 if end is not None and now >= end:
                     break
                 sched.after_tick()
-                self._refresh_shadow()
+                if not self._prepare_loop():  # a new loop's shadow after a later tick
+                    self._refresh_shadow()
                 self._watch_binding()
                 self.fc.drain_rehearsals()
         except KeyboardInterrupt:
