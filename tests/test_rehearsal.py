@@ -664,3 +664,32 @@ def test_the_warm_up_flies_a_throwaway_loop_through_tracking_and_packs_its_setpo
     assert loop.acquired and loop.mode is LoopMode.TRACKING
     counts = loop.dkf.counts
     assert counts[FusionResult.INITIALISED] == 1 and counts[FusionResult.ACCEPTED] == 3
+
+
+def test_a_failing_warm_up_is_a_warning_and_the_runtime_still_runs(tmp_path, monkeypatch):
+    import onboard.runtime.runner as runner
+
+    def broken(*_a, **_k):
+        raise FloatingPointError("a bad throwaway loop")
+
+    monkeypatch.setattr(runner, "warm_up", broken)
+    rt = OnboardRuntime(
+        RuntimeConfig(
+            fc_url=f"udpout:127.0.0.1:{free_port()}",
+            camera="sitl://127.0.0.1:9",  # nothing there: no frame, no loop
+            params_path=tmp_path / "params.toml",
+        ),
+        log=lambda _s: None,
+    )
+    warnings = []
+    real_event = rt._event
+    monkeypatch.setattr(
+        rt,
+        "_event",
+        lambda sev, text: (
+            (warnings.append(text) if sev == "warning" else None) or real_event(sev, text)
+        ),
+    )
+    assert rt.run(duration_s=0.2) == 0
+    assert "warm-up failed (FloatingPointError: a bad throwaway loop)" in warnings
+    assert rt.timing.tick_work_s  # it ticked

@@ -27,8 +27,9 @@ def _overran(ticks: list[dict] | None) -> str:
 
 
 def _rehearsed_sends(n: int | None) -> str:
-    """The rehearsals whose setpoint frame went to the runtime's own socket (the kernel's send
-    path warmed for the real send; none where the link to PX4 is not UDP)."""
+    """The rehearsals whose setpoint frame went to the runtime's own socket (the system call
+    and the kernel's UDP and IP layers warmed for the real send; none where the link to PX4 is
+    not UDP)."""
     if n is None:
         return ""
     return f"; the setpoint's send rehearsed {n} times (to a socket of its own, never to PX4)"

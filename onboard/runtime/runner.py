@@ -694,7 +694,10 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         sched = self.scheduler
         self._tick_failure = None
         if self.loop is None:  # the code's first runs paid before the loop runs (rehearsal.py)
-            warm_up(self._new_loop(640, 480), self.period_s)
+            try:
+                warm_up(self._new_loop(640, 480), self.period_s)
+            except Exception as exc:  # a throwaway loop's failure is no reason not to fly
+                self._event("warning", f"warm-up failed ({type(exc).__name__}: {exc})")
         note = sched.start()  # before the camera thread starts, so it inherits the priority
         if note:
             self._event("warning", note)
