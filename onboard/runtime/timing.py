@@ -70,7 +70,6 @@ class LoopTiming:
         # CPU, the host) or work of its own
         self.overran: deque[tuple[str, float, float, float | None]] = deque(maxlen=20)
         self._first_start: float | None = None
-        self._start = 0.0
         self.early_gaps_s: deque[float] = deque(maxlen=keep)  # previous tick -> early tick
 
     def tick_started(self, start_s: float, early: bool = False, kind: str | None = None) -> None:
@@ -80,7 +79,6 @@ class LoopTiming:
         the grid), its work figures kept apart by it."""
         self._early = early
         self._kind = kind if kind is not None else (EARLY_TICK if early else ON_THE_GRID)
-        self._start = start_s
         if self._first_start is None:
             self._first_start = start_s
         self._send_s = math.nan
@@ -119,7 +117,7 @@ class LoopTiming:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
             self.overruns += 1
-            self.overran.append((self._kind, self._start - self._first_start, work_s, cpu_s))
+            self.overran.append((self._kind, self._last_start - self._first_start, work_s, cpu_s))
             return True
         return False
 
