@@ -9,12 +9,14 @@ import math
 import numpy as np
 
 from ..datatypes import GRAVITY_M_S2
-from ..gains import Gains
+from ..gains import GainIndex, Gains, pack_gains
 from ..jit import kernel
 from .guidance_io import GuidanceInput, GuidanceOutput
 from .los import _f3, _max, _min, angles_floats, hypot2, saturate3, saturate_norm
 
-_LOS = (hypot2,)  # the kernels of los.py these call (see onboard.jit.kernel's ``uses``)
+# what these kernels call from other files (their cache is dropped when one changes): los.py's
+# kernels and the gains' declaration (png_floats's indices)
+_LOS = (hypot2, pack_gains)
 
 
 def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
@@ -232,28 +234,6 @@ def zem_floats(
     return (v0 - vn * n0) * k, (v1 - vn * n1) * k, (v2 - vn * n2) * k
 
 
-# the gains png_floats reads, in this order (angles in radians)
-_PNG_GAINS = ("v_min", "k_a", "a_max", "K_y", "K_z", "tau_zem", "r_mid", "pur_zone", "k_pur",
-              "k_brake", "v_max", "fov_margin")  # fmt: skip
-_PNG_DEGREES = {"pur_zone", "fov_margin"}
-_png_gains_of: tuple[Gains | None, np.ndarray] = (None, np.zeros(len(_PNG_GAINS)))
-
-
-def _png_gains(gains: Gains) -> np.ndarray:
-    """``gains`` as png_floats's array (made again only when the gains object changes)."""
-    global _png_gains_of
-    held, arr = _png_gains_of
-    if held is not gains:
-        arr = np.array(
-            [
-                math.radians(getattr(gains, k)) if k in _PNG_DEGREES else getattr(gains, k)
-                for k in _PNG_GAINS
-            ]
-        )
-        _png_gains_of = (gains, arr)
-    return arr
-
-
 def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """The proposed law: PNG on the velocity angles plus the k_a speed ramp (eqs. 8-9, 14, 17)."""
     a0, a1, a2, sigma_y, sigma_z, hovering = png_command(
@@ -290,7 +270,7 @@ def png_command(
     a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
         dt_s, l0, l1, l2, los_elev_rad, d_los_elev_rad, d_los_azim_rad, v0, v1, v2,
         float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom, range_m, vt is not None,
-        t0, t1, t2, target_vel_var_m2_s2, _png_gains(gains),
+        t0, t1, t2, target_vel_var_m2_s2, gains.packed,
     )  # fmt: skip
     if hovering != 0.0:  # the angles are math.nan itself (telemetry compares equal)
         return a0, a1, a2, math.nan, math.nan, True
@@ -330,9 +310,18 @@ def png_floats(
     """:func:`png_law` in floats (compiled): the hold dt (s), the LOS n_t and its elevation
     q_y, the LOS change (dq_y, dq_z), the velocity v, the camera axis (R_WC[:, 2]), the
     image's (top, bottom) edges, the DKF's range and target velocity (with its variance) and
-    the gains (``_PNG_GAINS``); returns (a_d, sigma_y, sigma_z, 1 when hovering else 0)."""
-    v_min, k_a, a_max, K_y, K_z, tau_zem, r_mid = G[0], G[1], G[2], G[3], G[4], G[5], G[6]
-    pur_zone, k_pur, k_brake, v_max, fov_margin = G[7], G[8], G[9], G[10], G[11]
+    the gains ``G`` (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when
+    hovering else 0)."""
+    v_min, k_a, a_max = G[GainIndex.v_min], G[GainIndex.k_a], G[GainIndex.a_max]
+    K_y, K_z, tau_zem, r_mid = (
+        G[GainIndex.K_y],
+        G[GainIndex.K_z],
+        G[GainIndex.tau_zem],
+        G[GainIndex.r_mid],
+    )
+    pur_zone, k_pur = math.radians(G[GainIndex.pur_zone]), G[GainIndex.k_pur]
+    k_brake, v_max = G[GainIndex.k_brake], G[GainIndex.v_max]
+    fov_margin = math.radians(G[GainIndex.fov_margin])
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if speed < v_min:
         # below v_min the velocity angles are undefined: accelerate along the LOS (§3.4)
