@@ -15,6 +15,7 @@ SCENARIO_DIR = Path(__file__).parent.parent / "scenarios"
 
 
 CAMERA_MODES = ("projected", "rendered")  # how the simulated camera sees the target
+ESTIMATE_PROFILES = ("indoor-mocap", "outdoor-gnss", "ideal", "table")  # sim/profiles.py
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,10 @@ class EstimateSpec:
     the model and the sources of each default). Sigmas are 1-sigma per axis."""
 
     enabled: bool = True  # false: ideal sensors (the loop sees the truth)
+    # the named error profile drawn per sortie (groundstation/sim/profiles.py): it draws every
+    # key below left at its default; "table" flies the keys as written, "ideal" the truth
+    profile: str = "outdoor-gnss"
+    heading_noise_deg: float = 0.2  # the attitude error about body z (others: att_noise_deg)
     pos_noise_m: float = 0.05  # Gauss-Markov position error
     pos_time_constant_s: float = 2.0
     vel_noise_m_s: float = 0.05  # Gauss-Markov velocity error

@@ -10,7 +10,7 @@ from onboard.gains import GainError, Gains
 
 from .physics import helium_gross_lift_n, jet_reference_problem
 from .problems import Problems
-from .specs import MOTIONS, WIND_MODELS, Scenario
+from .specs import ESTIMATE_PROFILES, MOTIONS, WIND_MODELS, Scenario
 
 
 def validate(s: Scenario, problems: Problems) -> None:
@@ -99,6 +99,12 @@ def validate(s: Scenario, problems: Problems) -> None:
         "command_delay_s",
     ):
         check(getattr(e, name) >= 0, f"estimate.{name}", "must not be negative")
+    check(
+        e.profile in ESTIMATE_PROFILES,
+        "estimate.profile",
+        f"must be one of {', '.join(ESTIMATE_PROFILES)}",
+    )
+    check(0 <= e.heading_noise_deg <= 10, "estimate.heading_noise_deg", "must be in [0, 10] deg")
     for name in ("pos_time_constant_s", "vel_time_constant_s", "att_time_constant_s"):
         check(getattr(e, name) > 0, f"estimate.{name}", "must be > 0")
     check(e.lag_s <= 0.5, "estimate.lag_s", "must be at most 0.5 s")

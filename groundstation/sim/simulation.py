@@ -55,6 +55,7 @@ from .physics import (
     physics_steps,
     sortie_buffer,
 )
+from .profiles import profile_of, sortie_estimate
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
@@ -94,6 +95,7 @@ class SortieResult:
     detections_fused: int
     detections_rejected: int
     guard_trips: int
+    profile: str = ""  # the state-estimate error profile flown ("ideal": ideal sensors)
     recovered: bool = False  # braked, level and above the clearance floor after the pass
     min_alt_after_pass_m: float = math.nan  # lowest altitude after the pass (NaN: no pass)
 
@@ -151,9 +153,10 @@ class Simulation:
         self._gyro_noise = Normals(gyro_rng, 3)  # the gyro's white noise, drawn in blocks
         # the estimate model's streams are the next child: the four above stay as they were
         est_seed = ss.spawn(1)[0]
-        self.estimate = (
-            StateEstimateModel(scenario.estimate, est_seed) if scenario.estimate.enabled else None
-        )
+        # the error profile's draw for this sortie (the next child: the streams above stay)
+        self.profile = profile_of(scenario)
+        self.estimate_spec = spec = sortie_estimate(scenario, ss.spawn(1)[0])
+        self.estimate = None if spec is None else StateEstimateModel(spec, est_seed)
         self._command_delay_steps = (
             0 if self.estimate is None else round(self.estimate.command_delay_s / self.dt_s)
         )
@@ -267,6 +270,7 @@ class Simulation:
             gains=self.loop.gains,
             scenario_source=sc.source,
             scenario_toml=scenario_toml(sc),
+            estimate_profile=self.profile,
         )
 
     def frame(self) -> Frame:
@@ -529,6 +533,7 @@ class Simulation:
             detections_fused=self._fused,
             detections_rejected=self._rejected,
             guard_trips=self.loop.guard_trips,
+            profile=self.profile,
             recovered=self.recovered,
             min_alt_after_pass_m=float(self.closest[C_MIN_ALT]) if self.passed else math.nan,
         )
