@@ -590,8 +590,17 @@ def _cmd_scenarios(_: argparse.Namespace) -> int:
     return 0
 
 
+# the commands that fly many sorties compile the kernels (onboard.jit); the others run them
+# as Python and start at once
+_JIT_COMMANDS = ("campaign", "tune", "bench")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
+    if args.command in _JIT_COMMANDS:
+        from onboard.jit import use_jit
+
+        use_jit()
     try:
         _with_profile_set(args)
         if args.command == "sortie":
