@@ -20,6 +20,7 @@ from onboard.link.address import add_host_port_option
 from .campaigns.tune_options import add_tune_arguments
 from .scenario import (
     CAMERA_MODES,
+    ESTIMATE_PROFILES,
     SCENARIO_DIR,
     ScenarioError,
     load_scenario,
@@ -134,6 +135,20 @@ def _add_backend_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+_PROFILE_HELP = (
+    "state-estimate error profile for every sortie (default: each scenario's own, "
+    "outdoor-gnss unless it says otherwise; ideal = ideal sensors, analysis only; "
+    "docs/realism.md)"
+)
+
+
+def _with_profile_set(args: argparse.Namespace) -> None:
+    """``--profile NAME`` is ``--set estimate.profile="NAME"`` (checked and applied alike)."""
+    name = getattr(args, "profile", None)
+    if name is not None:
+        args.set = [*(args.set or []), f'estimate.profile="{name}"']
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="groundstation", description="Peregrine ground station")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -150,6 +165,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--log", metavar="DIR", type=_writable_dir, help="record the sortie to DIR (MCAP)"
     )
     s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    s.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
 
     r = sub.add_parser("replay", help="print a recorded sortie's summary")
     r.add_argument("file", type=_existing_file("a sortie log (.mcap)"), help="a sortie log (.mcap)")
@@ -285,6 +301,7 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
     c.add_argument("--log", metavar="DIR", type=_writable_dir, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    c.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
     _add_backend_args(c)
 
     t = sub.add_parser("tune", help="search gains with Optuna over a campaign (see README)")
@@ -370,6 +387,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
 def _cmd_sortie(args: argparse.Namespace) -> int:
     from .recording.writer import SortieRecorder
+    from .sim.profiles import label
     from .sim.simulation import Simulation
 
     scenario = with_overrides(load_scenario(args.scenario), parse_overrides(args.set))
@@ -392,9 +410,17 @@ def _cmd_sortie(args: argparse.Namespace) -> int:
         print(json.dumps(out, sort_keys=True))
     else:
         r = result
+        after = (
+            f"recovered, lowest {r.min_alt_after_pass_m:.2f} m after the pass"
+            if r.recovered
+            else f"not recovered, lowest {r.min_alt_after_pass_m:.2f} m after the pass"
+            if math.isfinite(r.min_alt_after_pass_m)
+            else "no pass"
+        )
         print(
             f"{r.scenario}: {r.outcome}  miss {r.miss_m:.3f} m (hit radius {r.hit_radius_m:.2f} m)"
-            f" at t = {r.intercept_time_s:.2f} s\n"
+            f" at t = {r.intercept_time_s:.2f} s; {after}\n"
+            f"  state-estimate profile: {label(r.profile)}\n"
             f"  terminal speed {r.terminal_speed_m_s:.2f} m/s, max normal acceleration "
             f"{r.max_normal_accel_m_s2:.2f} m/s^2\n"
             f"  law {r.law}, seed {r.seed}, camera {r.camera}, detections fused "
@@ -576,6 +602,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         use_jit()
     try:
+        _with_profile_set(args)
         if args.command == "sortie":
             return _cmd_sortie(args)
         if args.command == "scenarios":

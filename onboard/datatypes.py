@@ -55,6 +55,12 @@ class VehicleParams(SharedWhenCopied):
     mass_kg: float = 1.5
     max_thrust_n: float = 3.0 * 1.5 * GRAVITY_M_S2
 
+    @classmethod
+    def from_hover_thrust(cls, hover_thrust_normalised: float) -> VehicleParams:
+        """The airframe as the operator knows it: only its hover thrust (PRG_HOVER_THR; the
+        loop uses mass and maximum thrust only as their ratio), mass 1 kg."""
+        return cls(mass_kg=1.0, max_thrust_n=GRAVITY_M_S2 / hover_thrust_normalised)
+
     @property
     def hover_thrust_normalised(self) -> float:
         return self.mass_kg * GRAVITY_M_S2 / self.max_thrust_n

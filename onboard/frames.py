@@ -43,6 +43,7 @@ class SortieStart:
     scenario_source: str  # where the scenario came from (a path, "live MAVLink")
     scenario_toml: str  # the scenario as flown ("" when there is none)
     t0_s: float = 0.0  # the producer's clock at the start: recordings count from here
+    estimate_profile: str = ""  # the simulator's state-estimate profile ("ideal": ideal sensors)
 
 
 @dataclass(frozen=True, slots=True)

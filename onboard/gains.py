@@ -65,6 +65,9 @@ class Gains(SharedWhenCopied):
     omega_max: float = _gain(4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)")
     v_min: float = _gain(0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)")
     k_brake: float = _gain(1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)")
+    k_brake_z: float = _gain(
+        3.0, "1/s", 0.1, 10.0, "braking: vertical velocity gain (a descent is stopped first)"
+    )
     k_v: float = _gain(
         1.8, "1/s", 0.2, 200.0, "PG/IBVS baselines: velocity-loop gain (PX4's; 1/dt = eq. 17)"
     )

@@ -22,7 +22,6 @@ from .control.guidance import (
     los_terms,
     png_command,
     png_law,
-    saturate_norm,
 )
 from .control.reacquire import (
     Candidate,
@@ -70,6 +69,22 @@ ATTITUDE_JUMP_MAX_PERIODS = 2.0
 ATTITUDE_STALE_S = 1e-6
 
 
+def brake_accel(velocity_enu_m_s: np.ndarray, gains: Gains) -> np.ndarray:
+    """Brake and hold (after the pass, on an abort, with the target lost): the vertical
+    velocity nulled first (``k_brake_z``, up to ``a_max``: a vehicle diving through a low
+    target must not reach the ground), the horizontal with ``k_brake`` in what is left of
+    ``a_max`` (m/s^2, ENU)."""
+    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
+    a_max = gains.a_max
+    az = min(max(-gains.k_brake_z * v2, -a_max), a_max)
+    room = math.sqrt(max(a_max * a_max - az * az, 0.0))
+    ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
+    n = math.hypot(ax, ay)
+    if n > room:
+        ax, ay = ax * room / n, ay * room / n
+    return np.array((ax, ay, az))
+
+
 class InterceptionLoop:
     """Call :meth:`on_gyro` and :meth:`on_detection` as samples arrive, and :meth:`tick` at
     the control rate; each tick returns the command and what was computed for it."""
@@ -89,6 +104,7 @@ class InterceptionLoop:
             raise ValueError("control_rate_hz must be positive")
         self.camera = camera
         self._R_BC = np.array(camera.R_BC)  # writable, as the kernels take it
+        self._offset_b_m = camera.offset_b_m
         self.vehicle = vehicle
         self.law_name = law
         self._law = GUIDANCE_LAWS[law]
@@ -160,6 +176,17 @@ class InterceptionLoop:
         self._gyro_n += 1
 
     def on_detection(self, detection: Detection) -> None:
+        """Queue a detection (the lens's pixels) for the next tick: undistorted with the
+        camera calibration the loop believes (a clipped blob's box is left as the detector saw
+        it: the DKF reads it only to know whether the blob is whole)."""
+        cam = self.camera
+        if cam.distorted:
+            d = detection
+            try:
+                u, v = cam.undistort_px(float(d.center_px[0]), float(d.center_px[1]))
+            except (TypeError, ValueError, IndexError):
+                u = v = math.nan  # the DKF refuses it
+            detection = Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
         self._detections.append(detection)
 
     # ------------------------------------------------------------------ track loss
@@ -348,7 +375,15 @@ class InterceptionLoop:
             self._first_tick_s = t
             # the launch cue: where the operator pointed the camera (horizontal heading)
             self._launch_cue = horizontal_unit(R_WC[:, 2])
-        self.dkf.predict(t, gyro, v, R_WC)
+        ox, oy, oz = self._offset_b_m
+        if ox or oy or oz:
+            # the camera's own velocity: the body's plus omega x the believed mount offset
+            w0, w1, w2 = (float(c) for c in gyro)
+            c0, c1, c2 = w1 * oz - w2 * oy, w2 * ox - w0 * oz, w0 * oy - w1 * ox
+            v_cam = v + R_WB @ np.array((c0, c1, c2))
+        else:
+            v_cam = v
+        self.dkf.predict(t, gyro, v_cam, R_WC)
         hist = self._R_hist
         hist.append((t, R_WC))
         while len(hist) > 2 and hist[1][0] <= t - _ATTITUDE_HISTORY_S:
@@ -395,7 +430,7 @@ class InterceptionLoop:
                 self._search_cue, R_WC[:, 2], self._search_dir, gains, t - self._search_start_s
             )
         elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
-            a_d = saturate_norm(-gains.k_brake * v, gains.a_max)  # brake and hold
+            a_d = brake_accel(v, gains)  # brake and hold
             if est is not None and not est.lost:
                 e_est, e_rate = est.e_px, est.e_rate_px_s
         else:  # tracking, or coasting on the prediction: the guidance law

@@ -420,7 +420,8 @@ let lastGainsStamp = null; // gains_pending and the last applied time, as last s
 
 function showStatus(st) {
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
-  setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
+  const profile = st.profile === "ideal" ? " · IDEAL SENSORS (analysis only)" : st.profile ? ` · ${st.profile}` : "";
+  setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera}${profile} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
   setBadge("st-time", `t = ${Number(st.time_s).toFixed(2)} s`);
   if (st.outcome) setBadge("st-outcome", `${st.outcome} · miss ${Number(st.miss_m).toFixed(3)} m`, st.outcome === "HIT" ? "ok" : "bad");
   else setBadge("st-outcome", "no outcome");

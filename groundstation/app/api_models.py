@@ -101,6 +101,9 @@ class Status(BaseModel):
     law: str | None
     seed: int | str | None
     camera: str | None
+    profile: str | None = Field(
+        default=None, description="state-estimate error profile; ideal = ideal sensors"
+    )
     speed: str
     time_s: float
     outcome: str | None

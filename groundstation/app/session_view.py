@@ -147,6 +147,8 @@ class SessionView:
             "law": self.config.law,
             "seed": self.config.seed,
             "camera": self.config.camera,
+            # the state-estimate error profile flown ("ideal": ideal sensors, shown as such)
+            "profile": None if sim is None else sim.profile,
             "speed": self.config.speed,
             "time_s": 0.0 if sim is None else round(sim.time_s, 4),
             "outcome": None,
@@ -183,6 +185,7 @@ class SessionView:
                 law=rp.info.law,
                 seed=rp.info.seed,
                 camera=rp.info.camera,
+                profile=rp.info.metadata.get("sortie", {}).get("estimate_profile") or None,
                 time_s=round(self.replay_t, 4),
                 outcome=rp.info.outcome if at_end else None,
                 miss_m=rp.info.miss_m if at_end else None,

@@ -91,6 +91,8 @@ def run_campaign(
         "overrides": dict(overrides or {}),
         # the state-estimate model every sortie flew with (overrides apply to all of them)
         "estimate": dataclasses.asdict(jobs[0].scenario.estimate) if jobs else {},
+        # the error profiles flown ("ideal": ideal sensors, analysis only)
+        "profiles": sorted({str(o.result.get("profile", "")) for o in outcomes}),
         "workers": n_workers,
         "backend": type(runner).__name__,
         "sorties": len(outcomes),
@@ -108,6 +110,7 @@ def _toml_value(v: Any) -> str:
 
 
 def main_campaign(args) -> int:
+    from ..sim.profiles import label
     from .definitions import parse_laws
     from .ray_runner import make_runner
 
@@ -140,6 +143,7 @@ def main_campaign(args) -> int:
         )
     else:
         print(tables_markdown(args.name, res["summary"], res["outcomes"]))
+        print("\nstate-estimate profile: " + ", ".join(label(p) for p in meta["profiles"]))
         print(
             f"\n{meta['sorties']} sorties, {meta['sim_time_s']:.1f} simulated s in "
             f"{meta['wall_s']:.1f} s wall with {meta['workers']} worker(s): "

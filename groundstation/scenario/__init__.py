@@ -20,9 +20,11 @@ from .physics import (
 from .problems import ScenarioError, ScenarioProblem
 from .specs import (
     CAMERA_MODES,
+    ESTIMATE_PROFILES,
     MOTIONS,
     SCENARIO_DIR,
     WIND_MODELS,
+    BeliefSpec,
     CameraSpec,
     EstimateSpec,
     InterceptorSpec,
@@ -36,10 +38,12 @@ from .specs import (
 __all__ = [
     "AIR_DENSITY_KG_M3",
     "CAMERA_MODES",
+    "ESTIMATE_PROFILES",
     "HELIUM_DENSITY_KG_M3",
     "MOTIONS",
     "SCENARIO_DIR",
     "WIND_MODELS",
+    "BeliefSpec",
     "CameraSpec",
     "EstimateSpec",
     "InterceptorSpec",

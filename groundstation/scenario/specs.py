@@ -15,6 +15,7 @@ SCENARIO_DIR = Path(__file__).parent.parent / "scenarios"
 
 
 CAMERA_MODES = ("projected", "rendered")  # how the simulated camera sees the target
+ESTIMATE_PROFILES = ("indoor-mocap", "outdoor-gnss", "ideal", "table")  # sim/profiles.py
 
 
 @dataclass(frozen=True)
@@ -58,17 +59,32 @@ class CameraSpec:
     rate_hz: float = 30.0
     delay_s: float = 0.08  # capture to result
     delay_jitter_s: float = 0.005  # 1 sigma
-    noise_px: float = 1.0  # 1 sigma, projected mode
+    # projected mode's blob (docs/realism.md "Perception"): centre noise 1 sigma per axis
+    # max(noise_px, centre_noise_k_px / sqrt(radius_px)), radius noise 1 sigma
+    # hypot(size_noise_px, size_noise_rel x radius)
+    noise_px: float = 0.3  # the centre noise's floor (a large blob's)
+    centre_noise_k_px: float = 1.0  # px^1.5: 1 px at a 1 px radius, 0.5 px at 4 px
+    size_noise_px: float = 0.3
+    size_noise_rel: float = 0.03
     dropout_probability: float = 0.02
     mount_pitch_deg: float = 0.0
     mount_roll_deg: float = 0.0
-    # detector realism (README "Detector realism"); each 0 switches its part off
-    min_blob_px: float = 0.0  # blobs narrower than this (diameter, px) are not detected
-    false_probability: float = 0.0  # per frame: a false red blob (clutter) is detected
+    # detector faults (docs/realism.md); each 0 switches its part off
+    min_blob_px: float = 3.2  # blobs narrower than this (diameter, px) are not detected
+    false_probability: float = 0.01  # per frame: a false red blob (clutter) is detected
     false_blob_px: float = 5.0  # diameter of a false blob; the larger blob wins the frame
-    burst_probability: float = 0.0  # per frame: a good frame starts a drop burst
+    burst_probability: float = 0.02  # per frame: a good frame starts a drop burst
     burst_mean_frames: float = 5.0  # mean burst length (frames), geometric
     burst_drop_probability: float = 1.0  # drop probability inside a burst
+    # the true lens and mount (docs/realism.md); the loop knows them only through the
+    # operator's calibration in [belief]
+    principal_offset_u_px: float = 2.5  # principal point right of the image centre
+    principal_offset_v_px: float = -1.5  # principal point below the image centre
+    k1: float = -0.105  # Brown-Conrady radial (OpenCV's distCoeffs order k1, k2, p1, p2)
+    k2: float = 0.012
+    p1: float = 0.0004  # tangential
+    p2: float = -0.0003
+    offset_m: Vec3 = (0.08, 0.0, 0.03)  # camera from the centre of mass, body FLU
 
 
 WIND_MODELS = ("uniform", "jet")  # groundstation/sim/wind.py
@@ -97,6 +113,10 @@ class EstimateSpec:
     the model and the sources of each default). Sigmas are 1-sigma per axis."""
 
     enabled: bool = True  # false: ideal sensors (the loop sees the truth)
+    # the named error profile drawn per sortie (groundstation/sim/profiles.py): it draws every
+    # key below left at its default; "table" flies the keys as written, "ideal" the truth
+    profile: str = "outdoor-gnss"
+    heading_noise_deg: float = 0.2  # the attitude error about body z (others: att_noise_deg)
     pos_noise_m: float = 0.05  # Gauss-Markov position error
     pos_time_constant_s: float = 2.0
     vel_noise_m_s: float = 0.05  # Gauss-Markov velocity error
@@ -114,6 +134,27 @@ class EstimateSpec:
 
 
 @dataclass(frozen=True)
+class BeliefSpec:
+    """What the vehicle's operator believes: the loop is configured from this table and
+    [gains] only, never from the true values of the other tables (docs/realism.md). Each
+    default is the operator's parameter's default (``PRG_TGT_DIAM``, ``PRG_CAM_HFOV``, ...) or
+    a typical calibration of the default camera, independent of the scenario's truth."""
+
+    target_diameter_m: float = 0.3  # PRG_TGT_DIAM
+    camera_hfov_deg: float = 90.0  # PRG_CAM_HFOV: the calibrated focal length
+    camera_mount_pitch_deg: float = 0.0  # PRG_CAM_PITCH
+    camera_mount_roll_deg: float = 0.0  # PRG_CAM_ROLL
+    camera_principal_offset_u_px: float = 0.0  # calibrated principal point from the centre
+    camera_principal_offset_v_px: float = 0.0
+    camera_k1: float = -0.1  # calibrated Brown-Conrady coefficients
+    camera_k2: float = 0.01
+    camera_p1: float = 0.0
+    camera_p2: float = 0.0
+    camera_offset_m: Vec3 = (0.08, 0.0, 0.03)  # measured camera offset from the CoM, FLU
+    hover_thrust: float = 1.0 / 3.0  # PRG_HOVER_THR: normalised thrust that hovers
+
+
+@dataclass(frozen=True)
 class Scenario:
     name: str
     duration_s: float
@@ -124,6 +165,7 @@ class Scenario:
     wind: WindSpec = field(default_factory=WindSpec)
     sim: SimSpec = field(default_factory=SimSpec)
     estimate: EstimateSpec = field(default_factory=EstimateSpec)
+    belief: BeliefSpec = field(default_factory=BeliefSpec)
     gains: dict[str, float] = field(default_factory=dict)
     source: str = "<memory>"
     text: str = ""  # the file as read, for recording alongside a sortie
@@ -139,4 +181,5 @@ SECTIONS = {
     "wind": WindSpec,
     "sim": SimSpec,
     "estimate": EstimateSpec,
+    "belief": BeliefSpec,
 }

@@ -10,7 +10,7 @@ from onboard.gains import GainError, Gains
 
 from .physics import helium_gross_lift_n, jet_reference_problem
 from .problems import Problems
-from .specs import MOTIONS, WIND_MODELS, Scenario
+from .specs import ESTIMATE_PROFILES, MOTIONS, WIND_MODELS, Scenario
 
 
 def validate(s: Scenario, problems: Problems) -> None:
@@ -57,6 +57,9 @@ def validate(s: Scenario, problems: Problems) -> None:
     check(c.delay_s >= 0, "camera.delay_s", "must be >= 0")
     check(c.delay_jitter_s >= 0, "camera.delay_jitter_s", "must be >= 0")
     check(c.noise_px >= 0, "camera.noise_px", "must not be negative")
+    check(0 <= c.centre_noise_k_px <= 10, "camera.centre_noise_k_px", "must be in [0, 10]")
+    check(0 <= c.size_noise_px <= 10, "camera.size_noise_px", "must be in [0, 10] px")
+    check(0 <= c.size_noise_rel <= 0.5, "camera.size_noise_rel", "must be in [0, 0.5]")
     check(0 <= c.dropout_probability < 1, "camera.dropout_probability", "must be in [0, 1)")
     check(0 <= c.min_blob_px <= 100, "camera.min_blob_px", "must be in [0, 100] px")
     check(0 <= c.false_probability <= 1, "camera.false_probability", "must be in [0, 1]")
@@ -96,6 +99,12 @@ def validate(s: Scenario, problems: Problems) -> None:
         "command_delay_s",
     ):
         check(getattr(e, name) >= 0, f"estimate.{name}", "must not be negative")
+    check(
+        e.profile in ESTIMATE_PROFILES,
+        "estimate.profile",
+        f"must be one of {', '.join(ESTIMATE_PROFILES)}",
+    )
+    check(0 <= e.heading_noise_deg <= 10, "estimate.heading_noise_deg", "must be in [0, 10] deg")
     for name in ("pos_time_constant_s", "vel_time_constant_s", "att_time_constant_s"):
         check(getattr(e, name) > 0, f"estimate.{name}", "must be > 0")
     check(e.lag_s <= 0.5, "estimate.lag_s", "must be at most 0.5 s")
@@ -108,6 +117,7 @@ def validate(s: Scenario, problems: Problems) -> None:
         "estimate.camera_time_offset_s",
         "must be at most 0.05 s (a larger offset is a wrong camera delay, camera.delay_s)",
     )
+    validate_belief(s, problems)
     each_ok = True
     for k, v in s.gains.items():
         try:
@@ -120,3 +130,51 @@ def validate(s: Scenario, problems: Problems) -> None:
             s.gains_obj()
         except GainError as exc:
             problems.add("gains", str(exc))
+
+
+# how far a calibration may be from the camera flown before it is a different camera (the
+# scenario forgot to state the belief): field of view and mount angles
+BELIEF_HFOV_REL = 0.1
+BELIEF_MOUNT_DEG = 10.0
+
+
+def validate_belief(s: Scenario, problems: Problems) -> None:
+    """The [belief] table's ranges, and a calibration that describes the camera flown."""
+    b, c, check = s.belief, s.camera, problems.check
+    check(0.02 <= b.target_diameter_m <= 3.0, "belief.target_diameter_m", "must be in [0.02, 3] m")
+    check(20 <= b.camera_hfov_deg <= 170, "belief.camera_hfov_deg", "must be in [20, 170] deg")
+    check(
+        -90 <= b.camera_mount_pitch_deg <= 90,
+        "belief.camera_mount_pitch_deg",
+        "must be in [-90, 90]",
+    )
+    check(
+        -180 <= b.camera_mount_roll_deg <= 180,
+        "belief.camera_mount_roll_deg",
+        "must be in [-180, 180]",
+    )
+    check(0.05 <= b.hover_thrust <= 0.95, "belief.hover_thrust", "must be in [0.05, 0.95]")
+    for side, spec, prefix in (("belief", b, "camera_"), ("camera", c, "")):
+        for name in ("principal_offset_u_px", "principal_offset_v_px"):
+            v = getattr(spec, prefix + name)
+            check(abs(v) <= 50, f"{side}.{prefix}{name}", "must be within 50 px of the centre")
+        for name in ("k1", "k2", "p1", "p2"):
+            v = getattr(spec, prefix + name)
+            limit = 1.0 if name in ("k1", "k2") else 0.05
+            check(abs(v) <= limit, f"{side}.{prefix}{name}", f"must be in [-{limit}, {limit}]")
+        off = getattr(spec, prefix + "offset_m")
+        check(all(abs(x) <= 1.0 for x in off), f"{side}.{prefix}offset_m", "must be within 1 m")
+    if 1 <= c.hfov_deg <= 170:
+        check(
+            abs(b.camera_hfov_deg / c.hfov_deg - 1.0) <= BELIEF_HFOV_REL,
+            "belief.camera_hfov_deg",
+            f"{b.camera_hfov_deg} deg calibrates a different lens than the camera's "
+            f"{c.hfov_deg} deg: state the operator's calibration in [belief]",
+        )
+    for name in ("mount_pitch_deg", "mount_roll_deg"):
+        believed, true = getattr(b, "camera_" + name), getattr(c, name)
+        check(
+            abs(believed - true) <= BELIEF_MOUNT_DEG,
+            f"belief.camera_{name}",
+            f"{believed} deg is not the mount flown ({true} deg): state it in [belief]",
+        )

@@ -1,12 +1,14 @@
 """The simulated strapdown camera and detection pipeline.
 
 Frames are captured at the camera rate. ``projected`` mode projects the target analytically
-(pinhole) and adds pixel noise; ``rendered`` mode draws a real frame and runs the onboard
-detector on it. Both apply the same capture-to-result delay with jitter and random dropouts,
-and deliver each detection stamped with its capture time when its delay has passed.
+through the true lens (pinhole, then Brown-Conrady distortion) and reports what a blob
+detector sees: the visible part of the disc, its size and centre with noise; ``rendered``
+mode draws a real frame through the same lens and runs the onboard detector on it. Both
+apply the same capture-to-result delay with jitter and random dropouts, and deliver each
+detection stamped with its capture time when its delay has passed.
 
-:class:`DetectorFaults` adds what a real detector does (all off by default, each switched on
-by a ``[camera]`` key): a minimum blob size (a range limit: the projected camera would
+:class:`DetectorFaults` adds what a real detector does (on by default, each switched off by a
+``[camera]`` key set to 0): a minimum blob size (a range limit: the projected camera would
 otherwise report a 0.06 px balloon), false red blobs (clutter) and bursty frame drops (a
 Gilbert-Elliott two-state channel).
 """
@@ -77,6 +79,50 @@ def sphere_in_view(
         R_WC, c0, c1, c2, t0, t1, t2, diameter_m, model.f_px, model.cu_px, model.cv_px
     )
     return ((u, v) if ahead else None), r_px
+
+
+def centre_noise_px(area_px: float, floor_px: float, k_px: float) -> float:
+    """1-sigma noise per axis of a blob's centroid (px): ``max(floor, k / sqrt(r))`` with r
+    the radius of a disc of ``area_px``. A thresholded blob's centroid moves with the
+    boundary pixels it gains or loses: about 2 pi r of them, each off by up to a pixel, each
+    moving the mean of pi r^2 pixels by ~r / (pi r^2), so the error grows as r^(-1/2) as the
+    blob shrinks; the floor is what a large blob keeps (shading, the colour threshold,
+    motion blur)."""
+    r = math.sqrt(max(area_px, 1e-12) / math.pi)
+    return max(floor_px, k_px / math.sqrt(r))
+
+
+_SLICES = 64  # rows of the numerical clip of a disc crossing the frame's edge
+
+
+def visible_disc(
+    u: float, v: float, r: float, width_px: float, height_px: float
+) -> tuple[float, float, float, tuple[float, float, float, float]] | None:
+    """The part of the disc (centre (u, v), radius r; px) inside the frame [0, w] x [0, h]:
+    (its area, centroid u and v, bounding box (x, y, width, height)), None if no part is
+    inside. A disc inside the frame is exact; one crossing an edge is integrated over
+    ``_SLICES`` rows (chords clipped to the frame)."""
+    x0, x1 = max(u - r, 0.0), min(u + r, width_px)
+    y0, y1 = max(v - r, 0.0), min(v + r, height_px)
+    if not (x0 < x1 and y0 < y1):
+        return None
+    if x0 == u - r and x1 == u + r and y0 == v - r and y1 == v + r:
+        return math.pi * r * r, u, v, (u - r, v - r, 2.0 * r, 2.0 * r)
+    dy = (y1 - y0) / _SLICES
+    y = y0 + dy * (np.arange(_SLICES) + 0.5)
+    h = np.sqrt(np.maximum(r * r - (y - v) ** 2, 0.0))
+    a, b = np.maximum(u - h, 0.0), np.minimum(u + h, width_px)
+    length = np.maximum(b - a, 0.0)
+    area = float(length.sum()) * dy
+    if not area > 0.0:
+        return None
+    cu = float((length * 0.5 * (a + b)).sum()) * dy / area
+    cv = float((length * y).sum()) * dy / area
+    # the box: the widest chord within the visible rows (at the centre's row if visible)
+    dv = 0.0 if y0 <= v <= y1 else min(abs(y0 - v), abs(y1 - v))
+    h_max = math.sqrt(max(r * r - dv * dv, 0.0))
+    bx0, bx1 = max(u - h_max, 0.0), min(u + h_max, width_px)
+    return area, cu, cv, (bx0, y0, bx1 - bx0, y1 - y0)
 
 
 class DetectorFaults:
@@ -150,6 +196,7 @@ class SimCamera:
         self.detections = 0
         # its own stream (spawned: the camera's stream is the same with or without faults)
         self.faults = DetectorFaults(spec, rng.spawn(1)[0])
+        self._size_rng = rng.spawn(1)[0]  # the blob size's noise
 
     def capture(
         self,
@@ -166,11 +213,14 @@ class SimCamera:
         uv, r_px = sphere_in_view(
             self.model, R_WC, camera_pos_enu_m, target_pos_enu_m, target_diameter_m
         )
+        if uv is not None:
+            u, v, r_px = self.model.disc_through_lens(uv[0], uv[1], r_px)
+            uv = (u, v)
         self.last_truth_px = uv
         # draw every random number each frame so the stream does not depend on the outcome
         dropped = self._rng.random() < spec.dropout_probability
         n0, n1 = self._rng.standard_normal(2).tolist()
-        noise = (n0 * spec.noise_px, n1 * spec.noise_px)
+        noise = (n0, n1, float(self._size_rng.standard_normal()))
         delay = spec.delay_s + spec.delay_jitter_s * float(self._rng.standard_normal())
         delay = min(max(delay, 0.5 * spec.delay_s), 2.0 * spec.delay_s + 1e-9)
         burst_drop, clutter = self.faults.frame()
@@ -196,23 +246,26 @@ class SimCamera:
         heapq.heappush(self._pending, (t_s + delay, self._count, det))
 
     def _project(self, t_s, uv, r_px, noise) -> Detection | None:
-        """The detection of the target seen at pixel ``uv`` (None: behind the camera) with
-        image radius ``r_px``, with pixel ``noise``; None when no part of it is in the frame."""
+        """The detection of the target imaged at pixel ``uv`` (through the lens; None: behind
+        the camera) with radius ``r_px``, as a blob detector reports it: the radius with its
+        noise, the part of the disc inside the frame (its centroid, area and box), the
+        centroid with noise growing as the blob shrinks (:func:`centre_noise_px`); None when no
+        part of it is in the frame. ``noise``: three standard normals (u, v, radius)."""
         if uv is None:
             return None
-        m = self.model
-        u, v = uv
-        # visible when at least part of the disc is in the frame
-        if not (-r_px < u < m.width_px + r_px and -r_px < v < m.height_px + r_px):
+        spec, m = self.spec, self.model
+        r_true = r_px
+        r_px = r_true + math.hypot(spec.size_noise_px, spec.size_noise_rel * r_true) * noise[2]
+        if not r_px > 0.0:
             return None
-        u += noise[0]
-        v += noise[1]
-        return Detection(
-            capture_time_s=t_s,
-            center_px=(u, v),
-            bbox_px=(u - r_px, v - r_px, 2.0 * r_px, 2.0 * r_px),
-            area_px=math.pi * r_px * r_px,
-        )
+        seen = visible_disc(uv[0], uv[1], r_px, m.width_px, m.height_px)
+        if seen is None:
+            return None
+        area, u, v, bbox = seen
+        sigma = centre_noise_px(area, spec.noise_px, spec.centre_noise_k_px)
+        u += noise[0] * sigma
+        v += noise[1] * sigma
+        return Detection(capture_time_s=t_s, center_px=(u, v), bbox_px=bbox, area_px=area)
 
     def _false_blob(self, t_s: float, where: tuple[float, float]) -> Detection:
         m, r = self.model, 0.5 * self.spec.false_blob_px

@@ -20,8 +20,9 @@ position (pos_noise_m,        0.05 m,  Gauss-Markov per axis. Indoors the paper'
 pos_time_constant_s)          2 s      OptiTrack (``EKF2_EVP_NOISE`` 0.1 m default, the real
                                        error smaller); the loop does not use position today,
                                        it is modelled so that the recorded estimate is honest.
-attitude (att_noise_deg,      0.2 deg, Gauss-Markov small rotation per body axis. EKF2's tilt
-att_time_constant_s)          2 s      is held by accelerometer/velocity fusion to a few
+attitude (att_noise_deg,      0.2 deg, Gauss-Markov small rotation per body axis (about body
+heading_noise_deg,            2 s      z: heading_noise_deg, the same process scaled). EKF2's tilt
+att_time_constant_s)                   is held by accelerometer/velocity fusion to a few
                                        tenths of a degree (``EKF2_ANGERR_INIT`` 0.1 rad is
                                        the switch-on uncertainty it converges from);
                                        correlated over seconds as its corrections are slow.
@@ -296,7 +297,8 @@ class DelayLine:
 # (position, velocity, attitude) time constants and sigmas, the bias's walk, and the
 # runtime's limits on carrying the attitude (fc_state)
 K_T, K_ROW, K_ATT_LAG, K_TAU, K_SIGMA, K_WALK, K_MAX_DT, K_MAX_RATE = 0, 1, 2, 3, 6, 9, 10, 11
-K_SIZE = 12
+K_HEADING = 12  # the attitude error about body z over the other axes' (heading / attitude)
+K_SIZE = 13
 # the error processes' rows (StateEstimateModel._x, ._normals)
 E_POS, E_VEL, E_ATT, E_BIAS = 0, 1, 2, 3
 
@@ -339,7 +341,7 @@ def estimate_of(
     delay_push(att_ring, now, old)
     # a unit quaternion times a unit quaternion: no renormalising, so that zero errors hand
     # the loop the truth bit for bit
-    e0, e1, e2, e3 = quat_exp3(x[E_ATT, 0], x[E_ATT, 1], x[E_ATT, 2])
+    e0, e1, e2, e3 = quat_exp3(x[E_ATT, 0], x[E_ATT, 1], x[E_ATT, 2] * k[K_HEADING])
     out[6], out[7], out[8], out[9] = quat_mul4(old[7], old[8], old[9], old[10], e0, e1, e2, e3)
     for c in range(3):
         out[10 + c] = old[11 + c] + x[E_BIAS, c]
@@ -426,6 +428,8 @@ class StateEstimateModel:
         k[K_SIGMA : K_SIGMA + 3] = sigmas
         k[K_WALK] = spec.gyro_bias_walk_rad_s_sqrt_s
         k[K_ATT_LAG] = spec.att_lag_s
+        att = spec.att_noise_deg
+        k[K_HEADING] = spec.heading_noise_deg / att if att > 0.0 else 0.0
         k[K_MAX_DT], k[K_MAX_RATE] = MAX_PROPAGATION_S, MAX_PROPAGATION_RATE_RAD_S
         # each process starts in its stationary distribution (the bias at its turn-on sigma)
         self._x = np.empty((4, 3))

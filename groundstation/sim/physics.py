@@ -23,7 +23,7 @@ import numpy as np
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.jit import kernel
 
-PASS_RADIUS_M = 3.0  # a closest approach nearer than this ends the sortie once range opens
+PASS_RADIUS_M = 3.0  # a closest approach nearer than this is the pass once range opens
 DIVERGED_SPEED_M_S = 60.0
 _DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
 
@@ -396,7 +396,10 @@ C_REL, C_MISS, C_TIME, C_SPEED, C_CLOSE_REL, C_CLOSE_VEL, C_OUTCOME, C_HIT_R, C_
     14,
 )
 C_ENDED_CLOSING = 15
-C_SIZE = 16
+# after the pass: its outcome so far (OUTCOME_HIT or OUTCOME_MISS; 0 before it), its time (s)
+# and the lowest altitude since (m); the sortie goes on until the vehicle has recovered
+C_PASS, C_PASS_TIME, C_MIN_ALT = 16, 17, 18
+C_SIZE = 19
 OUTCOME_NONE, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_DIVERGED, OUTCOME_CRASHED = 0, 1, 2, 3, 4
 
 
@@ -492,7 +495,8 @@ def physics_steps(
         dist, s, c0, c1, c2, r0d, r1d = closest_approach(r0x, r0y, r0z, r1x, r1y, r1z)
         r0x, r0y, r0z = r1x, r1y, r1z
         cs[0], cs[1], cs[2] = r1x, r1y, r1z
-        if dist < miss:
+        passed = cs[C_PASS] != 0.0
+        if not passed and dist < miss:
             miss = dist
             cs[3] = dist
             cs[4] = t + s * dt
@@ -502,11 +506,16 @@ def physics_steps(
         outcome = OUTCOME_NONE
         closing = r0d < 0.0 or cs[C_ENDED_CLOSING] != 0.0
         cs[C_ENDED_CLOSING] = 1.0 if r1d < 0.0 else 0.0
-        if dist < PASS_RADIUS_M and closing and r1d > 0.0:
+        if passed:
+            cs[C_MIN_ALT] = min(cs[C_MIN_ALT], pz)
+        elif dist < PASS_RADIUS_M and closing and r1d > 0.0:
             # closing at the start of the step (or at the end of the one before: the closest
-            # point on the step boundary), opening at its end, near: it is over
-            outcome = OUTCOME_HIT if miss <= hit_r else OUTCOME_MISS
-        elif (
+            # point on the step boundary), opening at its end, near: the pass is over (the
+            # miss is final), the sortie goes on to the recovery
+            cs[C_PASS] = OUTCOME_HIT if miss <= hit_r else OUTCOME_MISS
+            cs[C_PASS_TIME] = t + dt
+            cs[C_MIN_ALT] = pz
+        if (
             not (math.isfinite(fin) and math.isfinite(r1x + r1y + r1z))
             or vvx * vvx + vvy * vvy + vvz * vvz > _DIVERGED_SPEED2
         ):

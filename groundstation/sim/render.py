@@ -105,6 +105,7 @@ class FrameRenderer:
         r_px = cam.f_px * radius / math.sqrt(dist2 - radius * radius)
         u = cam.cu_px + cam.f_px * float(p_cam[0]) / z
         v = cam.cv_px + cam.f_px * float(p_cam[1]) / z
+        u, v, r_px = cam.disc_through_lens(u, v, r_px)  # the lens's distortion
         lim = 4.0 * (cam.width_px + cam.height_px)
         if abs(u) > lim + r_px or abs(v) > lim + r_px or r_px > 1e5:
             return

@@ -16,24 +16,29 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample, VehicleState
 from onboard.enums import LoopMode, Outcome
-from onboard.estimation.dkf import DkfConfig, FusionResult
+from onboard.estimation.dkf import FusionResult
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
-from onboard.geometry import as_quat, camera_attitude
+from onboard.geometry import as_quat, camera_attitude, rotmat_of_quat
+from onboard.link.params import RuntimeParams
 from onboard.loop import InterceptionLoop
+from onboard.runtime.state_machine import intercept_over
 
 from ..scenario import Scenario, scenario_toml
+from .beliefs import loop_configuration, true_camera
 from .camera import SimCamera
 from .estimate import Normals, StateEstimateModel
 from .physics import (
     C_CLOSE_REL,
     C_CLOSE_VEL,
     C_HIT_R,
+    C_MIN_ALT,
     C_MISS,
     C_OUTCOME,
+    C_PASS,
+    C_PASS_TIME,
     C_REL,
     C_SIZE,
     C_SPEED,
@@ -50,6 +55,7 @@ from .physics import (
     physics_steps,
     sortie_buffer,
 )
+from .profiles import profile_of, sortie_estimate
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
@@ -61,6 +67,16 @@ _OUTCOMES = {
     OUTCOME_CRASHED: Outcome.CRASHED,
 }
 _NO_NORMALS = np.zeros((0, 3))  # the gusts' draws of a wind without gusts
+_STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
+
+# After the pass the sortie goes on until the vehicle has recovered: slower than this, its
+# thrust axis within this of vertical, at least this high, checked at each control tick; or
+# until this long after the pass (not recovered: the outcome stands, ``recovered`` false).
+RECOVERED_SPEED_M_S = 0.5
+RECOVERED_TILT_DEG = 10.0
+CLEARANCE_FLOOR_M = 0.3
+RECOVERY_TIMEOUT_S = 6.0
+_LEVEL_COS = math.cos(math.radians(RECOVERED_TILT_DEG))
 
 
 @dataclass(frozen=True)
@@ -79,6 +95,9 @@ class SortieResult:
     detections_fused: int
     detections_rejected: int
     guard_trips: int
+    profile: str = ""  # the state-estimate error profile flown ("ideal": ideal sensors)
+    recovered: bool = False  # braked, level and above the clearance floor after the pass
+    min_alt_after_pass_m: float = math.nan  # lowest altitude after the pass (NaN: no pass)
 
     def to_json_dict(self) -> dict:
         d = asdict(self)
@@ -134,17 +153,16 @@ class Simulation:
         self._gyro_noise = Normals(gyro_rng, 3)  # the gyro's white noise, drawn in blocks
         # the estimate model's streams are the next child: the four above stay as they were
         est_seed = ss.spawn(1)[0]
-        self.estimate = (
-            StateEstimateModel(scenario.estimate, est_seed) if scenario.estimate.enabled else None
-        )
+        # the error profile's draw for this sortie (the next child: the streams above stay)
+        self.profile = profile_of(scenario)
+        self.estimate_spec = spec = sortie_estimate(scenario, ss.spawn(1)[0])
+        self.estimate = None if spec is None else StateEstimateModel(spec, est_seed)
         self._command_delay_steps = (
             0 if self.estimate is None else round(self.estimate.command_delay_s / self.dt_s)
         )
         self._commands: deque = deque()  # (physics step due, body rates, thrust) in flight
         c = scenario.camera
-        self.camera_model = CameraModel(
-            c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
-        )
+        self.camera_model = true_camera(scenario)  # the camera as it is (the loop's: belief)
         self._R_BC = np.array(self.camera_model.R_BC)  # writable, as the kernels take it
         self.vehicle = Multicopter(scenario.interceptor)
         self.target = (
@@ -155,13 +173,15 @@ class Simulation:
         self.wind = Wind(scenario.wind, wind_rng, scenario.target.position_m)
         self.target.settle_in_wind(self.wind.mean_at)
         self.camera = SimCamera(c, self.camera_model, camera_mode, cam_rng, render_rng)
+        # the loop is built from what the vehicle believes, never from the truth
+        self.loop_config = cfg = loop_configuration(scenario, law, gains)
         self.loop = InterceptionLoop(
-            self.camera_model,
-            self.vehicle.params,
-            gains if gains is not None else scenario.gains_obj(),
-            law=law,
-            control_rate_hz=sim.control_rate_hz,
-            dkf_config=DkfConfig(target_diameter_m=scenario.target.diameter_m),
+            cfg.camera,
+            cfg.vehicle,
+            cfg.gains,
+            law=cfg.law,
+            control_rate_hz=cfg.control_rate_hz,
+            dkf_config=cfg.dkf,
         )
         self.hit_radius_m = 0.5 * (scenario.target.diameter_m + scenario.interceptor.size_m)
         self.step_index = 0
@@ -184,6 +204,12 @@ class Simulation:
         self.max_normal_accel_m_s2 = 0.0
         self.normal_accel_m_s2 = 0.0
         self._fused = self._rejected = 0
+        # the onboard rule that ends an intercept (the runtime's state machine): the largest
+        # blob's width fraction while tracking, and whether the loop now brakes and holds
+        self._done_size_frac = RuntimeParams().DONE_SIZE
+        self._max_size_frac = 0.0
+        self.braking = False
+        self.recovered = False
         self.observers = list(observers)
         self.finished = False  # observers told the end
         if self.observers:
@@ -244,6 +270,7 @@ class Simulation:
             gains=self.loop.gains,
             scenario_source=sc.source,
             scenario_toml=scenario_toml(sc),
+            estimate_profile=self.profile,
         )
 
     def frame(self) -> Frame:
@@ -285,9 +312,19 @@ class Simulation:
         if self.outcome is not None:
             self._tell_finish(None)
 
+    def camera_position(self) -> list[float]:
+        """Where the camera is (ENU, m): the centre of mass plus the true mount offset."""
+        p = self.vehicle.p
+        o0, o1, o2 = self.camera_model.offset_b_m
+        if not (o0 or o1 or o2):
+            return p
+        R = rotmat_of_quat(as_quat(self.vehicle.q))
+        return [p[i] + R[i, 0] * o0 + R[i, 1] * o1 + R[i, 2] * o2 for i in range(3)]
+
     def _capture(self, t: float) -> None:
-        veh = self.vehicle
-        self.camera.capture(t, self.R_WC(), veh.p, self.target.p, self.scenario.target.diameter_m)
+        self.camera.capture(
+            t, self.R_WC(), self.camera_position(), self.target.p, self.scenario.target.diameter_m
+        )
         for o in self.observers:
             o.image(t, self.camera.last_frame)
 
@@ -350,16 +387,30 @@ class Simulation:
                 det = est.stamp(det)
             loop.on_detection(det)
             self.last_detection = det
+            if loop.mode is LoopMode.TRACKING:
+                frac = det.bbox_px[2] / self.camera_model.width_px
+                self._max_size_frac = max(self._max_size_frac, frac)
+        brake = self.braking
         if est is None:
             sigma = self.scenario.sim.gyro_noise_rad_s
             (r0, r1, r2), (n0, n1, n2) = veh.read_gyro(), self._gyro_noise.next()
             rates = [r0 + n0 * sigma, r1 + n1 * sigma, r2 + n2 * sigma]
             loop.on_gyro(GyroSample(t, np.array(rates)))
-            tel = loop.tick(veh.state(t))
+            tel = loop.tick(veh.state(t), brake)
         else:
             h = self._as_the_runtime_hands_it(t)
             loop.on_gyro(GyroSample(t, h[0:3]))
-            tel = loop.tick(VehicleState(t, h[3:6], h[6:9], h[9:13], h[13:16], float(h[16])))
+            state = VehicleState(t, h[3:6], h[6:9], h[9:13], h[13:16], float(h[16]))
+            tel = loop.tick(state, brake)
+        if not brake:
+            mode = loop.mode
+            over = intercept_over(
+                self._max_size_frac,
+                self._done_size_frac,
+                mode in _STALE_MODES,
+                mode is LoopMode.LOST,
+            )
+            self.braking = over is not None
         for r in loop.last_fusion:
             if r is FusionResult.ACCEPTED or r is FusionResult.INITIALISED:
                 self._fused += 1
@@ -387,9 +438,32 @@ class Simulation:
             if self.keep_records:
                 self.records.append(frame)
 
+    @property
+    def passed(self) -> bool:
+        """Has the pass happened (the sortie now waits for the recovery)?"""
+        return self.closest[C_PASS] != 0.0
+
+    def _has_recovered(self) -> bool:
+        """Braked, level and above the clearance floor (the true state)."""
+        veh = self.vehicle
+        v0, v1, v2 = veh.v
+        _w, x, y, _z = veh.q
+        level = 1.0 - 2.0 * (x * x + y * y)  # body z's vertical component
+        return (
+            v0 * v0 + v1 * v1 + v2 * v2 <= RECOVERED_SPEED_M_S**2
+            and level >= _LEVEL_COS
+            and veh.p[2] >= CLEARANCE_FLOOR_M
+        )
+
     def _check_loop_outcome(self, t: float) -> bool:
-        """Outcomes that can only change at a control tick: target lost, never acquired,
-        out of time."""
+        """Outcomes that can only change at a control tick: after the pass, recovered (or
+        out of recovery time); before it, target lost, never acquired, out of time."""
+        cs = self.closest
+        if cs[C_PASS] != 0.0:
+            self.recovered = self._has_recovered()
+            if self.recovered or t - cs[C_PASS_TIME] >= RECOVERY_TIMEOUT_S - 1e-9:
+                self.outcome = _OUTCOMES[int(cs[C_PASS])]
+            return self.outcome is not None
         # a balloon bursts on contact: losing it from the image with the vehicle already on
         # it ends a hit (the pass completes in the physics), not a lost target
         contact = self.miss_m <= self.hit_radius_m
@@ -459,6 +533,9 @@ class Simulation:
             detections_fused=self._fused,
             detections_rejected=self._rejected,
             guard_trips=self.loop.guard_trips,
+            profile=self.profile,
+            recovered=self.recovered,
+            min_alt_after_pass_m=float(self.closest[C_MIN_ALT]) if self.passed else math.nan,
         )
 
 

@@ -124,6 +124,7 @@ class ChannelBuilder:
                     "scenario_source": info.scenario_source,
                     "recorded_at_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                     "record_rate_hz": str(info.control_rate_hz / self.record_every),
+                    "estimate_profile": info.estimate_profile,
                 },
             )
             self._sink.attachment("scenario.toml", "application/toml", info.scenario_toml.encode())
@@ -132,7 +133,9 @@ class ChannelBuilder:
                 0.0,
                 "info",
                 f"sortie start: {info.scenario}, law {info.law}, "
-                f"seed {info.seed}, camera {info.camera}",
+                f"seed {info.seed}, camera {info.camera}"
+                + (f", estimate profile {info.estimate_profile}" if info.estimate_profile else "")
+                + (" (ideal sensors: analysis only)" if info.estimate_profile == "ideal" else ""),
             )
             self._sink.started()
             self._joined = getattr(self._sink, "joined", None)

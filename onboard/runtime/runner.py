@@ -32,7 +32,7 @@ from functools import partial
 from pathlib import Path
 
 from ..camera_model import CameraModel
-from ..datatypes import GRAVITY_M_S2, ControlTelemetry, LoopMode, VehicleParams
+from ..datatypes import ControlTelemetry, LoopMode, VehicleParams
 from ..link import ftp
 from ..link import telemetry as tm
 from ..link.param_meta import FILE_NAMES, component_files
@@ -223,7 +223,7 @@ class OnboardRuntime(FlightControllerSide, GroundSide):
         """An interception loop for a ``width`` x ``height`` (px) camera, as configured."""
         rt = self.params.runtime
         cam = CameraModel(width, height, rt.CAM_HFOV_DEG, rt.CAM_PITCH_DEG, rt.CAM_ROLL_DEG)
-        vehicle = VehicleParams(mass_kg=1.0, max_thrust_n=GRAVITY_M_S2 / rt.HOVER_THR)
+        vehicle = VehicleParams.from_hover_thrust(rt.HOVER_THR)
         return InterceptionLoop(
             cam,
             vehicle,

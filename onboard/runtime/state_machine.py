@@ -34,6 +34,23 @@ class Output(enum.Enum):
     BRAKE = "brake"  # the loop's brake-and-hold command
 
 
+PASS_DONE, TARGET_LOST = "pass done", "target lost"
+
+
+def intercept_over(
+    max_size_frac: float, done_size_frac: float, target_stale: bool, target_lost: bool
+) -> str | None:
+    """Why an intercept is over, or None: ``PASS_DONE`` once the target has filled
+    ``done_size_frac`` of the view's width and the track then went stale (the vehicle flew
+    past it), ``TARGET_LOST`` when the loop gave the target up. Either way the vehicle brakes
+    and holds."""
+    if target_stale and max_size_frac >= done_size_frac:
+        return PASS_DONE
+    if target_lost:
+        return PASS_DONE if max_size_frac >= done_size_frac else TARGET_LOST
+    return None
+
+
 @dataclass(frozen=True)
 class Inputs:
     now_s: float
@@ -188,9 +205,12 @@ class OffboardStateMachine:
                     d.output = Output.NONE
                 return d
             self._offboard_gone_s = None
-            done = self.max_size_frac >= self.done_size_frac
-            if i.target_lost or (i.target_stale and done):
-                self.reason = "pass done" if done else "target lost"
+            over = intercept_over(
+                self.max_size_frac, self.done_size_frac, i.target_stale, i.target_lost
+            )
+            if over is not None:
+                done = over == PASS_DONE
+                self.reason = over
                 self._go(
                     State.BRAKING,
                     now,
