@@ -170,7 +170,7 @@ def test_sorties_are_deterministic_and_the_estimate_changes_them():
 
 
 def test_realistic_defaults_still_hit_a_static_target():
-    # n=3 here (seconds); the campaign figures (n=20 a cell) are in the README
+    # n=3 here (seconds); the campaign figures (n=20 a cell) are in docs/paper.md
     for seed in range(3):
         r = run_sortie(_scenario(), seed=seed)
         assert r.outcome == "HIT" and r.miss_m <= 0.05, r

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import itertools
 import shutil
 import subprocess
 import sys
@@ -27,25 +26,27 @@ import time
 from pathlib import Path
 
 CHROMIUM_ARGS = ["--no-sandbox", "--enable-unsafe-swiftshader"]
-VIEWPORT = {"width": 1440, "height": 900}
-GIF_WIDTH_PX = 960  # the animation is scaled to this width: under 2 MB for a 6 s intercept
+VIEWPORT = {"width": 1440, "height": 960}
+GIF_WIDTH_PX = 880  # the animation is scaled to this width: under 2 MB for a 6 s intercept
+FRAME_S = 0.25  # sortie time between the animation's frames; it plays at 1x
+DASHBOARD_AT_S = 4.0  # the dashboard's picture: mid-intercept, the target large in the image
+CONTROL_PERIOD_S = 0.01  # one single-step of the dashboard (the scenarios' 100 Hz tick)
+SCENE_SETTLE_S = 0.6  # the 3D view redraws at 2.5-5 Hz
 
 
-def _gif(frames: list[tuple[float, bytes]], path: Path) -> None:
-    """Assemble PNG screenshots taken at wall times ``t`` (s) into a looping GIF that plays
-    at the speed they were taken."""
+def _gif(frames: list[bytes], path: Path) -> None:
+    """Assemble PNG screenshots taken every FRAME_S of sortie time into a looping GIF that
+    plays at 1x, holding the last (the outcome) for 2.5 s."""
     from PIL import Image
 
     images = []
-    for _, png in frames:
+    for png in frames:
         im = Image.open(io.BytesIO(png)).convert("RGB")
         h = round(im.height * GIF_WIDTH_PX / im.width)
         images.append(im.resize((GIF_WIDTH_PX, h), Image.LANCZOS))
     palette = images[len(images) // 2].quantize(colors=128, method=Image.MEDIANCUT)
     quantized = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
-    times = [t for t, _ in frames]
-    durations = [max(40, round(1000 * (b - a))) for a, b in itertools.pairwise(times)]
-    durations.append(2500)  # hold the outcome
+    durations = [round(1000 * FRAME_S)] * (len(quantized) - 1) + [2500]
     quantized[0].save(
         path,
         save_all=True,
@@ -54,6 +55,13 @@ def _gif(frames: list[tuple[float, bytes]], path: Path) -> None:
         loop=0,
         optimize=True,
     )
+
+
+def _dismiss_notices(scene) -> None:
+    """Close viser's notices (e.g. software WebGL) so they do not cover the 3D view."""
+    buttons = scene.locator(".mantine-Notification-closeButton")
+    for i in range(buttons.count()):
+        buttons.nth(i).click()
 
 
 def _small_study(data_dir: Path) -> None:
@@ -105,65 +113,90 @@ def take(out: Path) -> list[Path]:
             browser = p.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport=VIEWPORT)
             page.goto(gs.url())
-            page.wait_for_selector("text=telemetry: live", timeout=30000)
+            page.wait_for_selector("text=telemetry: live", timeout=60000)
             page.wait_for_function("document.querySelectorAll('#gains input').length > 5")
-            page.frame_locator("#viser").locator("text=View").first.wait_for(timeout=30000)
-            page.select_option("#scenario", "cv-top-to-bottom")
-            page.select_option("#speed", "1")
-            time.sleep(2.0)  # the 3D view draws the new scenario
-            page.click("#btn-start")
-            frames: list[tuple[float, bytes]] = []
-            while True:
-                frames.append((time.monotonic(), page.screenshot()))
-                if "miss" in (page.text_content("#st-outcome") or ""):
-                    break
-                if len(frames) > 400:
+            scene = page.frame_locator("#viser")
+            scene.locator("text=View").first.wait_for(timeout=60000)
+            _dismiss_notices(scene)
+            base = gs.url().split("?")[0]
+
+            def start_paused(scenario: str) -> None:
+                page.select_option("#scenario", scenario)
+                page.select_option("#speed", "1")
+                page.click("#btn-start")
+                page.wait_for_function("window.peregrine.snap && window.peregrine.snap.t > 0")
+                page.request.post(base + "api/sortie/pause")
+                page.wait_for_selector("#st-state:has-text('paused')", timeout=30000)
+
+            def advance(seconds: float) -> bool:
+                """Step the paused sortie on by ``seconds``; True once it has ended."""
+                for _ in range(round(seconds / CONTROL_PERIOD_S)):
+                    status = page.request.post(base + "api/sortie/step").json()
+                    if status["state"] != "paused":
+                        break
+                t = page.request.get(base + "api/status").json()["time_s"]
+                page.wait_for_function(f"window.peregrine.shownT >= {t} - 1e-6", timeout=30000)
+                time.sleep(SCENE_SETTLE_S)  # the 3D view redraws a few times a second
+                return page.request.get(base + "api/status").json()["state"] != "paused"
+
+            # the intercept, a frame every FRAME_S of sortie time; the dashboard's picture is
+            # the frame at about 4 s, the target large in the image plane
+            start_paused("cv-top-to-bottom")
+            frames: list[bytes] = [page.screenshot()]
+            while not advance(FRAME_S):
+                frames.append(page.screenshot())
+                if abs(len(frames) * FRAME_S - DASHBOARD_AT_S) < FRAME_S / 2:
+                    (out / "dashboard.png").write_bytes(frames[-1])
+                if len(frames) > 200:
                     raise SystemExit("docs_pictures: the sortie did not end")
-            time.sleep(1.5)  # the closest-approach marker and the outcome in the 3D view
-            frames.append((time.monotonic(), page.screenshot()))
+            page.wait_for_function(
+                "document.querySelector('#st-outcome').textContent.includes('miss')"
+            )
+            time.sleep(SCENE_SETTLE_S)
+            frames.append(page.screenshot())
             _gif(frames, out / "intercept.gif")
-            written.append(out / "intercept.gif")
-            page.screenshot(path=str(out / "dashboard.png"))
-            written.append(out / "dashboard.png")
+            written += [out / "intercept.gif", out / "dashboard.png"]
 
             # an edited gain: bold amber in its row, listed with its time once applied
-            page.select_option("#speed", "1")
-            page.click("#btn-start")
-            page.wait_for_function("window.peregrine.snap && window.peregrine.snap.t > 1.0")
+            start_paused("cv-top-to-bottom")
+            advance(1.0)
             page.fill('#gains input[data-gain="K_y"]', "4")
             page.click("#btn-apply-gains")
+            advance(0.5)
             page.wait_for_function(
                 "document.querySelector('#gains-applied').textContent.includes('applied at t =')"
             )
+            page.request.post(base + "api/sortie/resume")
+            page.select_option("#speed", "max")
             page.wait_for_function(
                 "document.querySelector('#st-outcome').textContent.includes('miss')",
-                timeout=60000,
+                timeout=120000,
             )
             page.locator("#gains-panel").screenshot(path=str(out / "gains.png"))
             written.append(out / "gains.png")
 
             # the gain studies `groundstation tune` stored
             page.select_option("#study", index=1)
-            page.wait_for_selector("#trials tr", timeout=15000)
+            page.wait_for_selector("#trials tr", timeout=30000)
             time.sleep(1.0)
             page.locator("#studies-panel").screenshot(path=str(out / "studies.png"))
             written.append(out / "studies.png")
 
             # the Sorties page, then a re-fly with another law overlaid on the original
-            page.goto(gs.url().split("?")[0] + "sorties")
-            page.wait_for_selector("#logs tr button", timeout=15000)
+            page.goto(base + "sorties")
+            page.wait_for_selector("#logs tr button", timeout=30000)
             page.screenshot(path=str(out / "sorties.png"))
             written.append(out / "sorties.png")
             page.select_option("#refly-law", "pg")
             page.select_option("#refly-speed", "max")
-            page.locator("#logs tr", has_text="cv-top-to-bottom").last.locator(
-                'button[data-act="refly"]'
-            ).click()
-            page.wait_for_selector("#cmp-legend:not(:empty)", timeout=30000)
+            row = page.locator("#logs tr", has_text="cv-top-to-bottom").last
+            row.locator('button[data-act="refly"]').click()
+            page.wait_for_selector("#cmp-legend:not(:empty)", timeout=60000)
             page.wait_for_function(
                 "document.querySelector('#st-outcome').textContent.includes('miss')",
-                timeout=60000,
+                timeout=120000,
             )
+            _dismiss_notices(page.frame_locator("#viser"))
             time.sleep(2.0)
             page.screenshot(path=str(out / "compare.png"))
             written.append(out / "compare.png")

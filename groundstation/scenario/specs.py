@@ -62,7 +62,7 @@ class CameraSpec:
     dropout_probability: float = 0.02
     mount_pitch_deg: float = 0.0
     mount_roll_deg: float = 0.0
-    # detector realism (README "Detector realism"); each 0 switches its part off
+    # detector realism (docs/simulation.md, "The camera"); each 0 switches its part off
     min_blob_px: float = 0.0  # blobs narrower than this (diameter, px) are not detected
     false_probability: float = 0.0  # per frame: a false red blob (clutter) is detected
     false_blob_px: float = 5.0  # diameter of a false blob; the larger blob wins the frame
