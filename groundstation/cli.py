@@ -290,7 +290,9 @@ def _build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument("name", help="static | moving | wind | outdoor | envelope | range")
-    c.add_argument("--n", type=_COUNT, default=None, help="targets / seeds / tries (see README)")
+    c.add_argument(
+        "--n", type=_COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"
+    )
     c.add_argument(
         "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"
     )
@@ -304,11 +306,11 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
     _add_backend_args(c)
 
-    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (see README)")
+    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (docs/tuning.md)")
     add_tune_arguments(t, _SET_HELP, count=_COUNT, seed=_SEED, out_dir=_writable_dir)
     _add_backend_args(t)
 
-    b = sub.add_parser("bench", help="print speed and memory figures (see README)")
+    b = sub.add_parser("bench", help="print speed and memory figures (docs/benchmarks.md)")
     b.add_argument("--repeat", type=_COUNT, default=5, help="sorties per camera mode")
     b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     b.add_argument("--json", action="store_true")

@@ -86,10 +86,11 @@ class Gains(SharedWhenCopied):
     )
     k_pur: float = _gain(4.0, "1/s", 0.0, 20.0, "PNG pursuit bias: heading-to-LOS rate at the edge")
     tau_los: float = _gain(0.0, "s", 0.0, 2.0, "low-pass time constant on the LOS change (0 = off)")
-    # latency compensation (README "The state-estimate model"): the runtime already carries
-    # PX4's stamped attitude to the tick (fc_state.state_at), so t_att_lag is for an unstamped
-    # attitude only; the velocity it uses unstamped, LOCAL_POSITION_NED ~20 ms old (EKF2's
-    # output predictor, the 100 Hz stream and the link: the estimate model's lag_s)
+    # latency compensation (docs/simulation.md, "The state-estimate model"): the runtime
+    # already carries PX4's stamped attitude to the tick (fc_state.state_at), so t_att_lag is
+    # for an unstamped attitude only; the velocity it uses unstamped, LOCAL_POSITION_NED
+    # ~20 ms old (EKF2's output predictor, the 100 Hz stream and the link: the estimate
+    # model's lag_s)
     t_att_lag: float = _gain(
         0.0, "s", 0.0, 0.1, "attitude-estimate latency, predicted away with the gyro (0 = off)"
     )
@@ -102,7 +103,7 @@ class Gains(SharedWhenCopied):
     r_mid: float = _gain(
         40.0, "m", 5.0, 1000.0, "PNG midcourse: acts beyond this range, fully beyond twice it"
     )
-    # track loss, re-acquisition and search (onboard/control/reacquire.py; README "Track loss")
+    # track loss, re-acquisition and search (onboard/control/reacquire.py; docs/core.md)
     t_coast: float = _gain(
         1.0,
         "s",

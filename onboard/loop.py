@@ -59,7 +59,7 @@ _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection'
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 # an attitude that moved this much more (rad) than the gyro turned it since an on-time last
 # tick was a stale one replaced by a fresh one: the simulator's differences while flying stay
-# under 1.7 mrad (noise, the gyro's bias, the attitude estimate's error; README "Stale attitude")
+# under 1.7 mrad (noise, the gyro's bias, the attitude estimate's error; docs/core.md)
 ATTITUDE_JUMP_RAD = 0.005
 # beyond this many periods since the last tick the mean gyro rate times the interval is no
 # better than the two attitudes (a stall: the rates' samples arrive late or not at all)

@@ -1,4 +1,4 @@
-"""``groundstation bench --sitl --runs N`` summarises #16's targets over the runs, and the
+"""``groundstation bench --sitl --runs N`` summarises the runtime's targets over the runs, and the
 wake-cost figure it prints times only the tick, not the sleep before it."""
 
 from __future__ import annotations

@@ -13,9 +13,9 @@ from groundstation.campaigns.aggregate import median_iqr, miss_stats, success_ra
 from groundstation.campaigns.definitions import parse_laws, static_targets
 from groundstation.campaigns.driver import run_campaign
 
-# the closed-loop figures below are the README's ideal-sensor ones; the state-estimate model's
+# the closed-loop figures below are docs/paper.md's perfect-state ones; the state-estimate model's
 # own checks and its closed-loop figures are in tests/test_estimate.py
-IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # the README's ideal-sensor column
+IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # docs/paper.md's perfect-state column
 
 
 def test_cep_and_spread_of_known_misses():
@@ -151,7 +151,7 @@ def test_static_campaign_png_centimetre_cep_beats_ibvs(tmp_path):
 
 def test_override_reaches_every_sortie_and_the_report(tmp_path):
     # k_v = 1/dt is the proposed law's literal eq. 17 applied to PG: a saturating, limit-cycling
-    # pursuit that lands centimetres off instead of millimetres (README, static targets).
+    # pursuit that lands centimetres off instead of millimetres (docs/paper.md, static targets).
     kw = dict(n=4, laws=("pg",), seed=0, workers=1, progress=False)
     base = run_campaign("static", out=tmp_path / "a", overrides=IDEAL, **kw)
     literal = run_campaign(

@@ -1,4 +1,4 @@
-"""The dashboard shows true numbers and curves after what an operator does (issue #12): the gain
+"""The dashboard shows true numbers and curves after what an operator does: the gain
 flown after Start, the plotted series after a backward seek, the replay speed actually used, the
 re-fly overlay and its legend, plots restored after a reload, the recording banner after a write
 error. One ground station and one headless chromium serve every test of this module."""
@@ -593,7 +593,7 @@ def test_3d_view_presets_are_per_viewer(station, browser):
             pg.close()
 
 
-# ---------------------------------------------------------------------- #16: gain studies
+# ------------------------------------------------------------------------ gain studies
 def test_gain_studies_are_listed_and_a_trial_flies_beside_the_defaults(station, page):
     from .test_studies_api import make_study
 

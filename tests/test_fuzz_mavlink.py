@@ -3,8 +3,8 @@ CRC, unknown message ids, duplicated and out-of-order copies of the real sender'
 10x the link's normal input rate, on loopback. Each link keeps flying (its real traffic still
 gets through and is acted on), counts what it dropped, and never sends a non-finite value.
 
-The flood lasts PEREGRINE_FUZZ_FLOOD_S seconds (default 2 s to keep the suite fast; the issue
-asks for 10 s: set PEREGRINE_FUZZ_FLOOD_S=10), at the full 10x rate either way."""
+The flood lasts PEREGRINE_FUZZ_FLOOD_S seconds (default 2 s to keep the suite fast; the full
+run is 10 s: set PEREGRINE_FUZZ_FLOOD_S=10), at the full 10x rate either way."""
 
 import io
 import math

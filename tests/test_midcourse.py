@@ -1,6 +1,6 @@
-"""PNG's long-range midcourse term (README "Range"): the schedule, the ZEM-nulling acceleration
-and a kinematic closed loop against the exponential ZEM decay it is built for, beside the
-textbook (t_go / t_go0)^K decay of the paper's PN."""
+"""PNG's long-range midcourse term (docs/core.md, "Midcourse ZEM nulling"): the schedule, the
+ZEM-nulling acceleration and a kinematic closed loop against the exponential ZEM decay it is
+built for, beside the textbook (t_go / t_go0)^K decay of the paper's PN."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Track loss, re-acquisition and search in closed loop (issue #13; onboard/control/reacquire.py):
+"""Track loss, re-acquisition and search in closed loop (onboard/control/reacquire.py):
 seeded sorties with forced detection dropouts and false detections."""
 
 import dataclasses

@@ -13,7 +13,7 @@ from onboard.datatypes import LoopMode
 from onboard.gains import Gains
 
 STATIC_SETUPS = [p.stem for p in shipped_scenarios() if load_scenario(p).target.motion == "static"]
-STATIC_MISS_TOLERANCE_M = 0.10  # issue 2: centimetre-level static interception
+STATIC_MISS_TOLERANCE_M = 0.10  # centimetre-level static interception
 
 
 def test_static_setups_present():
@@ -117,7 +117,7 @@ def test_human_summary():
 
 
 def test_scenario_override_on_the_command_line():
-    # the README's k_v figures: ideal sensors, without the velocity-latency prediction (with
+    # docs/paper.md's k_v figures: the perfect state, without the velocity-latency prediction (with
     # it, predicting the true velocity 20 ms ahead is a phase lead that rescues k_v = 100:
     # 0.009 m here against 0.087 m)
     ideal = ("--set", "estimate.enabled=false", "--set", "gains.t_vel_lag=0")
@@ -125,7 +125,7 @@ def test_scenario_override_on_the_command_line():
     literal = json.loads(
         _cli_json("static-ahead-20m", "--law", "pg", "--set", "gains.k_v=100", *ideal)
     )
-    assert default["miss_m"] < 0.02 and literal["miss_m"] > 0.05  # README: PG against k_v
+    assert default["miss_m"] < 0.02 and literal["miss_m"] > 0.05  # docs/paper.md: PG against k_v
     r = subprocess.run(
         [
             sys.executable,

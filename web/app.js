@@ -13,7 +13,7 @@ const W = (window.peregrine = { received: 0, applied: 0, updates: 0, lastT: null
 // there and waits for it (in a trace of 5 viewers most of each page's busy time). With a
 // software renderer the page's 2D canvases are drawn on the CPU in the page's own process
 // instead (willReadFrequently asks for exactly that): with 5 viewers, a page's main thread went
-// from 79 % to 62 % busy and painted 2-5 frames/s instead of about 1 (README, Benchmark).
+// from 79 % to 62 % busy and painted 2-5 frames/s instead of about 1 (groundstation bench --dashboard).
 W.softwareGl = (() => {
   try {
     const gl = document.createElement("canvas").getContext("webgl");

@@ -32,7 +32,7 @@ def run_campaign_bench(as_json: bool = False) -> int:
         figures["static50_sorties"] = res["meta"]["sorties"]
         figures["static50_workers"] = res["meta"]["workers"]
     figures["speedup_2_vs_1"] = figures["throughput_2_workers"] / figures["throughput_1_workers"]
-    # #16's target is 1000 sorties in <= 60 s on 2 cores: scaled from the full static run
+    # the target is 1000 sorties in <= 60 s on 2 cores: scaled from the full static run
     figures["per_1000_sorties_wall_s"] = (
         1000.0 * figures["static50_wall_s"] / figures["static50_sorties"]
     )

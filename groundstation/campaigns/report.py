@@ -226,7 +226,7 @@ def _estimate_note(estimate: dict | None) -> str:
         k: v for k, v in estimate.items() if getattr(EstimateSpec(), k, v) != v and k != "enabled"
     }
     extra = "".join(f", {k} = {v}" for k, v in changed.items())
-    return f"State estimate: on (the README's defaults{extra}). "
+    return f"State estimate: on (the simulator's defaults{extra}). "
 
 
 def write_report(
