@@ -52,7 +52,7 @@ def _gif(frames: list[bytes], path: Path) -> None:
     for im in picks:
         montage.paste(im, (0, y))
         y += im.height
-    palette = montage.quantize(colors=160, method=Image.MEDIANCUT)
+    palette = montage.quantize(colors=160, method=Image.Quantize.FASTOCTREE)
     quantized = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
     durations = [round(1000 * FRAME_S)] * (len(quantized) - 1) + [2500]
     quantized[0].save(
