@@ -234,6 +234,7 @@ def _runnable() -> list[tuple[str, str]]:
             if block.lang not in RUN_LANGS or not block.run:
                 continue
             for n, line in enumerate(_logical_lines(block.lines)):
+                line = line.removeprefix("$ ")  # a prompt
                 if line and not line.startswith("#"):
                     places.setdefault(line, []).append(f"{_rel(page)}:{block.line + n + 1}")
     return [(",".join(where), line) for line, where in places.items()]

@@ -4,7 +4,7 @@
 ground station on a free port with a scratch data folder, drives it with Playwright (Debian's
 chromium) and writes:
 
-- ``dashboard.png``: the dashboard at the end of a CV intercept;
+- ``dashboard.png``: the dashboard 4 s into a CV intercept;
 - ``intercept.gif``: that intercept as it flies, from Start to the outcome;
 - ``gains.png``: the gains panel with an edited value and the edits listed;
 - ``sorties.png``: the Sorties page listing the recorded sorties;
@@ -44,7 +44,15 @@ def _gif(frames: list[bytes], path: Path) -> None:
         im = Image.open(io.BytesIO(png)).convert("RGB")
         h = round(im.height * GIF_WIDTH_PX / im.width)
         images.append(im.resize((GIF_WIDTH_PX, h), Image.LANCZOS))
-    palette = images[len(images) // 2].quantize(colors=128, method=Image.MEDIANCUT)
+    # one palette for every frame (no flicker), from a montage of frames across the sortie so
+    # that colours only some frames show (the detection's orange, the plots' lines) keep theirs
+    picks = [*images[:: max(1, len(images) // 6)], images[-1]]
+    montage = Image.new("RGB", (GIF_WIDTH_PX, sum(im.height for im in picks)))
+    y = 0
+    for im in picks:
+        montage.paste(im, (0, y))
+        y += im.height
+    palette = montage.quantize(colors=160, method=Image.Quantize.FASTOCTREE)
     quantized = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
     durations = [round(1000 * FRAME_S)] * (len(quantized) - 1) + [2500]
     quantized[0].save(
@@ -176,8 +184,7 @@ def take(out: Path) -> list[Path]:
             written.append(out / "gains.png")
 
             # the gain studies `groundstation tune` stored
-            page.select_option("#study", index=1)
-            page.wait_for_selector("#trials tr", timeout=30000)
+            page.wait_for_selector("#trials tbody tr", timeout=30000)  # the first study shown
             time.sleep(1.0)
             page.locator("#studies-panel").screenshot(path=str(out / "studies.png"))
             written.append(out / "studies.png")
