@@ -11,13 +11,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException
 from fastapi.responses import FileResponse
 
-from onboard.gains import GainError
+from onboard.gains import GainError, Gains
 
 from ..recording.reader import LogError, LogIndex, scenario_attachment
-from ..scenario import ScenarioError, parse_scenario, with_changes
+from ..scenario import ScenarioError, parse_scenario
 from ..sim.camera import CAMERA_MODES
 from .api_models import Deleted, ReflyRequest, Status
 from .replay import ReplayPlayer
+from .routes_gains import check_each
 from .routes_sortie import command
 from .session import SessionError, SortieConfig
 
@@ -127,15 +128,22 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:
             scenario = parse_scenario(text, source=name)
-            # the gains it flew (edits included), so the re-fly flies the same sortie
-            flown = rp.describe()["gains"] or scenario.gains
-            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
-        except (ScenarioError, GainError) as exc:
+        except ScenarioError as exc:
             raise HTTPException(422, str(exc)) from None
+        # the gains it flew (edits included) with the form's changes: this sortie's only
+        recorded = rp.describe()["gains"] or scenario.gains
+        try:
+            flown = Gains.from_mapping(recorded, source=f"{name}: recorded gains")
+        except GainError as exc:
+            raise HTTPException(422, str(exc)) from None
+        _valid, refused = check_each(flown, req.gains or {})
+        if refused:
+            raise HTTPException(422, "; ".join(refused.values()))
+        gains = flown.replace(**(req.gains or {}))
         camera = rp.info.camera if rp.info.camera in CAMERA_MODES else "projected"
         seed = req.seed if req.seed is not None else (rp.info.seed or 0)
         config = SortieConfig(scenario, req.law, seed, camera, req.speed)
-        command(session, session.start, config, (rp.tt, rp.tp))
+        command(session, session.start, config, (rp.tt, rp.tp), gains, f"re-fly of {name}")
         return command(session, session.compare_with, rp.path, rp.name)
 
     return r
