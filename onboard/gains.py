@@ -14,8 +14,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .values import SharedWhenCopied
-
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -51,7 +49,7 @@ def check_ranges(obj: Any, kind: str) -> None:
 
 
 @dataclass(frozen=True)
-class Gains(SharedWhenCopied):
+class Gains:
     k_a: float = _gain(2.0, "m/s^2", 0.0, 10.0, "speed-ramp tangential acceleration (eq. 14)")
     K_y: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, vertical plane (eq. 8)")
     K_z: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, horizontal plane (eq. 8)")
