@@ -16,8 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .values import SharedWhenCopied
-
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -74,7 +72,7 @@ def check_ranges(obj: Any, kind: str) -> None:
 
 
 @dataclass(frozen=True)
-class Gains(SharedWhenCopied):
+class Gains:
     k_a: float = _gain(
         2.0, "m/s^2", 0.0, 10.0, "speed-ramp tangential acceleration (eq. 14)", "guidance"
     )
