@@ -272,3 +272,32 @@ def test_runnable_command_exits_0(where, line, tmp_path):
         timeout=RUN_TIMEOUT_S,
     )
     assert out.returncode == 0, f"{where}: `{line}` exited {out.returncode}\n{out.stderr[-2000:]}"
+
+
+def test_the_benchmark_page_gives_each_figure_its_command():
+    from groundstation.bench.docs_table import page
+
+    core = {
+        "rtf_projected": 251.4,
+        "rtf_projected_min": 199.6,
+        "rtf_rendered": 22.25,
+        "rtf_rendered_min": 20.0,
+        "tick_median_ms": 0.0361,
+        "tick_p99_ms": 0.09,
+        "tick_median_with_fusion_ms": 0.05,
+        "detector_median_ms": 1.234,
+        "detector_p99_ms": 2.5,
+        "render_median_ms": 3.0,
+        "peak_rss_mb": 312.4,
+        "load_average_1min_before_after": [1.5, 2.25],
+    }
+    text = page({"core": core}, 2, "a test machine", "compiled", "2026-01-02")
+    rows = [ln for ln in text.splitlines() if ln.startswith("| ") and "---" not in ln]
+    assert rows[0] == "| figure | measured | command |"
+    assert rows[1] == (
+        "| simulator real-time factor, projected camera, one core (median) | 251x (slowest 200x)"
+        " | `groundstation bench --repeat 2` |"
+    )
+    assert "| control tick (the loop's work per tick), median / p99 | 0.036 / 0.090 ms |" in text
+    assert len(rows) == 1 + 7  # the core rows only: the other kinds did not run
+    assert "2026-01-02 (UTC) on a test machine" in text and "core 1.5 -> 2.2" in text

@@ -192,8 +192,6 @@ def take(out: Path) -> list[Path]:
             # the Sorties page, then a re-fly with another law overlaid on the original
             page.goto(base + "sorties")
             page.wait_for_selector("#logs tr button", timeout=30000)
-            page.screenshot(path=str(out / "sorties.png"))
-            written.append(out / "sorties.png")
             page.select_option("#refly-law", "pg")
             page.select_option("#refly-speed", "max")
             row = page.locator("#logs tr", has_text="cv-top-to-bottom").last
@@ -207,6 +205,10 @@ def take(out: Path) -> list[Path]:
             time.sleep(2.0)
             page.screenshot(path=str(out / "compare.png"))
             written.append(out / "compare.png")
+            page.goto(base + "sorties")  # the re-flown sortie listed with its lineage
+            page.wait_for_function("document.querySelectorAll('#logs tbody tr').length >= 3")
+            page.locator("main .panel").first.screenshot(path=str(out / "sorties.png"))
+            written.append(out / "sorties.png")
             browser.close()
     finally:
         gs.stop()
