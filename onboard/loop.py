@@ -57,7 +57,8 @@ _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's L
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 # an attitude that moved this much more (rad) than the gyro turned it since an on-time last tick
-# was a stale one replaced: in flight the simulator's differences (noise, bias) stay < 1.7 mrad (docs/core.md)
+# was a stale one replaced: in flight the simulator's differences (noise, bias) stay < 1.7 mrad
+# (docs/core.md)
 ATTITUDE_JUMP_RAD = 0.005
 # beyond this many periods since the last tick (a stall) the gyro's turn is no better a guess
 ATTITUDE_JUMP_MAX_PERIODS = 2.0

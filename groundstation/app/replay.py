@@ -23,6 +23,7 @@ from onboard.gains import GainError, Gains
 
 from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
+from ..sim.beliefs import true_camera
 from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
@@ -86,10 +87,7 @@ class ReplayPlayer:
         if text:
             try:
                 sc = parse_scenario(text, source=self.path.name)
-                c = sc.camera
-                self.camera = CameraModel(
-                    c.width_px, c.height_px, c.hfov_deg, c.mount_pitch_deg, c.mount_roll_deg
-                )
+                self.camera = true_camera(sc)  # the camera the sortie's frames came from
                 self.diameter_m = sc.target.diameter_m
             except ScenarioError:
                 pass

@@ -205,7 +205,7 @@ class ChannelBuilder:
                 "width": cam.width_px,
                 "height": cam.height_px,
                 "distortion_model": "plumb_bob",
-                "D": [0, 0, 0, 0, 0],
+                "D": [*cam.distortion, 0],  # k1, k2, p1, p2, k3
                 "K": [f, 0, cu, 0, f, cv, 0, 0, 1],
                 "R": [1, 0, 0, 0, 1, 0, 0, 0, 1],
                 "P": [f, 0, cu, 0, 0, f, cv, 0, 0, 0, 1, 0],
