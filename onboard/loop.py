@@ -474,7 +474,7 @@ class InterceptionLoop:
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(
                     hold, (n0, n1, n2), q_y, dq_y, dq_z, vf, R_WC, self.fov_edges_rad,
-                    range_m, v_t, var_v, gains,
+                    range_m, v_t, var_v, gains, d_hat,
                 )  # fmt: skip
                 a_d = np.array((a0, a1, a2))
             else:
@@ -485,6 +485,7 @@ class InterceptionLoop:
                         range_m=range_m,
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
+                        disturbance_enu_m_s2=d_hat,
                     ),
                     gains,
                 )

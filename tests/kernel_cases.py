@@ -254,16 +254,26 @@ def _(a):
 @case(png.png_floats)
 def _(a):
     dt, l0, l1, l2, q_y, dq_y, dq_z, v0, v1, v2, ax0, ax1, ax2, top, bottom, rng = a[:16]
-    has_vt, t0, t1, t2, var_v, G = a[16:]
+    has_vt, t0, t1, t2, var_v, e0, e1, e2, G = a[16:]
     try:
         g = Gains(**dict(zip(GAIN_NAMES, G.tolist(), strict=True)))
     except GainError:
         return None
     a_d, s_y, s_z, hovering = R.png(
         dt, _v(l0, l1, l2), q_y, (dq_y, dq_z), _v(v0, v1, v2), _v(ax0, ax1, ax2),
-        (top, bottom), rng, _v(t0, t1, t2) if has_vt else None, var_v, g,
+        (top, bottom), rng, _v(t0, t1, t2) if has_vt else None, var_v, g, _v(e0, e1, e2),
     )  # fmt: skip
     return [(png.png_floats(*_copy(a)), (*a_d, s_y, s_z, float(hovering)))]
+
+
+@case(png.drag_feedforward_floats)
+def _(a):
+    speed, u0, u1, u2, d0, d1, d2, k_drag = a
+    g = _gains(k_drag=k_drag)
+    if g is None:
+        return None
+    want = R.drag_feedforward(speed, _v(u0, u1, u2), _v(d0, d1, d2), g)
+    return [(png.drag_feedforward_floats(*a), want)]
 
 
 # ---------------------------------------------------------------- attitude and observer

@@ -124,12 +124,17 @@ def min_pitch(q_y: float, top_edge_rad: float, margin_rad: float) -> float:
 
 
 def fov_guard(
-    a_d: np.ndarray, camera_axis: np.ndarray, top_edge_rad: float, q_y: float, gains: Gains
+    a_d: np.ndarray,
+    camera_axis: np.ndarray,
+    top_edge_rad: float,
+    q_y: float,
+    gains: Gains,
+    limit: float | None = None,
 ) -> tuple[bool, np.ndarray]:
     """Cap the forward part a_f of a_d (along the camera's horizontal heading h) at the value
     whose steady pitch, atan(a_f / (g + a_z)) (eqs. 16, 18), keeps the LOS ``fov_margin``
-    inside the top edge, and at no less than 0; then saturate to a_max. Returns (whether it
-    acted, a_d)."""
+    inside the top edge, and at no less than 0; then saturate to ``limit`` (a_max unless
+    given). Returns (whether it acted, a_d)."""
     margin = math.radians(gains.fov_margin)
     if margin <= 0.0 or not math.isfinite(top_edge_rad):
         return False, a_d
@@ -142,7 +147,7 @@ def fov_guard(
     a_f_max = max(-g_z * math.tan(min_pitch(q_y, top_edge_rad, margin)), 0.0)
     if a_f <= a_f_max:
         return False, a_d
-    return True, saturate(a_d + (a_f_max - a_f) * h, gains.a_max)
+    return True, saturate(a_d + (a_f_max - a_f) * h, gains.a_max if limit is None else limit)
 
 
 def edge_margin(fov_edges_rad: tuple[float, float], camera_axis: np.ndarray, q_y: float) -> float:
@@ -191,6 +196,12 @@ def zem_nulling_accel(
     return -v_perp / gains.tau_zem
 
 
+def drag_feedforward(speed_m_s: float, v_hat: np.ndarray, d_hat: np.ndarray, gains: Gains) -> float:
+    """The along-track acceleration the speed ramp adds against drag (eq. 14 with drag):
+    the believed drag k_drag |v| less the disturbance observer's d^ along v^, never negative."""
+    return max(gains.k_drag * speed_m_s - float(d_hat @ v_hat), 0.0)
+
+
 def png(
     dt_s: float,
     n_t: np.ndarray,
@@ -203,13 +214,14 @@ def png(
     v_t: np.ndarray | None,
     var_v: float,
     gains: Gains,
+    d_hat: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float, bool]:
     """The proposed law. Below v_min fly along the LOS: a_d = sat(k_a n_t, a_max). Otherwise
     the velocity angles (eq. 7) turned by K times the LOS change (eq. 8; faded out by the
     midcourse weight w_mid far away), the desired direction n_d (eq. 9), bent toward the LOS
     near the image's top or bottom edge (pursuit bias), the speed ramp (eq. 14), the midcourse
-    ZEM-nulling velocity, a_d = sat((v_d - v) / dt, a_max) (eq. 17) and the FOV guard.
-    Returns (a_d, sigma_y, sigma_z, hovering)."""
+    ZEM-nulling velocity, a_d = sat((v_d - v) / dt, a_max) (eq. 17), the drag feed-forward
+    along v^ (at most a_max) and the FOV guard. Returns (a_d, sigma_y, sigma_z, hovering)."""
     top = fov_edges_rad[0]
     speed = float(np.linalg.norm(v))
     if speed < gains.v_min:
@@ -228,4 +240,8 @@ def png(
     if w_mid > 0.0:
         v_d = v_d + w_mid * dt_s * zem_nulling_accel(v, v_t, var_v, n_t, gains)
     a_d = saturate((v_d - v) / dt_s, gains.a_max)
-    return fov_guard(a_d, camera_axis, top, q_y, gains)[1], sigma_y, sigma_z, False
+    d_hat = np.zeros(3) if d_hat is None else d_hat
+    a_drag = min(drag_feedforward(speed, v_hat, d_hat, gains), gains.a_max)
+    a_d = a_d + a_drag * v_hat
+    a_d = fov_guard(a_d, camera_axis, top, q_y, gains, gains.a_max + a_drag)[1]
+    return a_d, sigma_y, sigma_z, False
