@@ -66,7 +66,6 @@ _OUTCOMES = {
     OUTCOME_DIVERGED: Outcome.DIVERGED,
     OUTCOME_CRASHED: Outcome.CRASHED,
 }
-_NO_NORMALS = np.zeros((0, 3))  # the gusts' draws of a wind without gusts
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
 
 # After the pass the sortie goes on until the vehicle has recovered: slower than this, its
