@@ -365,6 +365,12 @@ def _build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
     )
+    b.add_argument(
+        "--overlay",
+        action="store_true",
+        help="the Sorties overlay page with 20 recorded sorties: open time, scrub frames/s "
+        "(needs chromium)",
+    )
     return p
 
 
@@ -600,6 +606,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 run_bench,
                 run_campaign_bench,
                 run_dashboard_bench,
+                run_overlay_bench,
                 run_recording_bench,
                 run_sitl_bench,
             )
@@ -621,6 +628,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return run_recording_bench(as_json=args.json)
             if args.dashboard:
                 return run_dashboard_bench(as_json=args.json)
+            if args.overlay:
+                return run_overlay_bench(as_json=args.json)
             if args.campaigns:
                 return run_campaign_bench(as_json=args.json)
             return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)
