@@ -83,6 +83,12 @@ def add_bench_parser(sub) -> None:
         action="store_true",
         help="dashboard with 5 browser tabs instead (needs chromium)",
     )
+    b.add_argument(
+        "--overlay",
+        action="store_true",
+        help="the Sorties overlay page with 20 recorded sorties: open time, scrub frames/s "
+        "(needs chromium)",
+    )
 
 
 def run_bench_command(args: argparse.Namespace) -> int:
@@ -90,6 +96,7 @@ def run_bench_command(args: argparse.Namespace) -> int:
         run_bench,
         run_campaign_bench,
         run_dashboard_bench,
+        run_overlay_bench,
         run_recording_bench,
         run_sitl_bench,
     )
@@ -109,6 +116,8 @@ def run_bench_command(args: argparse.Namespace) -> int:
         return run_recording_bench(as_json=args.json)
     if args.dashboard:
         return run_dashboard_bench(as_json=args.json)
+    if args.overlay:
+        return run_overlay_bench(as_json=args.json)
     if args.campaigns:
         return run_campaign_bench(as_json=args.json)
     return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)

@@ -484,3 +484,59 @@ def test_image_plane_band_end_marker_and_recent_track_in_replay(station, page):
     page.wait_for_function("window.peregrine.plotView.own.t_s.length > 50")
     page.wait_for_function("window.peregrine.trackPoints >= 10", timeout=5000)  # main: 1
     clean(station)
+
+
+# ---------------------------------------------------------------------- B: many sorties at once
+def test_overlay_of_sorties_picked_on_the_sorties_page(station, page):
+    clean(station)
+    names = []
+    for k_y, law in ((3, "png"), (4, "png"), (3, "pg")):
+        api(station, "PUT", "/api/gains", {"K_y": k_y})
+        names.append(fly(station, law=law))
+    clean(station)
+    page.goto(station.url())
+    page.goto(base(station) + "sorties")
+    for n in names:
+        page.locator(f'#logs tbody tr[data-name="{n}"] input[data-sel]').check()
+    assert page.text_content("#ov-go") == "Overlay selected (3)"
+    page.click("#ov-go")
+    page.wait_for_function("window.peregrine.openedMs !== null", timeout=60000)
+    rows = page.locator("#ov-table tbody tr")
+    assert rows.count() == 3
+    # only the gains that differ: K_y (3, 4, 3), nothing else
+    gains = [rows.nth(k).locator("td.gains").text_content() for k in range(3)]
+    assert gains == ["K_y 3", "K_y 4", "K_y 3"]
+    info = [api(station, "GET", f"/api/logs/{n}") for n in names]
+    miss = [rows.nth(k).locator("td").nth(6).text_content() for k in range(3)]
+    assert miss == [fmt_num(i["miss_m"]) for i in info]
+    # every plot carries the three sorties, aligned on the intercept: each crosses t = 0 there
+    series = page.evaluate("window.peregrine.plots.map(u => u.series.length)")
+    assert series == [4, 4, 4, 4]
+    xs = page.evaluate("window.peregrine.plots[3].data[0]")
+    assert min(xs) < -4.0 and -0.05 < max(xs) < 0.5
+    strokes = page.evaluate("window.peregrine.plots[0].series.slice(1).map(s => s._stroke)")
+    assert len(set(strokes)) == 3
+    page.select_option("#ov-align", "start")
+    page.wait_for_function("Math.min(...window.peregrine.plots[3].data[0]) >= 0")
+    # a scrub moves the cursor everywhere
+    drawn = page.evaluate("window.peregrine.drawn")
+    page.eval_on_selector(
+        "#ov-scrub", "(el) => { el.value = 2.0; el.dispatchEvent(new Event('input')); }"
+    )
+    page.wait_for_function(f"window.peregrine.drawn > {drawn}")
+    assert abs(page.evaluate("window.peregrine.cursor") - 2.0) < 0.02  # the slider's step
+    # Re-fly: the Sorties page's form, prefilled with that sortie's gains
+    rows.nth(1).locator("button[data-act=refly]").click()
+    page.wait_for_selector("#refly-form:not([hidden])")
+    assert page.input_value('#refly-gains input[data-gain="K_y"]') == "4"
+    page.go_back()
+    page.wait_for_function("window.peregrine.openedMs !== null", timeout=60000)
+    # clicking a sortie opens it in the dashboard
+    page.screenshot(path=str(station.log_dir.parent / "overlay.png"), full_page=True)
+    page.locator("#ov-table tbody tr").nth(2).locator("a[data-act=open]").click()
+    page.wait_for_function(
+        f"window.peregrine.snap && window.peregrine.snap.status.replay"
+        f" && window.peregrine.snap.status.replay.file === {names[2]!r}",
+        timeout=15000,
+    )
+    clean(station)

@@ -8,6 +8,7 @@ whole file."""
 from __future__ import annotations
 
 import bisect
+import functools
 import json
 import math
 from pathlib import Path
@@ -278,6 +279,37 @@ class ReplayPlayer:
             "events": self.timeline,
             "sortie": self.describe(),
         }
+
+
+OVERLAY_MAX = 20  # sorties overlaid at once
+
+
+def overlay_entry(path: Path, name: str) -> dict[str, Any]:
+    """One recorded sortie as the overlay shows it: who it is, its outcome, the plot columns
+    and the vehicle's position relative to the target (m, east-north-up) at the same times.
+    Kept per file (path, size, modification time): scrubbing or re-opening costs nothing."""
+    st = Path(path).stat()
+    return _overlay_entry(str(path), name, st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _overlay_entry(path: str, name: str, _size: int, _mtime_ns: int) -> dict[str, Any]:
+    p = ReplayPlayer(Path(path), name)
+    s = p.series()
+    rel = []
+    for t in s["t_s"]:
+        v, g = p.vp[p._at(p.tv, t)], p.tp[p._at(p.tt, t)]
+        rel.append([round(v[k] - g[k], 3) for k in range(3)])
+    return {
+        **p.describe(),
+        "outcome": p.info.outcome,
+        "miss_m": p.info.miss_m,
+        "intercept_time_s": p.closest_time_s,
+        "duration_s": p.duration_s,
+        "t_s": s["t_s"],
+        "columns": s["columns"],
+        "rel_m": rel,
+    }
 
 
 def _num(x: float | None, missing: float = math.nan) -> float:

@@ -145,7 +145,8 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
         try:
             gainsets.save_text(name, toml)
         except GainSetError as exc:
-            return JSONResponse({"detail": str(exc), "problems": exc.problems}, status_code=422)
+            problems = [{"message": m} for m in exc.problems]  # objects, as every 422's
+            return JSONResponse({"detail": str(exc), "problems": problems}, status_code=422)
         return GainSetSaved(saved=name, names=gainsets.names())
 
     return r

@@ -17,7 +17,7 @@ from ..recording.reader import LogError, LogIndex, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from ..sim.camera import CAMERA_MODES
 from .api_models import Deleted, ReflyRequest, Status
-from .replay import ReplayPlayer
+from .replay import OVERLAY_MAX, ReplayPlayer, overlay_entry
 from .routes_gains import check_each
 from .routes_sortie import command
 from .session import SessionError, SortieConfig
@@ -86,6 +86,26 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(409, "this sortie is still being recorded")
         path.unlink()
         return Deleted(deleted=name)
+
+    @r.get("/api/overlay", tags=["logs"])
+    async def overlay(names: str) -> list[dict[str, Any]]:
+        """Up to OVERLAY_MAX recorded sorties (``names``: comma-separated) for the overlay
+        page: each one's legend, outcome, plot columns and position relative to the target."""
+        wanted = [n for n in names.split(",") if n]
+        if not 1 <= len(wanted) <= OVERLAY_MAX:
+            raise HTTPException(422, f"overlay 1 to {OVERLAY_MAX} sorties, not {len(wanted)}")
+        paths = [log_path(n) for n in wanted]
+
+        def read() -> list[dict[str, Any]]:
+            out = []
+            for path, name in zip(paths, wanted, strict=True):
+                try:
+                    out.append(overlay_entry(path, name))
+                except (LogError, ValueError) as exc:
+                    raise HTTPException(422, f"{name}: {exc}") from None
+            return out
+
+        return await asyncio.to_thread(read)
 
     @r.post("/api/replay/open", tags=["replay"])
     async def replay_open(name: Annotated[str, Body(embed=True)]) -> Status:
