@@ -7,7 +7,8 @@ the kernel on copies of ``args`` and its reference on the same values, and retur
 the reference's domain (gains outside their declared ranges after a perturbation).
 :data:`COVERED` names the helper kernels that have no reference of their own, with the
 reference that covers them. :data:`FRESH` draws arguments for kernels a recorded sortie may
-not reach (other target motions)."""
+not reach (other target motions). The simulator's kernels are registered by
+:mod:`tests.kernel_cases_sim`."""
 
 from __future__ import annotations
 
@@ -18,11 +19,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from groundstation.sim import camera as sim_camera
-from groundstation.sim import estimate as sim_estimate
-from groundstation.sim import estimate_reference as ER  # noqa: N812
-from groundstation.sim import physics as P  # noqa: N812
-from groundstation.sim import physics_reference as PR  # noqa: N812
 from onboard import camera_model, geometry
 from onboard import geometry_reference as GR  # noqa: N812
 from onboard.control import attitude, disturbance, los, png
@@ -36,6 +32,7 @@ from onboard.gains import GAIN_NAMES, GainError, Gains
 Pairs = list[tuple[object, object]] | None
 
 CASES: dict[str, Callable[[tuple], Pairs]] = {}
+FRESH: dict[str, Callable[[np.random.Generator], tuple]] = {}
 
 # helpers with no reference of their own: each is one line a reader checks by eye, and the
 # reference of every kernel that calls it checks it along with its caller
@@ -139,14 +136,6 @@ def _(a):
     return [
         (camera_model.pixel_of(*a), (0.0, math.nan, math.nan) if want is None else (1.0, *want))
     ]
-
-
-@case(sim_camera.sphere_image)
-def _(a):
-    R_WC, c0, c1, c2, t0, t1, t2, dia, f, cu, cv = a
-    pixel, r_px = PR.sphere_image(R_WC, _v(c0, c1, c2), _v(t0, t1, t2), dia, f, _v(cu, cv))
-    want = (0.0, math.nan, math.nan, r_px) if pixel is None else (1.0, *pixel, r_px)
-    return [(sim_camera.sphere_image(*_copy(a)), want)]
 
 
 # ---------------------------------------------------------------- guidance
@@ -469,129 +458,3 @@ def _(a):
     buf = {"T": T, "U": U, "X": X, "HX": HX, "win": win}
     want = DR.view(buf, tracking, last, timeout, f, at_s if at_given else None)
     return [(K._view(*_copy(a)), want)]
-
-
-# ---------------------------------------------------------------- the simulator
-@case(P.vehicle_step)
-def _(a):
-    x, lag, dt, wx, wy, wz = a
-    got = x.copy()
-    total = P.vehicle_step(got, lag.copy(), dt, wx, wy, wz)
-    want = PR.vehicle_step(x, *lag, dt, _v(wx, wy, wz))
-    return [(got, want), (total, float(np.sum(want[: P.X_W + 3])))]
-
-
-@case(P.gyro_mean)
-def _(a):
-    return [(P.gyro_mean(a[0].copy()), PR.gyro_mean(a[0]))]
-
-
-@case(P.normal_accel)
-def _(a):
-    return [(P.normal_accel(a[0].copy()), PR.normal_accel(a[0]))]
-
-
-@case(P.vehicle_command)
-def _(a):
-    x, max_rate, max_thrust, c0, c1, c2, t = a
-    got = x.copy()
-    P.vehicle_command(got, max_rate, max_thrust, c0, c1, c2, t)
-    rates, thrust = PR.vehicle_command(_v(c0, c1, c2), t, max_rate, max_thrust)
-    return [(got[P.X_CMD_W : P.X_CMD_W + 3], rates), (got[P.X_CMD_THRUST], thrust)]
-
-
-@case(P.target_step)
-def _(a):
-    kind, c, track, x, t, dt, wx, wy, wz = a
-    got = x.copy()
-    P.target_step(kind, c.copy(), track.copy(), got, t, dt, wx, wy, wz)
-    return [(got, PR.target_state(P.MOTIONS[kind], c, track, x, t, dt, _v(wx, wy, wz)))]
-
-
-@case(P.jet_factor)
-def _(a):
-    want = PR.jet_factor(_v(*a[0:3]), _v(*a[3:6]), a[6], _v(*a[7:10]), a[10])
-    return [(P.jet_factor(*a), want)]
-
-
-@case(P.wind_at)
-def _(a):
-    x, c, px, py, pz = a
-    return [(P.wind_at(*_copy(a)), PR.wind_at(x, c, _v(px, py, pz)))]
-
-
-@case(P.gust_step)
-def _(a):
-    x, c, n0, n1, n2 = a
-    got = x.copy()
-    P.gust_step(got, c.copy(), n0, n1, n2)
-    return [(got, PR.gust_step(x, c, _v(n0, n1, n2)))]
-
-
-@case(P.closest_approach)
-def _(a):
-    dist, s, c, r0d, r1d = PR.closest_approach(_v(*a[:3]), _v(*a[3:]))
-    return [(P.closest_approach(*a), (dist, s, *c, r0d, r1d))]
-
-
-@case(P.physics_steps)
-def _(a):
-    k0, n, buf, track, normals, ni = a
-    got = buf.copy()
-    steps = P.physics_steps(k0, n, got, track.copy(), normals.copy(), ni)
-    steps_r, want = PR.physics_steps(k0, n, buf, track, normals, ni)
-    return [(steps, steps_r), (got, want)]
-
-
-@case(sim_estimate.delay_push)
-def _(a):
-    ring, now, _out = a
-    got_ring, out = ring.copy(), np.empty(len(now))
-    sim_estimate.delay_push(got_ring, now.copy(), out)
-    want_ring, want = ER.delay_push(ring, now)
-    return [(got_ring[0], want_ring[0]), (out, want)]
-
-
-@case(sim_estimate.advance_errors)
-def _(a):
-    t, k, x, normals = a
-    got_k, got_x = k.copy(), x.copy()
-    sim_estimate.advance_errors(t, got_k, got_x, normals.copy())
-    want_k, want_x = ER.advance_errors(t, k, x, normals)
-    return [(got_k, want_k), (got_x, want_x)]
-
-
-@case(sim_estimate.estimate_of)
-def _(a):
-    k, x, ring, att_ring, now, _out = a
-    out = np.empty(13)
-    sim_estimate.estimate_of(k.copy(), x.copy(), ring.copy(), att_ring.copy(), now.copy(), out)
-    return [(out, ER.estimate_of(k, x, ring, att_ring, now)[2])]
-
-
-@case(sim_estimate.hand_off)
-def _(a):
-    t, truth, n0, n1, n2, sigma, k, x, normals, ring, att_ring, _out = a
-    out = np.empty(17)
-    args = _copy((t, truth, n0, n1, n2, sigma, k, x, normals, ring, att_ring))
-    sim_estimate.hand_off(*args, out)
-    want = ER.hand_off(t, truth, _v(n0, n1, n2), sigma, k, x, normals, ring, att_ring)
-    return [(out, want)]
-
-
-# ---------------------------------------------------------------- fresh arguments
-def _fresh_target(rng: np.random.Generator) -> tuple:
-    """A target_step call of any motion (a sortie flies only some of them)."""
-    kind = int(rng.integers(0, len(P.MOTIONS)))
-    c = rng.normal(size=P.T_SIZE) * 3.0
-    c[P.T_MAX_SPEED], c[P.T_MASS], c[P.T_ROPE] = 4.0, 0.2, 5.0
-    c[P.T_TWO] = 2.0
-    times = np.sort(rng.uniform(0.0, 10.0, 6))
-    track = np.column_stack([times, rng.normal(size=(6, 3)) * 10.0])
-    x = rng.normal(size=6) * 2.0
-    return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *rng.normal(size=3).tolist())
-
-
-FRESH: dict[str, Callable[[np.random.Generator], tuple]] = {
-    "groundstation.sim.physics.target_step": _fresh_target,
-}

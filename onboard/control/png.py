@@ -16,7 +16,7 @@ from .los import _f3, _max, _min, angles_floats, hypot2, saturate3, saturate_nor
 
 # what these kernels call from other files (their cache is dropped when one changes): los.py's
 # kernels and the gains' declaration (png_floats's indices)
-_LOS = (hypot2, pack_gains)
+_USES = (hypot2, pack_gains)
 
 
 def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
@@ -29,7 +29,7 @@ def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
     return ramped_speed_floats(speed_m_s, gains.k_brake, gains.v_max, gains.k_a, dt_s)
 
 
-@kernel("float64(float64, float64, float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64, float64, float64)", uses=_USES)
 def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, dt: float) -> float:
     """:func:`ramped_speed` in floats (compiled)."""
     a_t = _min(_max(k_brake * (v_max - speed), -k_a), k_a)
@@ -37,7 +37,7 @@ def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, 
 
 
 @kernel(
-    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_LOS
+    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_USES
 )
 def drag_feedforward_floats(
     speed: float, u0: float, u1: float, u2: float, d0: float, d1: float, d2: float, k_drag: float
@@ -61,7 +61,7 @@ def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: fl
 _PITCH_LIMIT_RAD = math.radians(60.0)
 
 
-@kernel("float64(float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64)", uses=_USES)
 def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -> float:
     """Lowest body pitch (nose up +, rad) that keeps a LOS at elevation ``los_elev_rad`` at
     least ``margin_rad`` below the image's top edge, which sits ``top_edge_rad`` above body x
@@ -97,7 +97,7 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
 @kernel(
     "UniTuple(float64, 4)(float64, float64, float64, float64, float64, float64, float64, "
     "float64, float64)",
-    uses=_LOS,
+    uses=_USES,
 )
 def fov_guard_floats(
     a0: float,
@@ -137,7 +137,7 @@ def edge_margin_rad(inp: GuidanceInput) -> float:
     return edge_margin_floats(*inp.fov_edges_rad, *axis, inp.los_elev_rad)
 
 
-@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_USES)
 def edge_margin_floats(
     top: float, bottom: float, ax0: float, ax1: float, ax2: float, los_elev_rad: float
 ) -> float:
@@ -160,7 +160,7 @@ def pursuit_weight(inp: GuidanceInput, gains: Gains) -> float:
 
 
 @kernel(
-    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_LOS
+    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_USES
 )
 def pursuit_floats(
     pur_zone_rad: float,
@@ -187,7 +187,7 @@ def midcourse_weight(range_m: float, gains: Gains) -> float:
     return midcourse_floats(range_m, gains.tau_zem, gains.r_mid)
 
 
-@kernel("float64(float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64)", uses=_USES)
 def midcourse_floats(range_m: float, tau_zem: float, r_mid: float) -> float:
     """:func:`midcourse_weight` in floats (compiled)."""
     if tau_zem <= 0.0 or not math.isfinite(range_m):
@@ -300,7 +300,7 @@ def png_command(
     "UniTuple(float64, 6)(float64, float64, float64, float64, float64, float64, float64, "
     "float64, float64, float64, float64, float64, float64, float64, float64, float64, boolean, "
     "float64, float64, float64, float64, float64, float64, float64, float64[::1])",
-    uses=_LOS,
+    uses=_USES,
 )
 def png_floats(
     dt: float,
