@@ -17,14 +17,11 @@ from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import load_scenario, with_changes
 from .aggregate import median_iqr, miss_stats, success_rate
+from .errors import CampaignError
 from .runner import SortieJob, SortieOutcome
 
 LAWS = codes(GuidanceLaw)
 assert set(LAWS) <= set(GUIDANCE_LAWS)
-
-
-class CampaignError(ValueError):
-    """Unknown campaign or law, or a bad campaign parameter."""
 
 
 # ------------------------------------------------------------------------- paper numbers

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .errors import TuneError
 from .runner import SortieOutcome
-from .tune_options import TuneError
 
 BOOTSTRAP_RESAMPLES = 10_000
 

@@ -28,10 +28,11 @@ from onboard.gains import GAIN_NAMES, GAIN_SPECS, Gains
 
 from ..scenario import ScenarioError, load_scenario, with_overrides
 from .definitions import CAMPAIGNS, build_jobs
+from .errors import TuneError
 from .paired import main_paired, paired_campaigns, paired_comparison, paired_outcomes, sign_test_p
 from .runner import SortieJob, SortieOutcome, SortieRunner
 from .tune_figures import Figures, figures_markdown, objective_formula, score, write_tune_report
-from .tune_options import DEFAULT_N, DEFAULT_SATURATION_PENALTY, OBJECTIVES, TuneError
+from .tune_options import DEFAULT_N, DEFAULT_SATURATION_PENALTY, OBJECTIVES
 
 DEFAULT_OUT_ROOT = Path("logs") / "tune"
 HEARTBEAT_S = 20  # a trial whose process stopped beating for GRACE_S is failed and retried

@@ -13,9 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from .aggregate import success_rate
+from .errors import TuneError
 from .paired import paired_markdown
 from .runner import SortieOutcome
-from .tune_options import OBJECTIVE_HELP, TuneError
+from .tune_options import OBJECTIVE_HELP
 
 
 @dataclass
