@@ -1,4 +1,4 @@
-"""The setpoint's datagram sent with the GIL held (onboard/link/datagram.py, #16 item 5): the
+"""The setpoint's datagram sent with the GIL held (onboard/link/datagram.py): the
 bytes that arrive are the frame, a refusal is counted and never raises, a closed socket is
 never written to, and the MavLink link uses it for its UDP links and pymavlink otherwise."""
 

@@ -24,7 +24,7 @@ from ..scenario import load_scenario
 from ..sim.simulation import Simulation
 
 BENCH_SCENARIOS = ("static-ahead-20m", "cv-top-to-bottom")
-TARGETS = {  # #16: projected >= 200x per core, rendered >= 20x, tick median <= 0.1 ms
+TARGETS = {  # projected >= 200x per core, rendered >= 20x, tick median <= 0.1 ms
     "rtf_projected": 200.0,
     "rtf_rendered": 20.0,
     "rtf_projected_cpu": 200.0,
