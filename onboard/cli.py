@@ -171,8 +171,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=DEFAULT_PRIORITY,
         metavar="PRIO|off",
         help="run the control thread under SCHED_FIFO at this priority (1-99; default "
-        "%(default)s; off: normal scheduling). Without the permission (LimitRTPRIO, "
-        "CAP_SYS_NICE) one warning line and normal scheduling",
+        "%(default)s; off: normal scheduling), the camera, link and sender threads one below. "
+        "Without the permission (LimitRTPRIO, CAP_SYS_NICE) one warning line and normal "
+        "scheduling (docs/realtime.md)",
     )
     r.add_argument(
         "--lock-memory",

@@ -327,8 +327,8 @@ class InterceptionLoop:
         one hold's worth) is taken off this one's, so the turn summed over the commands stays
         K times the LOS change (with the low-pass on, the LOS change is filtered as a rate
         instead, over the elapsed time, per hold). None: the hold is the elapsed time, as on a
-        fixed grid (the simulator: nothing else changes). The runtime passes its period: an
-        early tick re-anchors its grid, so its command is held a whole period."""
+        fixed grid (the simulator: nothing else changes). The runtime passes the time until
+        its next tick is expected (its next deadline plus the recent wake-up lateness)."""
         t = state.time_s
         if self._pending_gains is not None:
             self.gains, self._pending_gains = self._pending_gains, None

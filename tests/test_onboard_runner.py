@@ -81,7 +81,10 @@ def test_a_slow_tick_is_reported_as_an_overrun(tmp_path):
     rt.run(duration_s=0.5)
     assert rt.overruns >= 1  # the slow tick (a loaded machine may add another)
     assert any("loop overrun" in line for line in lines)
-    assert 40 <= rt.stats()["ticks"] <= 51  # 100 Hz for 0.5 s, less the stall
+    st = rt.stats()
+    # the deadlines the stall passed are dropped, not caught up: at most 100 Hz for 0.5 s
+    assert st["missed_deadlines"] >= 2 and st["late_ticks"] >= 1
+    assert 10 <= st["ticks"] <= 51
     for link in (fc, gcs):
         link.close()
 
@@ -172,8 +175,8 @@ def test_a_refused_real_time_setting_is_one_warning_line_and_the_loop_runs(
 
 
 def test_granted_real_time_priority_holds_while_the_loop_runs_and_is_undone(tmp_path):
-    """Where SCHED_FIFO is permitted: the control thread runs under it, the other threads do
-    not, and the thread is put back afterwards."""
+    """Where SCHED_FIFO is permitted: the control thread runs under it, the camera, link and
+    sender threads one priority below, and the control thread is put back afterwards."""
     if not hasattr(os, "SCHED_FIFO"):
         pytest.skip("no SCHED_FIFO here")
     from onboard.runtime.check_rt import fifo_permitted
@@ -186,13 +189,16 @@ def test_granted_real_time_priority_holds_while_the_loop_runs_and_is_undone(tmp_
     tick = rt.tick
 
     def looking():
+        for name, t in (("camera", rt.camera), ("sender", rt.sender), ("fc rx", rt._fc_rx)):
+            param = os.sched_getparam(t.native_id).sched_priority
+            seen.setdefault(name, (os.sched_getscheduler(t.native_id), param))
         seen.setdefault("control", os.sched_getscheduler(0))
-        seen.setdefault("camera", os.sched_getscheduler(rt.camera.native_id))
         tick()
 
     rt.tick = looking
     rt.run(duration_s=0.2)
-    assert seen == {"control": os.SCHED_FIFO, "camera": before}
+    below = (os.SCHED_FIFO, 9)
+    assert seen == {"control": os.SCHED_FIFO, "camera": below, "sender": below, "fc rx": below}
     assert os.sched_getscheduler(0) == before and rt.stats()["realtime_priority"] == 10
     for link in (fc, gcs):
         link.close()
@@ -202,7 +208,11 @@ def test_each_tick_is_told_how_long_its_command_is_held(tmp_path):
     """The hold handed to the loop runs from the tick's start to the next deadline plus the
     recent mean lateness of the wake-ups: with delayed wake-ups (injected here) it is on
     average the time the command was really held."""
-    rt, fc, gcs, _ = _runtime(tmp_path, control_rate_hz=100.0, inject_delays_seed=3)
+    # under SCHED_FIFO where permitted: the injected delays, not this machine's load, then
+    # make most of the lateness
+    rt, fc, gcs, _ = _runtime(
+        tmp_path, control_rate_hz=100.0, inject_delays_seed=3, realtime_priority=10
+    )
     period = 0.01
     seen = []
     tick = rt.tick
@@ -219,14 +229,14 @@ def test_each_tick_is_told_how_long_its_command_is_held(tmp_path):
     assert len(seen) > 50
     assert all(left <= hold <= 2 * period for _, hold, left in seen), seen
     # each hold against the time to the next tick, stalls left out (the loop takes their
-    # excess back when the tick after them comes): no bias beyond a tenth of a period
+    # excess back when the tick after them comes): no bias beyond 15 % of a period
     errors = [
         hold - (t1 - t0)
         for (t0, hold, _), (t1, _, _) in itertools.pairwise(seen)
         if t1 - t0 < 2 * period
     ]
     assert len(errors) > 0.8 * len(seen)
-    assert abs(sum(errors) / len(errors)) < 0.1 * period, sorted(errors)
+    assert abs(sum(errors) / len(errors)) < 0.15 * period, sorted(errors)
     st = rt.stats()
     assert st["injected_stalls"] == 1 and st["injected_delay_s"] > 0.03  # 30 ms at 1 s
     assert st["late_ticks"] >= 1 and st["missed_deadlines"] >= 3

@@ -402,8 +402,9 @@ class OnboardRuntime:
         if self.foxglove is not None:
             self.foxglove.start()
             self.events.add("info", f"Foxglove live on {self.foxglove.live.url()}")
-        # the other threads started: they keep the normal policy and any CPU
-        self.realtime = make_realtime(cfg.realtime_priority, cfg.cpu, cfg.lock_memory)
+        helpers = (self._fc_rx, self._gcs_rx, self.sender, self.camera)
+        tids = [t.native_id for t in helpers if t is not None and t.native_id is not None]
+        self.realtime = make_realtime(cfg.realtime_priority, cfg.cpu, cfg.lock_memory, tids)
         warning = self.realtime.warning()
         if warning:
             print(warning, file=sys.stderr, flush=True)
