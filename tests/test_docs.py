@@ -36,7 +36,7 @@ INVOCATION = re.compile(
 OPTION = re.compile(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)")
 ENV_SETTING = re.compile(r"^[A-Z_][A-Z0-9_]*=\S*$")
 
-# Each program's parser, taken where it is built: ``main`` is run with ``parse_args`` replaced
+# Each program's parser, taken where it is built: ``main`` is run with argparse's parsing replaced
 # by a function that hands the parser back, so however a program builds its parser, its
 # subcommands and options are the ones checked. A subprocess with PEREGRINE_JIT=0, so that
 # importing the runtime compiles nothing.
@@ -49,7 +49,7 @@ class Got(Exception):
 def grab(self, *args, **kwargs):
     raise Got(self)
 
-argparse.ArgumentParser.parse_args = grab
+argparse.ArgumentParser.parse_known_args = grab  # parse_args goes through it too
 
 def options(parser):
     subs = {}

@@ -1,6 +1,8 @@
 """``groundstation bench``: a measuring tool beside the product, not part of it. Each kind of
-figure has its module (core, campaigns, dashboard, overlay, recording, sitl); each imports only the
-parts of the product it measures, when it runs."""
+figure has its module (core, campaigns, dashboard, overlay, recording, sitl); each imports only
+the parts of the product it measures, when it runs. ``docs_table`` and ``docs_pictures`` write
+the manual's benchmark page and pictures from them (run by hand:
+``python -m groundstation.bench.docs_table``)."""
 
 from .campaigns import run_campaign_bench
 from .core import run_bench
