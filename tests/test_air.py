@@ -18,6 +18,8 @@ from groundstation.sim.vehicle import Multicopter
 from groundstation.sim.wind import Wind
 from onboard.datatypes import GRAVITY_M_S2
 
+from .as_written import load_as_written
+
 DT = 1.0 / 600.0
 
 
@@ -63,9 +65,10 @@ def test_drawn_drag_stays_in_its_range_and_the_loop_believes_only_its_gain():
 def test_speed_ramp_reaches_v_max_against_the_drag_and_hits(name, v_max, drag):
     """The loop believes k_drag = 0.17 1/s (0.25 N s/m); the airframe's drag at 10 m/s is
     0.25 or 0.5 N s/m-equivalent: the ramp's feed-forward plus the observer's along-track part
-    bring the vehicle within 0.6 m/s of v_max by the pass, and it hits."""
+    bring the vehicle within 0.6 m/s of v_max by the pass, and it hits. Flown with ideal
+    sensors (tests/as_written.py) so that the airframe alone is tested."""
     sc = with_overrides(
-        load_scenario(name),
+        load_as_written(name),
         {"interceptor.drag_min_n_s_m": drag, "interceptor.drag_max_n_s_m": drag},
     )
     res = Simulation(sc, "png", 3, keep_records=False).run()
