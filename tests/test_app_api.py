@@ -163,7 +163,8 @@ def test_uploaded_scenario_flies(client):
     r = client.post("/api/sortie/start", json={"toml": toml, "speed": "max"})
     assert r.status_code == 200
     st = _wait(client, lambda s: s["state"] == "finished")
-    assert st["outcome"] == "HIT" and st["miss_m"] <= 0.1
+    # flown with the realistic default sensors (outdoor-gnss): a decimetre, not millimetres
+    assert st["outcome"] == "HIT" and st["miss_m"] <= 0.15
 
 
 # ----------------------------------------------------------------------------- lifecycle
