@@ -473,7 +473,10 @@ function setBadge(id, text, cls) {
 let lastStatusParts = "";
 let lastGainsStamp = null; // gains_pending and the last applied time, as last shown
 
+let shownEpoch = -1; // the newest sortie shown: a status from before it (a telemetry message
+// sent before a Start's answer, read after it) is not shown over it
 function showStatus(st) {
+  if (st.epoch !== undefined) { if (st.epoch < shownEpoch) return; shownEpoch = st.epoch; }
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
   setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
   setBadge("st-time", `t = ${Number(st.time_s).toFixed(2)} s`);
