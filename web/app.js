@@ -348,7 +348,7 @@ $("btn-add-plot").onclick = () => {
   buildPlots();
 };
 // ------------------------------------------------------------------ image plane
-const img = { canvas: $("image"), frame: null };
+const img = { canvas: $("image"), frame: null, asked: 0, seq: 0 };
 img.ctx = img.canvas.getContext("2d");
 
 function drawImagePlane(s) {
@@ -615,9 +615,12 @@ function takeSnapshot(s) {
   if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
     W.lastT = s.t;
+    // a replayed frame comes with its recorded time: the last decoded for the newest
+    // snapshot is shown (an older one decoded late is dropped), none where none was recorded
+    if (s.frame_t_s === null) { img.frame = null; img.seq = ++img.asked; W.frameT = null; W.frameFor = s.t; }
     if (s.frame_jpeg_b64) {
-      const im = new Image();
-      im.onload = () => { img.frame = im; };
+      const im = new Image(), seq = ++img.asked, ft = s.frame_t_s, at = s.t;
+      im.onload = () => { if (seq < img.seq) return; img.seq = seq; img.frame = im; W.frameT = ft === undefined ? null : ft; W.frameFor = at; pending = pending || W.snap; if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); } };
       im.src = "data:image/jpeg;base64," + s.frame_jpeg_b64;
     }
     if (appendLive(s)) W.applied += 1;
