@@ -869,7 +869,11 @@ async function applyGains(changes) {
     const r = await api("PUT", "/api/gains?valid_only=true", changes);
     const refused = r.refused || {};
     const applied = Object.entries(changes).filter(([k]) => !(k in refused)).map(([k, v]) => `${k} = ${v}`);
-    await loadGains();
+    if (applied.length) await loadGains(); // the values in force, the new ones among them
+    for (const k of Object.keys(refused)) { // a refused field goes back to the value in force
+      const el = document.querySelector(`#gains input[data-gain="${k}"]`);
+      if (el) { el.value = gainValues[k]; el.classList.remove("changed"); }
+    }
     const why = Object.keys(refused).map((k) => refusal(k, String(changes[k]), refused[k]));
     const text = (applied.length ? [`applied: ${applied.join(", ")}.`] : []).concat(why).join(" ");
     msg($("gains-msg"), text, !why.length);
