@@ -540,3 +540,38 @@ def test_overlay_of_sorties_picked_on_the_sorties_page(station, page):
         timeout=15000,
     )
     clean(station)
+
+
+# ---------------------------------------------------------------------- C: video in replay
+def test_replay_video_frame_follows_200_random_seeks(station, page):
+    import random
+
+    from groundstation.recording.reader import iter_messages
+
+    clean(station)
+    s = station.session
+    s.start(SortieConfig(load_scenario("cv-top-to-bottom"), "png", 0, "rendered", "max"))
+    name = s.recording["file"]
+    wait_state(station, "finished", timeout=120)
+    frames = [t for _, t, _ in iter_messages(station.log_dir / name, ["/camera/image"])]
+    assert len(frames) > 10
+    api(station, "POST", "/api/replay/open", {"name": name})
+    goto(page, station)
+    duration = status(station)["replay"]["duration_s"]
+    rng = random.Random(7)
+    hits = 0
+    for _ in range(200):  # backward and forward at random
+        t = round(rng.uniform(0.0, duration), 3)
+        api(station, "POST", "/api/replay/seek", {"t_s": t})
+        page.wait_for_function(
+            f"window.peregrine.frameFor !== undefined && Math.abs(window.peregrine.frameFor - {t})"
+            " < 1e-6",
+            timeout=10000,
+        )
+        shown = page.evaluate("window.peregrine.frameT")
+        before = [f for f in frames if f <= t + 1e-6]
+        expected = before[-1] if before and t - before[-1] <= 0.5 else None
+        assert shown == (None if expected is None else round(expected, 6)), (t, shown, expected)
+        hits += shown is not None and 0.0 <= t - shown < 0.2 + 1e-6  # within one frame (5/s)
+    assert hits == 200
+    clean(station)

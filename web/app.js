@@ -348,7 +348,7 @@ $("btn-add-plot").onclick = () => {
   buildPlots();
 };
 // ------------------------------------------------------------------ image plane
-const img = { canvas: $("image"), frame: null };
+const img = { canvas: $("image"), frame: null, asked: 0, seq: 0 };
 img.ctx = img.canvas.getContext("2d");
 
 function drawImagePlane(s) {
@@ -473,7 +473,10 @@ function setBadge(id, text, cls) {
 let lastStatusParts = "";
 let lastGainsStamp = null; // gains_pending and the last applied time, as last shown
 
+let shownEpoch = -1; // the newest sortie shown: a status from before it (a telemetry message
+// sent before a Start's answer, read after it) is not shown over it
 function showStatus(st) {
+  if (st.epoch !== undefined) { if (st.epoch < shownEpoch) return; shownEpoch = st.epoch; }
   setBadge("st-state", st.state, st.state === "running" ? "ok" : st.state === "finished" ? "warn" : "");
   const profile = st.profile === "ideal" ? " · IDEAL SENSORS (analysis only)" : st.profile ? ` · ${st.profile}` : "";
   setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera}${profile} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
@@ -613,9 +616,12 @@ function takeSnapshot(s) {
   if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
     W.lastT = s.t;
+    // a replayed frame comes with its recorded time: the last decoded for the newest
+    // snapshot is shown (an older one decoded late is dropped), none where none was recorded
+    if (s.frame_t_s === null) { img.frame = null; img.seq = ++img.asked; W.frameT = null; W.frameFor = s.t; }
     if (s.frame_jpeg_b64) {
-      const im = new Image();
-      im.onload = () => { img.frame = im; };
+      const im = new Image(), seq = ++img.asked, ft = s.frame_t_s, at = s.t;
+      im.onload = () => { if (seq < img.seq) return; img.seq = seq; img.frame = im; W.frameT = ft === undefined ? null : ft; W.frameFor = at; pending = pending || W.snap; if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); } };
       im.src = "data:image/jpeg;base64," + s.frame_jpeg_b64;
     }
     if (appendLive(s)) W.applied += 1;
@@ -864,7 +870,11 @@ async function applyGains(changes) {
     const r = await api("PUT", "/api/gains?valid_only=true", changes);
     const refused = r.refused || {};
     const applied = Object.entries(changes).filter(([k]) => !(k in refused)).map(([k, v]) => `${k} = ${v}`);
-    await loadGains();
+    if (applied.length) await loadGains(); // the values in force, the new ones among them
+    for (const k of Object.keys(refused)) { // a refused field goes back to the value in force
+      const el = document.querySelector(`#gains input[data-gain="${k}"]`);
+      if (el) { el.value = gainValues[k]; el.classList.remove("changed"); }
+    }
     const why = Object.keys(refused).map((k) => refusal(k, String(changes[k]), refused[k]));
     const text = (applied.length ? [`applied: ${applied.join(", ")}.`] : []).concat(why).join(" ");
     msg($("gains-msg"), text, !why.length);

@@ -68,24 +68,42 @@ function buildPlots() {
       title: p.title, width: Math.max(grid.clientWidth / 2 - 10, 300), height: 200, series,
       scales: { x: { time: false, auto: false, range: () => [lo, hi] } },
       axes: [{ label: series[0].label, labelSize: 16, size: 34 }, { size: 52, values: (u, vals) => vals.map(fmt) }],
-      cursor: { sync: { key: "overlay" } }, legend: { show: false },
-      hooks: { draw: [(u) => { const x = u.valToPos(O.cursor, "x", true); u.ctx.save(); u.ctx.strokeStyle = "#d7263d"; u.ctx.lineWidth = 2;
-        u.ctx.beginPath(); u.ctx.moveTo(x, u.bbox.top); u.ctx.lineTo(x, u.bbox.top + u.bbox.height); u.ctx.stroke(); u.ctx.restore(); }] },
+      // the scrub moves uPlot's own cursor line (an element): no plot is redrawn for it
+      cursor: { sync: { key: "overlay" }, points: { show: false }, drag: { x: false, y: false } }, legend: { show: false },
     }, plotData(p.key), box);
     return u;
   });
   const sc = $("ov-scrub"); sc.min = lo; sc.max = hi; sc.step = (hi - lo) / 1000; sc.value = O.cursor = Math.min(Math.max(O.cursor, lo), hi);
 }
 
-// plan (east, north) and side (north, up) views of each vehicle relative to its target
+// plan (east, north) and side (north, up) views of each vehicle relative to its target: the
+// tracks drawn once (relBase), each scrub frame copies them and adds the dots at the cursor
+let relBase = null;
 function drawRel() {
-  const cv = $("ov-rel"), ctx = cv.getContext("2d"), W = cv.width / 2, H = cv.height;
+  const cv = $("ov-rel"), ctx = cv.getContext("2d");
+  if (!relBase) {
+    relBase = document.createElement("canvas"); relBase.width = cv.width; relBase.height = cv.height;
+    drawRelOn(relBase.getContext("2d"), cv.width, cv.height, false);
+  }
   ctx.clearRect(0, 0, cv.width, cv.height);
+  ctx.drawImage(relBase, 0, 0);
+  drawRelOn(ctx, cv.width, cv.height, true);
+}
+function drawRelOn(ctx, width, H, dots) {
+  const W = width / 2;
   let m = 1;
   for (const s of O.sorties) for (const r of s.rel_m) m = Math.max(m, Math.abs(r[0]), Math.abs(r[1]), Math.abs(r[2]));
   const views = [[0, 1, "plan: east → , north ↑"], [1, 2, "side: north → , up ↑"]];
   views.forEach(([a, b, name], k) => {
     const ox = k * W + W / 2, oy = H / 2, sc = (Math.min(W, H) / 2 - 16) / m;
+    if (dots) {
+      O.sorties.forEach((s, i) => {
+        const t = O.cursor + shift(s); let j = s.t_s.findIndex((x) => x >= t); if (j < 0) j = s.t_s.length - 1;
+        const r = s.rel_m[j]; if (!r) return;
+        ctx.fillStyle = COLORS[i]; ctx.beginPath(); ctx.arc(ox + r[a] * sc, oy - r[b] * sc, 4, 0, 2 * Math.PI); ctx.fill();
+      });
+      return;
+    }
     ctx.strokeStyle = "#dde3e8"; ctx.beginPath(); ctx.moveTo(k * W + 8, oy); ctx.lineTo(k * W + W - 8, oy); ctx.moveTo(ox, 8); ctx.lineTo(ox, H - 8); ctx.stroke();
     ctx.fillStyle = "#47525d"; ctx.font = "12px sans-serif"; ctx.fillText(`${name} · ${fmt(m)} m to the edge`, k * W + 8, 14);
     ctx.fillStyle = "#d7263d"; ctx.beginPath(); ctx.arc(ox, oy, 4, 0, 2 * Math.PI); ctx.fill(); // the target
@@ -93,9 +111,6 @@ function drawRel() {
       ctx.strokeStyle = COLORS[i]; ctx.lineWidth = 1.3; ctx.beginPath();
       s.rel_m.forEach((r, j) => (j ? ctx.lineTo(ox + r[a] * sc, oy - r[b] * sc) : ctx.moveTo(ox + r[a] * sc, oy - r[b] * sc)));
       ctx.stroke();
-      const t = O.cursor + shift(s); let j = s.t_s.findIndex((x) => x >= t); if (j < 0) j = s.t_s.length - 1;
-      const r = s.rel_m[j]; if (!r) return;
-      ctx.fillStyle = COLORS[i]; ctx.beginPath(); ctx.arc(ox + r[a] * sc, oy - r[b] * sc, 4, 0, 2 * Math.PI); ctx.fill();
     });
   });
 }
@@ -106,7 +121,7 @@ function scrubTo(t) {
   if (frame) return;
   frame = requestAnimationFrame(() => {
     frame = null;
-    for (const u of O.plots) u.redraw(false, false);
+    for (const u of O.plots) u.setCursor({ left: u.valToPos(O.cursor, "x"), top: u.bbox.height / devicePixelRatio / 2 }, false);
     drawRel();
     $("ov-time").textContent = `${$("ov-align").value === "intercept" ? "t − t_intercept" : "t"} = ${fmt(O.cursor)} s`;
     O.drawn += 1;

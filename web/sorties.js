@@ -90,11 +90,14 @@ document.querySelector("#logs tbody").addEventListener("change", (ev) => {
   const name = box.closest("tr").dataset.name;
   if (box.checked && selected.size >= OVERLAY_MAX) { box.checked = false; say(`at most ${OVERLAY_MAX} sorties at once`, false); return; }
   if (box.checked) selected.add(name); else selected.delete(name);
+  // the server reads it for the overlay now, while more are picked (it keeps what it read)
+  if (box.checked) fetch("/api/overlay?names=" + encodeURIComponent(name)).catch(() => {});
   showSelected();
 });
 $("ov-shown").onclick = () => {
   for (const n of W.shown) { if (selected.size >= OVERLAY_MAX) break; if (rows.find((r) => r.name === n && r.status !== "not_mcap")) selected.add(n); }
   if (W.shown.length > OVERLAY_MAX) say(`the first ${OVERLAY_MAX} shown are selected`, true);
+  if (selected.size) fetch("/api/overlay?names=" + encodeURIComponent([...selected].join(","))).catch(() => {}); // read ahead
   render();
 };
 $("ov-clear").onclick = () => { selected.clear(); render(); };

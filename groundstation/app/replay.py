@@ -30,6 +30,7 @@ from .scene import SceneState
 from .snapshot import frame_snapshot
 
 OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/dkf", "/gains", "/events"]
+FRAME_WINDOW_S = 0.5  # a camera frame older than this at the cursor is not shown
 PLOT_KEYS = ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px", "range_m")
 
 
@@ -177,12 +178,20 @@ class ReplayPlayer:
 
     def frame_b64(self, t: float) -> str | None:
         """The last camera frame at or before t, found through the index."""
-        last = None
-        for _topic, _t, m in iter_messages(
-            self.path, ["/camera/image"], max(t - 0.5, 0.0), t + 1e-6
+        return self.frame_at(t)[1]
+
+    def frame_at(self, t: float) -> tuple[float | None, str | None]:
+        """(its log time, the JPEG as base64) of the last camera frame at or before ``t``
+        and at most FRAME_WINDOW_S before it, found through the index; (None, None) if none."""
+        last, last_t = None, None
+        for _topic, tf, m in iter_messages(
+            self.path, ["/camera/image"], max(t - FRAME_WINDOW_S, 0.0), t + 1e-6
         ):
-            last = m
-        return None if last is None else last.get("data")
+            if tf <= t + 1e-6:
+                last, last_t = m, tf
+        if last is None or not last.get("data"):
+            return None, None
+        return round(last_t, 6), last.get("data")
 
     def _velocity(self, i: int, c: dict) -> tuple[float, float, float] | None:
         """The recorded velocity; a recording made before it was recorded: the poses'

@@ -82,11 +82,18 @@ class TelemetryHub:
             self.loop.call_soon_threadsafe(self._broadcast, full, lean)
 
     def _broadcast(self, full: str, lean: str) -> None:
+        has_frame = full is not lean
         for q, frames in list(self.queues.items()):
+            item = (has_frame and frames, full if frames else lean)
             if q.full():
-                with contextlib.suppress(asyncio.QueueEmpty):
-                    q.get_nowait()
-            q.put_nowait(full if frames else lean)
+                # a slow subscriber loses its oldest message without a camera frame: a frame
+                # (sent once, after a seek) is not lost to the snapshots that follow it
+                held = [q.get_nowait() for _ in range(q.qsize())]
+                drop = next((k for k, (f, _) in enumerate(held) if not f), 0)
+                del held[drop]
+                for h in held:
+                    q.put_nowait(h)
+            q.put_nowait(item)
 
 
 def create_app(
@@ -229,7 +236,7 @@ def create_app(
             if hub.last is not None:
                 await ws.send_text(hub.last)
             while True:
-                await ws.send_text(await q.get())
+                await ws.send_text((await q.get())[1])
                 hub.sent[key] += 1
 
         tasks = [asyncio.create_task(listen()), asyncio.create_task(pump())]

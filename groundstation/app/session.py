@@ -291,10 +291,12 @@ class SimSession(SessionView, SessionReplay):
             else:
                 base = self.gains_base.to_dict()
                 for k, v in gains.to_dict().items():
-                    if v != getattr(old, k):
+                    if v == getattr(old, k):
+                        continue
+                    if v == base[k]:  # back to the value the sortie started with
+                        self.gain_edits.pop(k, None)
+                    else:
                         self.gain_edits[k] = v
-                    if k in self.gain_edits and self.gain_edits[k] == base[k]:
-                        del self.gain_edits[k]
             self.gains = gains
             t = None if self.sim is None else round(self.sim.time_s, 3)
             for k, v in gains.to_dict().items():

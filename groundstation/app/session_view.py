@@ -227,7 +227,10 @@ class SessionView:
                 self.replay_playing and self._publish_count % FRAME_EVERY == 0
             ):
                 self._force_frame = False
-                frame = rp.frame_b64(self.replay_t)
+                # the recorded camera frame at the cursor: the last one at or before it, with
+                # its time (None: no frame there, the page shows none)
+                frame_t, frame = rp.frame_at(self.replay_t)
+                snap["frame_t_s"] = frame_t
                 if frame:
                     snap["frame_jpeg_b64"] = frame
             return snap
