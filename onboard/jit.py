@@ -43,17 +43,14 @@ def _tell_once(what: str, text: str) -> None:
 def use_jit() -> bool:
     """Compile the kernels in this process and the processes it starts (campaign workers
     inherit the environment), unless ``PEREGRINE_JIT`` already says otherwise; returns the
-    mode. Call it before any kernel module is imported: a mode change after a kernel was
-    defined would leave some kernels compiled and others not, so it raises instead."""
+    mode. Once a kernel is defined the mode is fixed (a change would leave some kernels
+    compiled and others not): a caller that imported the kernels first, such as a test that
+    runs a command in its own process, keeps their mode, and its environment is left alone."""
     global ENABLED
+    if KERNELS:
+        return ENABLED
     os.environ.setdefault(ENV, "1")
-    wanted = os.environ[ENV] != "0"
-    if wanted != ENABLED and KERNELS:
-        raise RuntimeError(
-            f"onboard.jit.use_jit() after {len(KERNELS)} kernels were defined as "
-            f"{'compiled' if ENABLED else 'Python'}: call it before importing them"
-        )
-    ENABLED = wanted
+    ENABLED = os.environ[ENV] != "0"
     return ENABLED
 
 

@@ -1,12 +1,18 @@
 import math
+import os
 
-import numpy as np
-import pytest
+# The suite runs the kernels as Python (a newcomer's and the vehicle's mode) in this process and
+# in every process it starts, whatever a command it runs in-process asks for; .ci/run checks the
+# compiled kernels against their references apart (PEREGRINE_JIT=1).
+os.environ.setdefault("PEREGRINE_JIT", "0")
 
-from onboard.geometry import attitude_from_yaw_pitch_roll
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from onboard.geometry import attitude_from_yaw_pitch_roll  # noqa: E402
 
 # the browser tests' ground station and chromium, one of each per module
-from .browser_support import browser, station  # noqa: F401
+from .browser_support import browser, station  # noqa: E402, F401
 
 _FUZZ: dict[str, tuple[int, int]] = {}  # suite -> (cases tried, failures)
 
