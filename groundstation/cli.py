@@ -564,8 +564,28 @@ def _cmd_scenarios(_: argparse.Namespace) -> int:
     return 0
 
 
+# the commands that fly many sorties compile the kernels (onboard.jit); the others run them
+# as Python and start at once
+_JIT_COMMANDS = ("campaign", "tune", "bench")
+
+
+def _makes_pool(args: argparse.Namespace) -> bool:
+    """Does the command fly its sorties in a local process pool?"""
+    if args.command in ("campaign", "tune"):
+        return args.backend == "process"
+    return args.command == "bench" and args.campaigns
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
+    if args.command in _JIT_COMMANDS:
+        from onboard.jit import use_jit
+
+        use_jit()
+        if _makes_pool(args):
+            from .campaigns.pool import start_pool_server
+
+            start_pool_server(getattr(args, "workers", None))
     try:
         if args.command == "sortie":
             return _cmd_sortie(args)

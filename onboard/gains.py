@@ -7,6 +7,8 @@ Names are at most 16 characters so that they can be MAVLink parameters.
 from __future__ import annotations
 
 import dataclasses
+import enum
+import functools
 import math
 import sys
 from collections.abc import Mapping
@@ -160,6 +162,11 @@ class Gains(SharedWhenCopied):
     def to_dict(self) -> dict[str, float]:
         return dataclasses.asdict(self)
 
+    @functools.cached_property
+    def packed(self) -> Any:
+        """:func:`pack_gains` of these gains, made once per gains object (they are frozen)."""
+        return pack_gains(self)
+
 
 @dataclass(frozen=True)
 class GainSpec:
@@ -195,3 +202,17 @@ def load_gains_file(path: str | Path) -> Gains:
     except tomllib.TOMLDecodeError as exc:
         raise GainError(f"{path}: not valid TOML: {exc}") from None
     return Gains.from_mapping(data, source=str(path))
+
+
+GainIndex = enum.IntEnum("GainIndex", [(name, i) for i, name in enumerate(GAIN_NAMES)])
+GainIndex.__doc__ = """Index of each gain in :func:`pack_gains`'s array (``G[GainIndex.K_y]``
+in a kernel): the declaration's order, so there is no second list of the gains to keep."""
+
+
+def pack_gains(gains: Gains) -> Any:
+    """Every gain as one float64 array in :class:`Gains`'s declaration order (the units of the
+    declaration: degrees stay degrees), for the compiled kernels, which cannot read a
+    dataclass. Index it with :class:`GainIndex`."""
+    import numpy as np  # not at import: ``--help`` and ``scenarios`` read the gains without it
+
+    return np.array([getattr(gains, name) for name in GAIN_NAMES], dtype=np.float64)

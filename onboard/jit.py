@@ -1,12 +1,19 @@
 """Compiled arithmetic: numba's nopython JIT for the loop's and the simulator's hot kernels.
 
 A kernel is an ordinary Python function over floats and numpy arrays, decorated with
-:func:`kernel` and an explicit numba signature. It is compiled when its module is imported
-(from numba's on-disk cache after the first time, so a vehicle never compiles mid-sortie) and
-runs the same IEEE operations in the same order as the Python source: no fast-math, so no
-fused multiply-adds or reassociation. ``PEREGRINE_JIT=0`` in the environment runs the very
-same functions as plain Python (debugging, coverage, a platform without numba's LLVM).
-There is one implementation of each kernel either way.
+:func:`kernel` and an explicit numba signature. With the JIT on it is compiled when its module
+is imported (from numba's on-disk cache after the first time, so a vehicle never compiles
+mid-sortie) and runs the same IEEE operations in the same order as the Python source: no
+fast-math, so no fused multiply-adds or reassociation. With the JIT off the very same
+functions run as plain Python. There is one implementation of each kernel either way; its
+readable statement in the paper's notation is its reference (``*_reference.py`` beside it,
+tests/test_kernel_references.py).
+
+The JIT pays only where thousands of sorties run: campaigns, tuning and benchmarks (about
+200x real time compiled against 5x as Python) call :func:`use_jit` before they import a kernel
+module. A single sortie, the web app and the vehicle run as Python by default: they start in
+about a second instead of waiting for the compiler. ``PEREGRINE_JIT=1`` or ``PEREGRINE_JIT=0``
+in the environment always wins. The mode is fixed when the first kernel is defined.
 """
 
 from __future__ import annotations
@@ -18,7 +25,8 @@ from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-ENABLED = os.environ.get("PEREGRINE_JIT", "1") != "0"
+ENV = "PEREGRINE_JIT"  # "1": compile the kernels, "0": run them as Python
+ENABLED = os.environ.get(ENV, "0") != "0"  # plain Python unless told
 
 KERNELS: list[Callable[..., Any]] = []  # every kernel defined so far, compiled or not
 
@@ -32,13 +40,31 @@ def _tell_once(what: str, text: str) -> None:
         print(f"peregrine: {text}", file=sys.stderr, flush=True)
 
 
+def use_jit() -> bool:
+    """Compile the kernels in this process and the processes it starts (campaign workers
+    inherit the environment), unless ``PEREGRINE_JIT`` already says otherwise; returns the
+    mode. Call it before any kernel module is imported: a mode change after a kernel was
+    defined would leave some kernels compiled and others not, so it raises instead."""
+    global ENABLED
+    os.environ.setdefault(ENV, "1")
+    wanted = os.environ[ENV] != "0"
+    if wanted != ENABLED and KERNELS:
+        raise RuntimeError(
+            f"onboard.jit.use_jit() after {len(KERNELS)} kernels were defined as "
+            f"{'compiled' if ENABLED else 'Python'}: call it before importing them"
+        )
+    ENABLED = wanted
+    return ENABLED
+
+
 def _tell_compiling(name: str) -> None:
-    """The kernels are being compiled (the first run after an install or an upgrade;
-    cached on disk afterwards)."""
+    """The kernels are being compiled (the first compiled run after an install or an
+    upgrade; cached on disk afterwards)."""
     _tell_once(
         "compiling",
-        f"compiling the numba kernels ({name}, ...): once after an install or upgrade, about "
-        "half a minute; cached on disk afterwards",
+        f"compiling the numba kernels ({name}, ...; campaigns, tuning and benchmarks run them "
+        "compiled): once after an install or upgrade, one to a few minutes on 2 cores; cached "
+        "on disk afterwards",
     )
 
 
@@ -47,7 +73,7 @@ def _tell_no_cache(name: str) -> None:
     _tell_once(
         "no cache",
         f"no writable cache for the numba kernels ({name}, ...): compiling them at every start "
-        "(about half a minute); set NUMBA_CACHE_DIR to a writable directory",
+        "(one to a few minutes on 2 cores); set NUMBA_CACHE_DIR to a writable directory",
     )
 
 
@@ -80,10 +106,8 @@ def _compile(
 
     if cache:
         _forget_if_stale(fn, uses)
-    # nogil: a kernel call lets the GIL go. On the vehicle the control thread then waits
-    # for no other thread's kernel (the camera thread's fusion) when it wakes; keeping the GIL
-    # in kernels instead (so a waiting thread cannot take it at the control thread's own kernel
-    # calls) was measured worse: README "Session 16"
+    # nogil: a kernel call lets the GIL go, so a thread that wakes (the control thread) does
+    # not wait for another thread's kernel (the camera thread's fusion) to finish
     options = {"cache": cache, "nogil": True}
     if signature is None:
         return numba.njit(**options)(fn)
@@ -98,10 +122,10 @@ def kernel(
     signature: str | None = None, uses: Sequence[Callable[..., Any]] = ()
 ) -> Callable[[F], F]:
     """Compile the decorated function with numba (``nopython``, cached, releases the GIL)
-    for ``signature`` (eagerly, at import) or lazily on first call without one; with
-    ``PEREGRINE_JIT=0`` return it unchanged. ``uses``: the kernels of other files it calls
-    (its cache is dropped when one of them changes; callees in its own file need not be
-    named)."""
+    for ``signature`` (eagerly, at import) or lazily on first call without one; with the JIT
+    off (the default: see :func:`use_jit`) return it unchanged. ``uses``: functions of other
+    files it calls or whose module constants it reads (its cache is dropped when one of those
+    files changes; callees in its own file need not be named)."""
 
     def wrap(fn: F) -> F:
         if not ENABLED:

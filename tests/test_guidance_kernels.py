@@ -101,7 +101,7 @@ def _png_args(rng: np.random.Generator, gains: np.ndarray) -> tuple:
 def test_png_kernel_matches_its_source():
     rng = np.random.default_rng(1702)
     for i in range(N):
-        gains = G._png_gains(G.Gains())
+        gains = G.Gains().packed
         if i % 3 == 1:  # the FOV guard, pursuit and midcourse terms switched off in turn
             gains = gains.copy()
             gains[rng.choice([5, 7, 11])] = 0.0
@@ -114,7 +114,7 @@ def test_png_kernel_flies_each_branch():
     midcourse term (so the comparison above covers them)."""
     rng = np.random.default_rng(1702)
     seen = set()
-    gains = G._png_gains(G.Gains())
+    gains = G.Gains().packed
     for _ in range(N):
         args = _png_args(rng, gains)
         a0, a1, a2, _, _, hovering = G.png_floats(*args)
