@@ -6,13 +6,13 @@ import os
 # compiled kernels against their references apart (PEREGRINE_JIT=1).
 os.environ.setdefault("PEREGRINE_JIT", "0")
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
-from onboard.geometry import attitude_from_yaw_pitch_roll  # noqa: E402
+from onboard.geometry import attitude_from_yaw_pitch_roll
 
 # the browser tests' ground station and chromium, one of each per module
-from .browser_support import browser, station  # noqa: E402, F401
+from .browser_support import browser, station  # noqa: F401
 
 _FUZZ: dict[str, tuple[int, int]] = {}  # suite -> (cases tried, failures)
 

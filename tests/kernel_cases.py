@@ -255,14 +255,15 @@ def _(a):
     return [(png.png_floats(*_copy(a)), (*a_d, s_y, s_z, float(hovering)))]
 
 
+@case(png.believed_drag_floats)
+def _(a):
+    want = R.believed_drag(_v(*a[0:3]), _v(*a[3:6]), _v(*a[6:9]), a[9])
+    return [(png.believed_drag_floats(*a), want)]
+
+
 @case(png.drag_feedforward_floats)
 def _(a):
-    speed, u0, u1, u2, d0, d1, d2, k_drag = a
-    g = _gains(k_drag=k_drag)
-    if g is None:
-        return None
-    want = R.drag_feedforward(speed, _v(u0, u1, u2), _v(d0, d1, d2), g)
-    return [(png.drag_feedforward_floats(*a), want)]
+    return [(png.drag_feedforward_floats(*a), max(-float(_v(*a[0:3]) @ _v(*a[3:6])), 0.0))]
 
 
 # ---------------------------------------------------------------- attitude and observer

@@ -67,16 +67,29 @@ def _(a):
 
 @case(P.wind_at)
 def _(a):
-    x, c, px, py, pz = a
-    return [(P.wind_at(*_copy(a)), PR.wind_at(x, c, _v(px, py, pz)))]
+    c, modes, px, py, pz = a
+    return [(P.wind_at(*_copy(a)), PR.wind_at(c, modes, _v(px, py, pz)))]
 
 
-@case(P.gust_step)
+@case(P.turbulence_at)
 def _(a):
-    x, c, n0, n1, n2 = a
-    got = x.copy()
-    P.gust_step(got, c.copy(), n0, n1, n2)
-    return [(got, PR.gust_step(x, c, _v(n0, n1, n2)))]
+    c, modes, px, py, pz = a
+    return [(P.turbulence_at(*_copy(a)), PR.turbulence_at(c, modes, _v(px, py, pz)))]
+
+
+@case(P.rotor_wash_at)
+def _(a):
+    x, lag, wx, wy, wz, px, py, pz = a
+    want = PR.rotor_wash_at(x, lag[P.L_DISC], _v(wx, wy, wz), _v(px, py, pz))
+    return [(P.rotor_wash_at(*_copy(a)), want)]
+
+
+@case(P.thrust_axis)
+def _(a):
+    q = _v(*a)
+    if abs(float(q @ q) - 1.0) > 1e-9:  # the formula is for a unit quaternion
+        q = q / np.linalg.norm(q)
+    return [(P.thrust_axis(*q), PR.thrust_axis(q))]
 
 
 @case(P.closest_approach)
@@ -87,10 +100,10 @@ def _(a):
 
 @case(P.physics_steps)
 def _(a):
-    k0, n, buf, track, normals, ni = a
+    k0, n, buf, track, modes = a
     got = buf.copy()
-    steps = P.physics_steps(k0, n, got, track.copy(), normals.copy(), ni)
-    steps_r, want = PR.physics_steps(k0, n, buf, track, normals, ni)
+    steps = P.physics_steps(k0, n, got, track.copy(), modes.copy())
+    steps_r, want = PR.physics_steps(k0, n, buf, track, modes)
     return [(steps, steps_r), (got, want)]
 
 
@@ -137,9 +150,11 @@ def _fresh_target(rng: np.random.Generator) -> tuple:
     c = rng.normal(size=P.T_SIZE) * 3.0
     c[P.T_MAX_SPEED], c[P.T_MASS], c[P.T_ROPE] = 4.0, 0.2, 5.0
     c[P.T_TWO] = 2.0
+    c[P.T_CL], c[P.T_STROUHAL], c[P.T_DIA], c[P.T_AREA] = 0.1, 0.2, 0.16, 0.02
     times = np.sort(rng.uniform(0.0, 10.0, 6))
     track = np.column_stack([times, rng.normal(size=(6, 3)) * 10.0])
-    x = rng.normal(size=6) * 2.0
+    x = rng.normal(size=P.TX_SIZE) * 2.0
+    x[6] = rng.uniform(0.0, 2.0 * math.pi)
     return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *rng.normal(size=3).tolist())
 
 

@@ -23,6 +23,12 @@ import numpy as np
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.jit import kernel
 
+from ..scenario.physics import AIR_DENSITY_KG_M3, helium_gross_lift_n
+
+# what these kernels read from other files (their cache is dropped when one changes): the air
+# density of scenario/physics.py
+_USES = (helium_gross_lift_n,)
+
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this is the pass once range opens
 DIVERGED_SPEED_M_S = 60.0
 _DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
@@ -40,7 +46,6 @@ X_SIZE = 25
 # downwash; 0: none)
 L_RATE, L_THRUST, L_DRAG, L_MASS, L_BODY, L_ROTOR, L_DISC = 0, 1, 2, 3, 4, 5, 6
 L_SIZE = 7
-AIR_DENSITY_KG_M3 = 1.2  # sea level, 20 C (as scenario/physics.py)
 
 
 @kernel("UniTuple(f8, 3)(f8, f8, f8, f8)")
@@ -200,7 +205,7 @@ T_SIZE = 32
 TX_SIZE = 7
 
 
-@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)")
+@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)", uses=_USES)
 def target_step(
     kind: int,
     c: np.ndarray,
@@ -282,7 +287,10 @@ def target_step(
             s0, s1 = (r1 / h, -r0 / h) if h > 1e-9 else (1.0, 0.0)
             side = c[28] * 0.5 * AIR_DENSITY_KG_M3 * speed * speed * c[31] * math.sin(x[6])
             f0, f1 = f0 + side * s0, f1 + side * s1
-            x[6] = math.fmod(x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt, 2.0 * math.pi)
+            phase = x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt
+            if phase > 2.0 * math.pi:  # kept in [0, 2 pi) (a step adds far less than 2 pi)
+                phase -= 2.0 * math.pi
+            x[6] = phase
         m = c[25]
         v0, v1, v2 = x[3] + f0 / m * dt, x[4] + f1 / m * dt, x[5] + f2 / m * dt
         p0, p1, p2 = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
@@ -384,8 +392,8 @@ def turbulence_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: fl
     """The turbulence (m/s ENU, before the jet's profile) at (px, py, pz) (m) at the time
     c[W_TIME]: the frozen field of ``modes`` (M_* rows, unit variance per axis) carried by the
     mean wind (Taylor's hypothesis), times the sigmas per axis (wind.py)."""
-    n = int(c[7])
-    if n == 0:
+    n = min(int(c[7]), modes.shape[0])  # never past the modes given
+    if n <= 0:
         return 0.0, 0.0, 0.0
     t = c[6]
     qx, qy, qz = px - c[0] * t, py - c[1] * t, pz - c[2] * t
@@ -411,7 +419,7 @@ def wind_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: float) -
     return f * w0, f * w1, f * w2
 
 
-@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8, f8, f8, f8)")
+@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8, f8, f8, f8)", uses=_USES)
 def rotor_wash_at(
     x: np.ndarray, lag: np.ndarray, wx: float, wy: float, wz: float, px: float, py: float, pz: float
 ) -> tuple:
@@ -534,7 +542,7 @@ def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray
     return buf
 
 
-@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])")
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])", uses=_USES)
 def physics_steps(k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np.ndarray) -> int:
     """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
     recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps in the wind

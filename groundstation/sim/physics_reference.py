@@ -27,14 +27,19 @@ def vehicle_step(
     thrust_lag: float,
     drag_1_s: float,
     mass_kg: float,
+    body_1_m: float,
+    rotor_1_s_n: float,
+    disc_m2: float,
     dt: float,
     wind: np.ndarray,
 ) -> np.ndarray:
     """One rigid-body step of dt in the wind (the state x in the X_* layout, a new array):
     the body rates and thrust lag toward their commands by the per-step factors (first-order
     actuators), the attitude turns by the rates (q <- q exp(omega dt / 2) renormalised), then
-    semi-implicit Euler of v' = (T / m) z_B - c (v - w) + g, p' = v (the step's kinematic
-    acceleration kept), and the rates summed for the gyro's mean."""
+    semi-implicit Euler of v' = (T / m) z_B - c v_a - b |v_a| v_a - r T (v_a - (v_a . z_B)
+    z_B) + g with v_a = v - w (linear, body and rotor drag), p' = v (the step's kinematic
+    acceleration kept), and the rates summed for the gyro's mean. ``disc_m2`` (the rotors'
+    area) is the wash's, not the step's."""
     x = x.copy()
     omega = x[P.X_W : P.X_W + 3] + (x[P.X_CMD_W : P.X_CMD_W + 3] - x[P.X_W : P.X_W + 3]) * rate_lag
     x[P.X_RATE_SUM : P.X_RATE_SUM + 3] += omega
@@ -49,7 +54,12 @@ def vehicle_step(
         q = q / np.linalg.norm(q)
     z_B = rotation_of_quaternion(q)[:, 2]
     v = x[P.X_V : P.X_V + 3]
-    acc = thrust / mass_kg * z_B - drag_1_s * (v - wind) + G_ENU
+    v_a = v - wind
+    rotor_plane = v_a - float(v_a @ z_B) * z_B
+    drag = (
+        drag_1_s + body_1_m * float(np.linalg.norm(v_a))
+    ) * v_a + rotor_1_s_n * thrust * rotor_plane
+    acc = thrust / mass_kg * z_B - drag + G_ENU
     v = v + acc * dt
     x[P.X_P : P.X_P + 3] += v * dt
     x[P.X_V : P.X_V + 3] = v
@@ -93,13 +103,18 @@ def target_state(
     dt: float,
     wind: np.ndarray,
 ) -> np.ndarray:
-    """The target's (position, velocity) at time t, a step of dt after ``x``, for each motion
-    (targets.py): closed forms for cv, ca, sinusoid, circle and takeoff; escape accelerates to
-    its top speed; the tethered balloon feels lift and quadratic drag and is held by its rope
-    (projected back onto the sphere, outward radial velocity dropped); a track is linear
-    between samples and continued at its last velocity."""
+    """The target's (position, velocity, buffet phase) at time t, a step of dt after ``x``,
+    for each motion (targets.py): closed forms for cv, ca, sinusoid, circle and takeoff;
+    escape accelerates to its top speed; a balloon (tethered or free) feels lift, quadratic
+    drag of the air relative to it and the buffet, C_L' 0.5 rho |r|^2 A sin(phase) across the
+    relative air (horizontal), its phase advancing at 2 pi St |r| / D; the tethered one is held
+    by its rope (projected back onto the sphere, outward radial velocity dropped); a track is
+    linear between samples and continued at its last velocity. Nothing goes below the ground:
+    there z = 0 and the vertical velocity is not downward."""
     p0, v0, a0 = c[P.T_P0 : P.T_P0 + 3], c[P.T_V0 : P.T_V0 + 3], c[P.T_A0 : P.T_A0 + 3]
-    p, v = x[:3].copy(), x[3:].copy()
+    p, v, phase = x[:3].copy(), x[3:6].copy(), float(x[6])
+    if kind == "static":
+        return x.copy()
     if kind == "cv":
         p = p0 + v0 * t
     elif kind == "ca":
@@ -122,14 +137,23 @@ def target_state(
         if speed > top:
             v = v * (top / speed)
         p = p + v * dt
-    elif kind == "tethered":
+    elif kind in ("tethered", "balloon"):
         rel = wind - v
-        force = c[P.T_DRAG_K] * float(np.linalg.norm(rel)) * rel + np.array([0, 0, c[P.T_LIFT]])
+        speed = float(np.linalg.norm(rel))
+        force = c[P.T_DRAG_K] * speed * rel + np.array([0, 0, c[P.T_LIFT]])
+        if c[P.T_CL] > 0.0 and speed > 1e-6:
+            h = math.hypot(rel[0], rel[1])
+            across = np.array([rel[1] / h, -rel[0] / h, 0.0]) if h > 1e-9 else np.array([1.0, 0, 0])
+            q = 0.5 * P.AIR_DENSITY_KG_M3 * speed * speed
+            force = force + c[P.T_CL] * q * c[P.T_AREA] * math.sin(phase) * across
+            phase += 2.0 * math.pi * c[P.T_STROUHAL] * speed / c[P.T_DIA] * dt
+            if phase > 2.0 * math.pi:
+                phase -= 2.0 * math.pi
         v = v + force / c[P.T_MASS] * dt
         p = p + v * dt
         anchor, rope = c[P.T_ANCHOR : P.T_ANCHOR + 3], c[P.T_ROPE]
         d = p - anchor
-        if np.linalg.norm(d) > rope:
+        if kind == "tethered" and np.linalg.norm(d) > rope:
             u = d / np.linalg.norm(d)
             p = anchor + u * rope
             v = v - max(float(v @ u), 0.0) * u
@@ -137,7 +161,9 @@ def target_state(
         i = min(max(int(np.searchsorted(track[:, 0], t, side="right")) - 1, 0), len(track) - 2)
         v = (track[i + 1, 1:] - track[i, 1:]) / (track[i + 1, 0] - track[i, 0])
         p = track[i, 1:] + v * (t - track[i, 0])
-    return np.concatenate([p, v])
+    if p[2] < 0.0:
+        p[2], v[2] = 0.0, max(v[2], 0.0)
+    return np.concatenate([p, v, [phase]])
 
 
 def jet_factor(
@@ -161,19 +187,53 @@ def jet_factor(
     return core * math.exp(-math.log(2.0) * r2 / r_half**2)
 
 
-def wind_at(x: np.ndarray, c: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """The wind at p: the state (mean + gust) times the jet's profile relative to its reference
-    point (a uniform wind: the state itself)."""
+def turbulence_at(c: np.ndarray, modes: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The frozen turbulence field carried by the mean wind U, at p at time t (wind.py):
+    sigma * sum_n (c_n cos(k_n . q) + s_n sin(k_n . q)), q = p - U t, over the first
+    ``n`` = c[W_NMODES] modes."""
+    n = min(int(c[P.W_NMODES]), len(modes))
+    if n <= 0:
+        return np.zeros(3)
+    q = p - c[P.W_MEAN : P.W_MEAN + 3] * c[P.W_TIME]
+    m = modes[:n]
+    theta = m[:, P.M_K : P.M_K + 3] @ q
+    g = np.cos(theta) @ m[:, P.M_C : P.M_C + 3] + np.sin(theta) @ m[:, P.M_S : P.M_S + 3]
+    return c[P.W_SIGMA : P.W_SIGMA + 3] * g
+
+
+def wind_at(c: np.ndarray, modes: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The wind at p: the mean plus the turbulence there, for the jet times its profile
+    relative to its reference point."""
+    w = c[P.W_MEAN : P.W_MEAN + 3] + turbulence_at(c, modes, p)
     if c[P.W_JET] == 0.0:
-        return x[:3]
+        return w
     m, s = c[P.W_MEAN : P.W_MEAN + 3], c[P.W_SOURCE : P.W_SOURCE + 3]
-    return jet_factor(m, s, c[P.W_DIA], p, False) / c[P.W_REF] * x[:3]
+    return jet_factor(m, s, c[P.W_DIA], p, False) / c[P.W_REF] * w
 
 
-def gust_step(x: np.ndarray, c: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Gauss-Markov gusts g' = a g + b sigma n (n standard normals), and mean + g'."""
-    g = c[P.W_A] * x[3:] + c[P.W_B] * c[P.W_SIGMA : P.W_SIGMA + 3] * normals
-    return np.concatenate([c[P.W_MEAN : P.W_MEAN + 3] + g, g])
+def rotor_wash_at(x: np.ndarray, disc_m2: float, wind: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The rotors' downwash at p (m/s): v_h^2 = T / (2 rho A); edgewise at the rotor-plane
+    airspeed V, v_i^2 = (sqrt(V^4 + 4 v_h^4) - V^2) / 2 (Glauert); a slipstream of 2 v_i along
+    -z_B from a disc of area A / 2 at the vehicle, spreading as a round jet along the
+    slipstream's path relative to the vehicle, -2 v_i z_B - v_a; none without rotors or
+    thrust."""
+    thrust = x[P.X_THRUST]
+    if disc_m2 <= 0.0 or thrust <= 0.0:
+        return np.zeros(3)
+    z_B = thrust_axis(x[P.X_Q : P.X_Q + 4])
+    v_a = x[P.X_V : P.X_V + 3] - wind
+    edge = v_a - float(v_a @ z_B) * z_B
+    vv = float(edge @ edge)
+    vh2 = thrust / (2.0 * P.AIR_DENSITY_KG_M3 * disc_m2)
+    u = 2.0 * math.sqrt(0.5 * (math.sqrt(vv * vv + 4.0 * vh2 * vh2) - vv))
+    dia = math.sqrt(4.0 * disc_m2 / math.pi) / math.sqrt(2.0)
+    return -u * jet_factor(-u * z_B - v_a, x[P.X_P : P.X_P + 3], dia, p, False) * z_B
+
+
+def thrust_axis(q: np.ndarray) -> np.ndarray:
+    """Body z in the world of a unit quaternion (w, x, y, z): the rotation's third column."""
+    w, x, y, z = q
+    return np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
 
 
 def closest_approach(r0: np.ndarray, r1: np.ndarray) -> tuple:
@@ -197,18 +257,19 @@ def sphere_image(
 
 
 def physics_steps(
-    k0: int, n: int, buf: np.ndarray, track: np.ndarray, normals: np.ndarray, ni: int
+    k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np.ndarray
 ) -> tuple[int, np.ndarray]:
-    """Steps k0 .. k0 + n of the sortie in ``buf`` (S_* layout), each: the command arrives
-    when due, the vehicle steps in the wind where it is, the target moves (in the wind where
-    it is), the gusts step; then the closest approach inside the step and the outcome: a hit
-    or miss once the range opens within 3 m after closing, diverged (not finite or faster
-    than 60 m/s), crashed (below the ground). Returns (steps taken, the new buffer)."""
+    """Steps k0 .. k0 + n of the sortie in ``buf`` (S_* layout), each at its time t: the
+    command arrives when due, the vehicle steps in the wind where it is, the target moves (a
+    light one in the wind where it is plus the vehicle's rotor wash); then the closest
+    approach inside the step and the outcome: a hit or miss once the range opens within 3 m
+    after closing, diverged (not finite or faster than 60 m/s), crashed (below the ground).
+    Returns (steps taken, the new buffer)."""
     buf = buf.copy()
     vx = buf[P.S_VX : P.S_VX + P.X_SIZE]
-    rate_lag, thrust_lag, drag, mass = buf[P.S_LAG : P.S_LAG + 4]
-    tc, tx = buf[P.S_TC : P.S_TC + P.T_SIZE], buf[P.S_TX : P.S_TX + 6]
-    wx, wc = buf[P.S_WX : P.S_WX + 6], buf[P.S_WC : P.S_WC + P.W_SIZE]
+    lag = buf[P.S_LAG : P.S_LAG + P.L_SIZE]
+    tc, tx = buf[P.S_TC : P.S_TC + P.T_SIZE], buf[P.S_TX : P.S_TX + P.TX_SIZE]
+    wc = buf[P.S_WC : P.S_WC + P.W_SIZE]
     cs, cmd = buf[P.S_CS : P.S_CS + P.C_SIZE], buf[P.S_CMD : P.S_CMD + 7]
     dt, kind = buf[P.S_DT], P.MOTIONS[int(buf[P.S_KIND])]
     for k in range(k0, k0 + n):
@@ -217,13 +278,15 @@ def physics_steps(
             rates, thrust = vehicle_command(cmd[1:4], cmd[4], cmd[5], cmd[6])
             vx[P.X_CMD_W : P.X_CMD_W + 3], vx[P.X_CMD_THRUST] = rates, thrust
             cmd[0] = -1.0
-        vx[:] = vehicle_step(vx, rate_lag, thrust_lag, drag, mass, dt, wind_at(wx, wc, vx[:3]))
+        wc[P.W_TIME] = t
+        wind = wind_at(wc, modes, vx[:3])
+        light = kind in ("tethered", "balloon")
+        if light:
+            air = wind_at(wc, modes, tx[:3]) + rotor_wash_at(vx, lag[P.L_DISC], wind, tx[:3])
+        vx[:] = vehicle_step(vx, *lag, dt, wind)
         p, v = vx[:3].copy(), vx[3:6].copy()
         if kind != "static":
-            tx[:] = target_state(kind, tc, track, tx, t + dt, dt, wind_at(wx, wc, tx[:3]))
-        if wc[P.W_SIGMA] > 0.0:
-            wx[:] = gust_step(wx, wc, normals[ni])
-            ni += 1
+            tx[:] = target_state(kind, tc, track, tx, t + dt, dt, air if light else np.zeros(3))
         r0, r1 = cs[P.C_REL : P.C_REL + 3].copy(), tx[:3] - p
         dist, s, closest, r0d, r1d = closest_approach(r0, r1)
         cs[P.C_REL : P.C_REL + 3] = r1
