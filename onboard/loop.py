@@ -16,6 +16,7 @@ from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
     GUIDANCE_LAWS,
     GuidanceInput,
+    believed_drag_floats,
     direction_angles,
     line_of_sight,
     los_terms,
@@ -405,6 +406,10 @@ class InterceptionLoop:
             d_hat = dob.update_floats(t, (v0, v1, v2), (z0, z1, z2))
         else:
             d_hat = dob.estimate_floats
+        # the drag the loop believes (its airframe's in still air, the rotor-plane model) and
+        # the observer's estimate of the rest: the speed ramp overcomes its along-track part,
+        # the attitude loop cancels the part across the velocity
+        d_hat = believed_drag_floats(v0, v1, v2, z0, z1, z2, *d_hat, gains.k_drag)
         # the estimate, the buffered one at the last tick and the range: one read
         est, est_prev_e, est_range = self.dkf.view(self._prev_time_s)
         e_est = e_rate = None
@@ -498,14 +503,16 @@ class InterceptionLoop:
             # without a live track: never descend below h_floor above home (z = 0)
             a_d = floor_guard_accel(a_d, float(state.position_enu_m[2]), float(v[2]), gains)
 
-        # disturbance feed-forward: the attitude loop flies a_d - d^ (normal to v in flight;
-        # the guidance limit a_max applies to a_d, |d^| is clamped to a_max by the observer)
+        # drag and disturbance feed-forward: the attitude loop flies a_d - D (D the believed
+        # drag plus d^; its part normal to v in flight, the along-track part being the speed
+        # ramp's; the guidance limit a_max applies to a_d, |d^| is clamped by the observer)
         ad0, ad1, ad2 = a_d.tolist()
         veh = self.vehicle
         d0, d1, d2 = d_hat
         # never hand a non-finite or out-of-range command on: the guard flies level hover
         w0, w1, w2, thrust, guard, a_normal = command_floats(
-            ad0, ad1, ad2, dob.enabled, d0, d1, d2, *vf, gains.v_min, R_WB, yaw_rate,
+            ad0, ad1, ad2, dob.enabled or gains.k_drag > 0.0, d0, d1, d2, *vf, gains.v_min, R_WB,
+            yaw_rate,
             gains.k_R, gains.omega_max, veh.mass_kg, veh.max_thrust_n,
             veh.hover_thrust_normalised,
         )  # fmt: skip

@@ -267,13 +267,17 @@ def _(a):
     return [(png.png_floats(*_copy(a)), (*a_d, s_y, s_z, float(hovering)))]
 
 
+@case(png.believed_drag_floats)
+def _(a):
+    v0, v1, v2, z0, z1, z2, d0, d1, d2, k_drag = a
+    want = R.believed_drag(_v(v0, v1, v2), _v(z0, z1, z2), _v(d0, d1, d2), k_drag)
+    return [(png.believed_drag_floats(*a), want)]
+
+
 @case(png.drag_feedforward_floats)
 def _(a):
-    speed, u0, u1, u2, d0, d1, d2, k_drag = a
-    g = _gains(k_drag=k_drag)
-    if g is None:
-        return None
-    want = R.drag_feedforward(speed, _v(u0, u1, u2), _v(d0, d1, d2), g)
+    u0, u1, u2, d0, d1, d2 = a
+    want = R.drag_feedforward(_v(u0, u1, u2), _v(d0, d1, d2))
     return [(png.drag_feedforward_floats(*a), want)]
 
 

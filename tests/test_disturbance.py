@@ -181,8 +181,9 @@ def _state(t, vel):
 
 
 def test_k_dob_zero_is_the_loop_without_observer():
-    """k_dob = 0: the command is exactly the attitude loop's on the guidance's a_d."""
-    loop = InterceptionLoop(CameraModel(), PARAMS, Gains(k_dob=0.0))
+    """k_dob = 0 and no believed drag (k_drag = 0): the command is exactly the attitude loop's
+    on the guidance's a_d."""
+    loop = InterceptionLoop(CameraModel(), PARAMS, Gains(k_dob=0.0, k_drag=0.0))
     for k in range(30):
         st = _state(k * DT, (0.05 * k, 3.0, 0.0))  # speeding sideways: d != 0
         tel = loop.tick(st)

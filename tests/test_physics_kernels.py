@@ -179,12 +179,12 @@ def _pass_by(target_x_m: float, push_y_m_s: float) -> tuple[int, float, int]:
     x[16] = x[20] = mass * GRAVITY_M_S2
     b[ph.S_LAG : ph.S_LAG + 4] = (1.0, 1.0, 0.5, mass)
     b[ph.S_TX : ph.S_TX + 3] = (target_x_m, 0.3, 10.0)
-    b[ph.S_WX : ph.S_WX + 3] = (10.0, push_y_m_s, 0.0)
+    b[ph.S_WC + ph.W_MEAN : ph.S_WC + ph.W_MEAN + 3] = (10.0, push_y_m_s, 0.0)
     cs = b[ph.S_CS : ph.S_CS + ph.C_SIZE]
     cs[ph.C_REL : ph.C_REL + 3] = b[ph.S_TX : ph.S_TX + 3] - x[0:3]
     cs[ph.C_MISS], cs[ph.C_HIT_R], cs[ph.C_TWO] = 1e9, 0.35, 2.0
     b[ph.S_CMD], b[ph.S_KIND], b[ph.S_DT] = -1.0, 0, dt
-    taken = ph.physics_steps(0, 300, b, np.zeros((0, 4)), np.zeros((0, 3)), 0)
+    taken = ph.physics_steps(0, 300, b, np.zeros((0, 4)), np.zeros((0, ph.M_SIZE)))
     return int(cs[ph.C_OUTCOME]), float(cs[ph.C_MISS]), taken
 
 

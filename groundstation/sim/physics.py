@@ -23,6 +23,8 @@ import numpy as np
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.jit import kernel
 
+from ..scenario.physics import AIR_DENSITY_KG_M3
+
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this is the pass once range opens
 DIVERGED_SPEED_M_S = 60.0
 _DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at every step
@@ -40,7 +42,6 @@ X_SIZE = 25
 # downwash; 0: none)
 L_RATE, L_THRUST, L_DRAG, L_MASS, L_BODY, L_ROTOR, L_DISC = 0, 1, 2, 3, 4, 5, 6
 L_SIZE = 7
-AIR_DENSITY_KG_M3 = 1.2  # sea level, 20 C (as scenario/physics.py)
 
 
 @kernel("UniTuple(f8, 3)(f8, f8, f8, f8)")
@@ -282,7 +283,10 @@ def target_step(
             s0, s1 = (r1 / h, -r0 / h) if h > 1e-9 else (1.0, 0.0)
             side = c[28] * 0.5 * AIR_DENSITY_KG_M3 * speed * speed * c[31] * math.sin(x[6])
             f0, f1 = f0 + side * s0, f1 + side * s1
-            x[6] = math.fmod(x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt, 2.0 * math.pi)
+            phase = x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt
+            if phase > 2.0 * math.pi:  # kept in [0, 2 pi) (a step adds far less than 2 pi)
+                phase -= 2.0 * math.pi
+            x[6] = phase
         m = c[25]
         v0, v1, v2 = x[3] + f0 / m * dt, x[4] + f1 / m * dt, x[5] + f2 / m * dt
         p0, p1, p2 = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt

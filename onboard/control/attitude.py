@@ -151,8 +151,8 @@ def command_floats(
     hover_thrust: float,
 ) -> tuple[float, float, float, float, float, float]:
     """A tick's command from the guidance's a_d = (a0, a1, a2) (ENU, m/s^2), compiled: with
-    ``feedforward`` the disturbance observer's d^ = (d0, d1, d2) is cancelled (its normal part
-    at speed: ``feedforward_floats`` of the velocity v), :func:`attitude_floats` turns it
+    ``feedforward`` the believed drag and disturbance D = (d0, d1, d2) is cancelled (its normal
+    part at speed: ``feedforward_floats`` of the velocity v), :func:`attitude_floats` turns it
     into body rates (FLU, rad/s) and thrust in [0, 1], and the output guard replaces a
     non-finite or out-of-range command by level hover (``hover_thrust``: no rates). Returns
     (w0, w1, w2, thrust, 1 if the guard tripped else 0, |a_d normal to v| m/s^2)."""

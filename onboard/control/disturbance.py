@@ -54,8 +54,9 @@ class DisturbanceObserverConfig:
     """Observer settings: ``bandwidth_rad_s`` w (0 disables: d^ = 0), the motors' thrust lag
     (s), the clamp on |d^| (m/s^2), the velocity innovation treated as a reset (m/s), the
     cold-start factor (see the module doc) and the airframe's linear drag per unit mass
-    (1/s, PX4 EKF2_MCOEF's rotor-drag model) counted in the model, so that d^ is what the
-    *wind* adds, c w, not the airframe's own drag -c v, which turns with the velocity."""
+    (1/s, PX4 EKF2_MCOEF's rotor-drag model: -c times the velocity's part in the rotor plane)
+    counted in the model, so that d^ is what the *wind* adds, not the airframe's own drag,
+    which turns with the velocity and the thrust axis."""
 
     bandwidth_rad_s: float
     mass_kg: float
@@ -287,11 +288,14 @@ def observer_step(
         thrust_n = t_cmd + (t0 - t_cmd) * decay
     else:
         t_mean = thrust_n = t_cmd
-    # f_model = (T / m) z_mean - g e_z - c v^ (the airframe's own drag in still air)
+    # f_model = (T / m) z_mean - g e_z - c (v^ - (v^ . z_mean) z_mean): the airframe's own
+    # drag in still air, in the rotor plane (EKF2_MCOEF's rotor-drag model)
     k = t_mean / mass_kg
-    f0 = k * (0.5 * (zp0 + z0)) - kd * h0
-    f1 = k * (0.5 * (zp1 + z1)) - kd * h1
-    f2 = (k * (0.5 * (zp2 + z2)) - GRAVITY_M_S2) - kd * h2
+    m0, m1, m2 = 0.5 * (zp0 + z0), 0.5 * (zp1 + z1), 0.5 * (zp2 + z2)
+    hz = h0 * m0 + h1 * m1 + h2 * m2
+    f0 = k * m0 - kd * (h0 - hz * m0)
+    f1 = k * m1 - kd * (h1 - hz * m1)
+    f2 = (k * m2 - GRAVITY_M_S2) - kd * (h2 - hz * m2)
     p0, p1, p2 = h0 + (f0 + e0) * dt, h1 + (f1 + e1) * dt, h2 + (f2 + e2) * dt  # v_pred
     r0, r1, r2 = v0 - p0, v1 - p1, v2 - p2
     if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > max_innovation:

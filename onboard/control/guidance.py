@@ -35,6 +35,7 @@ from .los import (
 )
 from .png import (
     accel_toward_velocity,
+    believed_drag_floats,
     edge_margin_floats,
     edge_margin_rad,
     fov_guard,
@@ -55,7 +56,8 @@ from .png import (
 
 __all__ = [
     "GUIDANCE_LAWS", "GuidanceInput", "GuidanceLaw", "GuidanceOutput", "_f3", "_hover_start",
-    "_max", "_min", "accel_toward_velocity", "angles_floats", "direction_angles",
+    "_max", "_min", "accel_toward_velocity", "angles_floats", "believed_drag_floats",
+    "direction_angles",
     "direction_from_angles", "edge_margin_floats", "edge_margin_rad", "fov_guard",
     "fov_guard_floats", "hypot2", "ibvs_law", "line_of_sight", "los_change", "los_floats",
     "los_terms", "midcourse_floats", "midcourse_weight", "min_pitch_rad", "normal_component",

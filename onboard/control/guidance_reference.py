@@ -196,10 +196,19 @@ def zem_nulling_accel(
     return -v_perp / gains.tau_zem
 
 
-def drag_feedforward(speed_m_s: float, v_hat: np.ndarray, d_hat: np.ndarray, gains: Gains) -> float:
+def believed_drag(v: np.ndarray, z_B: np.ndarray, d_hat: np.ndarray, k_drag: float) -> np.ndarray:
+    """The specific force of drag and disturbance the loop believes acts on it (m/s^2):
+    D = d^ - k_drag (v - (v . z_B) z_B), its airframe's drag in still air in PX4 EKF2's
+    rotor-drag form (EKF2_MCOEF: linear in the velocity's part in the rotor plane, z_B the
+    thrust axis) plus the disturbance observer's estimate of the rest."""
+    return d_hat - k_drag * (v - float(v @ z_B) * z_B)
+
+
+def drag_feedforward(v_hat: np.ndarray, drag: np.ndarray) -> float:
     """The along-track acceleration the speed ramp adds against drag (eq. 14 with drag):
-    the believed drag k_drag |v| less the disturbance observer's d^ along v^, never negative."""
-    return max(gains.k_drag * speed_m_s - float(d_hat @ v_hat), 0.0)
+    the believed drag and disturbance D (:func:`believed_drag`) against v^, max(-D . v^, 0)
+    (a tailwind does not brake)."""
+    return max(-float(drag @ v_hat), 0.0)
 
 
 def png(
@@ -214,14 +223,15 @@ def png(
     v_t: np.ndarray | None,
     var_v: float,
     gains: Gains,
-    d_hat: np.ndarray | None = None,
+    drag: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float, bool]:
     """The proposed law. Below v_min fly along the LOS: a_d = sat(k_a n_t, a_max). Otherwise
     the velocity angles (eq. 7) turned by K times the LOS change (eq. 8; faded out by the
     midcourse weight w_mid far away), the desired direction n_d (eq. 9), bent toward the LOS
     near the image's top or bottom edge (pursuit bias), the speed ramp (eq. 14), the midcourse
     ZEM-nulling velocity, a_d = sat((v_d - v) / dt, a_max) (eq. 17), the drag feed-forward
-    along v^ (at most a_max) and the FOV guard. Returns (a_d, sigma_y, sigma_z, hovering)."""
+    along v^ against the believed drag and disturbance ``drag`` (:func:`believed_drag`; at
+    most a_max) and the FOV guard. Returns (a_d, sigma_y, sigma_z, hovering)."""
     top = fov_edges_rad[0]
     speed = float(np.linalg.norm(v))
     if speed < gains.v_min:
@@ -240,8 +250,8 @@ def png(
     if w_mid > 0.0:
         v_d = v_d + w_mid * dt_s * zem_nulling_accel(v, v_t, var_v, n_t, gains)
     a_d = saturate((v_d - v) / dt_s, gains.a_max)
-    d_hat = np.zeros(3) if d_hat is None else d_hat
-    a_drag = min(drag_feedforward(speed, v_hat, d_hat, gains), gains.a_max)
+    drag = np.zeros(3) if drag is None else drag
+    a_drag = min(drag_feedforward(v_hat, drag), gains.a_max)
     a_d = a_d + a_drag * v_hat
     a_d = fov_guard(a_d, camera_axis, top, q_y, gains, gains.a_max + a_drag)[1]
     return a_d, sigma_y, sigma_z, False

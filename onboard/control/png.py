@@ -37,20 +37,45 @@ def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, 
 
 
 @kernel(
-    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_LOS
+    "UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64, float64, "
+    "float64, float64, float64)",
+    uses=_LOS,
 )
+def believed_drag_floats(
+    v0: float,
+    v1: float,
+    v2: float,
+    z0: float,
+    z1: float,
+    z2: float,
+    d0: float,
+    d1: float,
+    d2: float,
+    k_drag: float,
+) -> tuple[float, float, float]:
+    """The specific force (m/s^2, ENU) of drag and disturbance the loop believes acts on it:
+    its airframe's drag in still air as PX4's EKF2 models it, -k_drag times the velocity's
+    part in the rotor plane (v - (v . z) z, z the thrust axis; k_drag an operator parameter,
+    EKF2_MCOEF), plus the disturbance observer's d^ = (d0, d1, d2), which is what that model
+    leaves unexplained (drag beyond the believed one, wind). The model part follows the
+    attitude at once; the observer's acts as an integral on the rest."""
+    vz = v0 * z0 + v1 * z1 + v2 * z2
+    return (
+        d0 - k_drag * (v0 - vz * z0),
+        d1 - k_drag * (v1 - vz * z1),
+        d2 - k_drag * (v2 - vz * z2),
+    )
+
+
+@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_LOS)
 def drag_feedforward_floats(
-    speed: float, u0: float, u1: float, u2: float, d0: float, d1: float, d2: float, k_drag: float
+    u0: float, u1: float, u2: float, d0: float, d1: float, d2: float
 ) -> float:
     """The along-track acceleration (m/s^2, >= 0) the speed ramp adds so that the vehicle
-    gains speed at a_t against drag (eq. 14 with drag): the drag the loop believes its
-    airframe has in still air, k_drag |v| (an operator parameter, PX4's EKF2_MCOEF), less the
-    disturbance observer's estimate d^ along the unit velocity u (d^ is what the observer's
-    model, which holds that same drag, leaves unexplained: drag beyond the believed one, a
-    head- or tailwind). The observer's part acts as the speed loop's integral: a steady drag
-    error leaves no steady speed error. Never negative: a tailwind does not brake."""
-    a = k_drag * speed - (d0 * u0 + d1 * u1 + d2 * u2)
-    return _max(a, 0.0)
+    gains speed at a_t against drag (eq. 14 with drag): the believed drag and disturbance
+    d = (d0, d1, d2) (:func:`believed_drag_floats`) against the unit velocity u. Never
+    negative: a tailwind does not brake."""
+    return _max(-(d0 * u0 + d1 * u1 + d2 * u2), 0.0)
 
 
 def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
@@ -277,8 +302,8 @@ def png_command(
     disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> tuple[float, float, float, float, float, bool]:
     """:func:`png_law` from floats (:class:`GuidanceInput`'s fields, the LOS, the velocity
-    and d^ as three floats each; the loop's tick calls it so): (a_d ENU m/s^2 as three
-    floats, sigma_y, sigma_z (nan while hovering), hovering)."""
+    and the believed drag and disturbance as three floats each; the loop's tick calls it so):
+    (a_d ENU m/s^2 as three floats, sigma_y, sigma_z (nan while hovering), hovering)."""
     e0, e1, e2 = disturbance_enu_m_s2
     l0, l1, l2 = los_enu
     v0, v1, v2 = velocity_enu_m_s
@@ -332,7 +357,8 @@ def png_floats(
     """:func:`png_law` in floats (compiled): the hold dt (s), the LOS n_t and its elevation
     q_y, the LOS change (dq_y, dq_z), the velocity v, the camera axis (R_WC[:, 2]), the
     image's (top, bottom) edges, the DKF's range and target velocity (with its variance), the
-    disturbance observer's d^ (e0, e1, e2) and the gains ``G``
+    believed drag and disturbance (e0, e1, e2) (:func:`believed_drag_floats`) and the gains
+    ``G``
     (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when hovering
     else 0).
 
@@ -349,7 +375,6 @@ def png_floats(
     pur_zone, k_pur = math.radians(G[GainIndex.pur_zone]), G[GainIndex.k_pur]
     k_brake, v_max = G[GainIndex.k_brake], G[GainIndex.v_max]
     fov_margin = math.radians(G[GainIndex.fov_margin])
-    k_drag = G[GainIndex.k_drag]
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if speed < v_min:
         # below v_min the velocity angles are undefined: accelerate along the LOS (§3.4)
@@ -380,7 +405,7 @@ def png_floats(
         d0, d1, d2 = d0 + k * z0, d1 + k * z1, d2 + k * z2
     # eq. 17, saturated, the drag feed-forward along the velocity, then the FOV guard
     a0, a1, a2 = saturate3((d0 - v0) / dt, (d1 - v1) / dt, (d2 - v2) / dt, a_max)
-    a_drag = _min(drag_feedforward_floats(speed, u0, u1, u2, e0, e1, e2, k_drag), a_max)
+    a_drag = _min(drag_feedforward_floats(u0, u1, u2, e0, e1, e2), a_max)
     a0, a1, a2 = a0 + a_drag * u0, a1 + a_drag * u1, a2 + a_drag * u2
     lim = a_max + a_drag
     _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, lim)
