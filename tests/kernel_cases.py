@@ -626,7 +626,7 @@ def _fresh_target(rng: np.random.Generator) -> tuple:
     dia = float(rng.uniform(0.1, 0.5))
     area = math.pi * dia * dia / 4.0
     c[P.T_DIA], c[P.T_AREA] = dia, area
-    c[P.T_DRAG_K] = 0.5 * P.AIR_DENSITY_KG_M3 * 0.47 * area
+    c[P.T_DRAG_K] = 0.5 * PR.RHO * 0.47 * area
     c[P.T_LIFT], c[P.T_MASS] = float(rng.uniform(-0.05, 0.05)), float(rng.uniform(0.003, 0.2))
     c[P.T_CL] = float(rng.uniform(0.05, 0.2)) if rng.uniform() < 0.8 else 0.0
     c[P.T_STROUHAL] = float(rng.uniform(0.1, 0.3))

@@ -14,11 +14,12 @@ import numpy as np
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.geometry_reference import pixel_of, propagated_attitude, rotation_of_quaternion
 
+from ..scenario.physics import AIR_DENSITY_KG_M3
 from . import physics as P  # noqa: N812
 
 G_ENU = np.array([0.0, 0.0, -GRAVITY_M_S2])  # m/s^2
 E_UP = np.array([0.0, 0.0, 1.0])
-RHO = P.AIR_DENSITY_KG_M3  # kg/m^3, sea level, 20 C
+RHO = AIR_DENSITY_KG_M3  # kg/m^3, sea level, 20 C
 
 
 # ---------------------------------------------------------------- the multicopter
