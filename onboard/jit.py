@@ -62,8 +62,9 @@ def _tell_compiling(name: str) -> None:
     upgrade; cached on disk afterwards)."""
     _tell_once(
         "compiling",
-        f"compiling the numba kernels for batch work ({name}, ...): once after an install or "
-        "upgrade, about a minute on 2 cores; cached on disk afterwards",
+        f"compiling the numba kernels ({name}, ...; campaigns, tuning and benchmarks run them "
+        "compiled): once after an install or upgrade, one to a few minutes on 2 cores; cached "
+        "on disk afterwards",
     )
 
 
@@ -72,7 +73,7 @@ def _tell_no_cache(name: str) -> None:
     _tell_once(
         "no cache",
         f"no writable cache for the numba kernels ({name}, ...): compiling them at every start "
-        "(about half a minute); set NUMBA_CACHE_DIR to a writable directory",
+        "(one to a few minutes on 2 cores); set NUMBA_CACHE_DIR to a writable directory",
     )
 
 

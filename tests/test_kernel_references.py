@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from onboard import jit
-from tests import kernel_cases
+from tests import kernel_cases, kernel_cases_sim  # noqa: F401 (the simulator's cases)
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = 25

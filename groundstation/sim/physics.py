@@ -23,7 +23,11 @@ import numpy as np
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.jit import kernel
 
-from ..scenario.physics import AIR_DENSITY_KG_M3
+from ..scenario.physics import AIR_DENSITY_KG_M3, helium_gross_lift_n
+
+# what these kernels read from other files (their cache is dropped when one changes): the air
+# density of scenario/physics.py
+_USES = (helium_gross_lift_n,)
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this is the pass once range opens
 DIVERGED_SPEED_M_S = 60.0
@@ -201,7 +205,7 @@ T_SIZE = 32
 TX_SIZE = 7
 
 
-@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)")
+@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)", uses=_USES)
 def target_step(
     kind: int,
     c: np.ndarray,
@@ -388,8 +392,8 @@ def turbulence_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: fl
     """The turbulence (m/s ENU, before the jet's profile) at (px, py, pz) (m) at the time
     c[W_TIME]: the frozen field of ``modes`` (M_* rows, unit variance per axis) carried by the
     mean wind (Taylor's hypothesis), times the sigmas per axis (wind.py)."""
-    n = int(c[7])
-    if n == 0:
+    n = min(int(c[7]), modes.shape[0])  # never past the modes given
+    if n <= 0:
         return 0.0, 0.0, 0.0
     t = c[6]
     qx, qy, qz = px - c[0] * t, py - c[1] * t, pz - c[2] * t
@@ -415,7 +419,7 @@ def wind_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: float) -
     return f * w0, f * w1, f * w2
 
 
-@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8, f8, f8, f8)")
+@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8, f8, f8, f8)", uses=_USES)
 def rotor_wash_at(
     x: np.ndarray, lag: np.ndarray, wx: float, wy: float, wz: float, px: float, py: float, pz: float
 ) -> tuple:
@@ -538,7 +542,7 @@ def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray
     return buf
 
 
-@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])")
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])", uses=_USES)
 def physics_steps(k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np.ndarray) -> int:
     """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
     recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps in the wind

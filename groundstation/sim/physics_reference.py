@@ -304,7 +304,7 @@ def turbulence_at(w: WindParams, modes: np.ndarray, p: np.ndarray) -> np.ndarray
     k_n the modes' wavenumbers (rad/m, drawn from the von Karman spectrum), c_n, s_n their
     amplitudes across k_n (unit variance per axis over space), sigma the standard deviations
     per axis (wind.py, MIL-F-8785C)."""
-    m = modes[: w.n_modes]
+    m = modes[: max(min(w.n_modes, len(modes)), 0)]  # never past the modes given
     k, c, s = m[:, P.M_K : P.M_K + 3], m[:, P.M_C : P.M_C + 3], m[:, P.M_S : P.M_S + 3]
     phase = k @ (p - w.mean_m_s * w.time_s)
     return w.sigma_m_s * (np.cos(phase) @ c + np.sin(phase) @ s)

@@ -96,8 +96,7 @@ def observer_step(
     """One step of the extended state observer on (v, d) (onboard/control/disturbance.py):
 
     the thrust through the motors' first-order lag (its mean over the step and its end value);
-    f = (T_mean / m) z_m - g e_z - c (v^ - (v^ . z_m) z_m), z_m = (z_prev + z) / 2 (the
-    airframe's own drag in still air in the rotor plane, PX4 EKF2_MCOEF's model);
+    f = (T_mean / m) z_m - g e_z - c (v^ - (v^ . z_m) z_m), z_m = (z_prev + z) / 2;
     v_pred = v^ + (f + d^) dt;
     r = v - v_pred (beyond ``max_innovation``: a reset, elapsed -1, v^ and d^ kept);
     w = max(bandwidth, start_factor / elapsed), p = exp(-w dt);
@@ -109,9 +108,9 @@ def observer_step(
         thrust_n = thrust_cmd_n + (thrust_n - thrust_cmd_n) * decay
     else:
         t_mean = thrust_n = thrust_cmd_n
-    z_m = 0.5 * (z_prev + z)
-    rotor_plane_v = v_hat - float(v_hat @ z_m) * z_m
-    f = t_mean / mass_kg * z_m + G_ENU - drag_per_mass_1_s * rotor_plane_v
+    z_mean = 0.5 * (z_prev + z)
+    v_rotor = v_hat - float(v_hat @ z_mean) * z_mean  # the rotor plane's part (EKF2_MCOEF)
+    f = t_mean / mass_kg * z_mean + G_ENU - drag_per_mass_1_s * v_rotor
     v_pred = v_hat + (f + d_hat) * dt_s
     r = v - v_pred
     if np.linalg.norm(r) > max_innovation_m_s:

@@ -34,8 +34,8 @@ class GuidanceInput:
     target_vel_enu_m_s: np.ndarray | None = None
     target_vel_var_m2_s2: float = math.nan
     # the specific force (m/s^2, ENU) of the drag the loop believes its airframe has plus the
-    # disturbance observer's d^ (:func:`~.png.believed_drag_floats`): the speed ramp overcomes
-    # its along-track part
+    # disturbance observer's d^ (png.believed_drag_floats): the speed ramp overcomes its
+    # along-track part
     disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 

@@ -196,21 +196,6 @@ def zem_nulling_accel(
     return -v_perp / gains.tau_zem
 
 
-def believed_drag(v: np.ndarray, z_B: np.ndarray, d_hat: np.ndarray, k_drag: float) -> np.ndarray:
-    """The specific force of drag and disturbance the loop believes acts on it (m/s^2):
-    D = d^ - k_drag (v - (v . z_B) z_B), its airframe's drag in still air in PX4 EKF2's
-    rotor-drag form (EKF2_MCOEF: linear in the velocity's part in the rotor plane, z_B the
-    thrust axis) plus the disturbance observer's estimate of the rest."""
-    return d_hat - k_drag * (v - float(v @ z_B) * z_B)
-
-
-def drag_feedforward(v_hat: np.ndarray, drag: np.ndarray) -> float:
-    """The along-track acceleration the speed ramp adds against drag (eq. 14 with drag):
-    the believed drag and disturbance D (:func:`believed_drag`) against v^, max(-D . v^, 0)
-    (a tailwind does not brake)."""
-    return max(-float(drag @ v_hat), 0.0)
-
-
 def png(
     dt_s: float,
     n_t: np.ndarray,
@@ -229,9 +214,10 @@ def png(
     the velocity angles (eq. 7) turned by K times the LOS change (eq. 8; faded out by the
     midcourse weight w_mid far away), the desired direction n_d (eq. 9), bent toward the LOS
     near the image's top or bottom edge (pursuit bias), the speed ramp (eq. 14), the midcourse
-    ZEM-nulling velocity, a_d = sat((v_d - v) / dt, a_max) (eq. 17), the drag feed-forward
-    along v^ against the believed drag and disturbance ``drag`` (:func:`believed_drag`; at
-    most a_max) and the FOV guard. Returns (a_d, sigma_y, sigma_z, hovering)."""
+    ZEM-nulling velocity, a_d = sat((v_d - v) / dt, a_max) (eq. 17) plus the along-track
+    drag feed-forward a_drag v^ (a_drag = min(max(-D . v^, 0), a_max), D the believed drag and
+    disturbance ``drag``), and the FOV guard with the limit a_max + a_drag.
+    Returns (a_d, sigma_y, sigma_z, hovering)."""
     top = fov_edges_rad[0]
     speed = float(np.linalg.norm(v))
     if speed < gains.v_min:
@@ -250,8 +236,13 @@ def png(
     if w_mid > 0.0:
         v_d = v_d + w_mid * dt_s * zem_nulling_accel(v, v_t, var_v, n_t, gains)
     a_d = saturate((v_d - v) / dt_s, gains.a_max)
-    drag = np.zeros(3) if drag is None else drag
-    a_drag = min(drag_feedforward(v_hat, drag), gains.a_max)
+    a_drag = 0.0 if drag is None else min(max(-float(drag @ v_hat), 0.0), gains.a_max)
     a_d = a_d + a_drag * v_hat
-    a_d = fov_guard(a_d, camera_axis, top, q_y, gains, gains.a_max + a_drag)[1]
-    return a_d, sigma_y, sigma_z, False
+    lim = gains.a_max + a_drag
+    return fov_guard(a_d, camera_axis, top, q_y, gains, lim)[1], sigma_y, sigma_z, False
+
+
+def believed_drag(v: np.ndarray, z: np.ndarray, d_hat: np.ndarray, k_drag: float) -> np.ndarray:
+    """The drag and disturbance the loop believes: EKF2's rotor-drag model -k_drag (v - (v . z)
+    z) (z the thrust axis) plus the observer's d^."""
+    return d_hat - k_drag * (v - float(v @ z) * z)

@@ -16,7 +16,7 @@ from .los import _f3, _max, _min, angles_floats, hypot2, saturate3, saturate_nor
 
 # what these kernels call from other files (their cache is dropped when one changes): los.py's
 # kernels and the gains' declaration (png_floats's indices)
-_LOS = (hypot2, pack_gains)
+_USES = (hypot2, pack_gains)
 
 
 def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
@@ -29,17 +29,9 @@ def ramped_speed(speed_m_s: float, gains: Gains, dt_s: float) -> float:
     return ramped_speed_floats(speed_m_s, gains.k_brake, gains.v_max, gains.k_a, dt_s)
 
 
-@kernel("float64(float64, float64, float64, float64, float64)", uses=_LOS)
-def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, dt: float) -> float:
-    """:func:`ramped_speed` in floats (compiled)."""
-    a_t = _min(_max(k_brake * (v_max - speed), -k_a), k_a)
-    return speed + a_t * dt
-
-
 @kernel(
     "UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64, float64, "
-    "float64, float64, float64)",
-    uses=_LOS,
+    "float64, float64, float64)"
 )
 def believed_drag_floats(
     v0: float,
@@ -67,7 +59,7 @@ def believed_drag_floats(
     )
 
 
-@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_USES)
 def drag_feedforward_floats(
     u0: float, u1: float, u2: float, d0: float, d1: float, d2: float
 ) -> float:
@@ -78,6 +70,13 @@ def drag_feedforward_floats(
     return _max(-(d0 * u0 + d1 * u1 + d2 * u2), 0.0)
 
 
+@kernel("float64(float64, float64, float64, float64, float64)", uses=_USES)
+def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, dt: float) -> float:
+    """:func:`ramped_speed` in floats (compiled)."""
+    a_t = _min(_max(k_brake * (v_max - speed), -k_a), k_a)
+    return speed + a_t * dt
+
+
 def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
     """a_d = (v_d - v) / dt, saturated to a_max (paper eq. 17)."""
     return saturate_norm((v_d - v) / dt_s, gains.a_max)
@@ -86,7 +85,7 @@ def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: fl
 _PITCH_LIMIT_RAD = math.radians(60.0)
 
 
-@kernel("float64(float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64)", uses=_USES)
 def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -> float:
     """Lowest body pitch (nose up +, rad) that keeps a LOS at elevation ``los_elev_rad`` at
     least ``margin_rad`` below the image's top edge, which sits ``top_edge_rad`` above body x
@@ -122,7 +121,7 @@ def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
 @kernel(
     "UniTuple(float64, 4)(float64, float64, float64, float64, float64, float64, float64, "
     "float64, float64)",
-    uses=_LOS,
+    uses=_USES,
 )
 def fov_guard_floats(
     a0: float,
@@ -162,7 +161,7 @@ def edge_margin_rad(inp: GuidanceInput) -> float:
     return edge_margin_floats(*inp.fov_edges_rad, *axis, inp.los_elev_rad)
 
 
-@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64, float64, float64, float64)", uses=_USES)
 def edge_margin_floats(
     top: float, bottom: float, ax0: float, ax1: float, ax2: float, los_elev_rad: float
 ) -> float:
@@ -185,7 +184,7 @@ def pursuit_weight(inp: GuidanceInput, gains: Gains) -> float:
 
 
 @kernel(
-    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_LOS
+    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_USES
 )
 def pursuit_floats(
     pur_zone_rad: float,
@@ -212,7 +211,7 @@ def midcourse_weight(range_m: float, gains: Gains) -> float:
     return midcourse_floats(range_m, gains.tau_zem, gains.r_mid)
 
 
-@kernel("float64(float64, float64, float64)", uses=_LOS)
+@kernel("float64(float64, float64, float64)", uses=_USES)
 def midcourse_floats(range_m: float, tau_zem: float, r_mid: float) -> float:
     """:func:`midcourse_weight` in floats (compiled)."""
     if tau_zem <= 0.0 or not math.isfinite(range_m):
@@ -325,7 +324,7 @@ def png_command(
     "UniTuple(float64, 6)(float64, float64, float64, float64, float64, float64, float64, "
     "float64, float64, float64, float64, float64, float64, float64, float64, float64, boolean, "
     "float64, float64, float64, float64, float64, float64, float64, float64[::1])",
-    uses=_LOS,
+    uses=_USES,
 )
 def png_floats(
     dt: float,
@@ -358,8 +357,7 @@ def png_floats(
     q_y, the LOS change (dq_y, dq_z), the velocity v, the camera axis (R_WC[:, 2]), the
     image's (top, bottom) edges, the DKF's range and target velocity (with its variance), the
     believed drag and disturbance (e0, e1, e2) (:func:`believed_drag_floats`) and the gains
-    ``G``
-    (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when hovering
+    ``G`` (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when hovering
     else 0).
 
     The speed ramp's tangential acceleration is net of drag: the along-track drag feed-forward
