@@ -11,6 +11,7 @@ from groundstation.sim import estimate as sim_estimate
 from groundstation.sim import estimate_reference as ER  # noqa: N812
 from groundstation.sim import physics as P  # noqa: N812
 from groundstation.sim import physics_reference as PR  # noqa: N812
+from onboard.datatypes import GRAVITY_M_S2
 from tests.kernel_cases import FRESH, _copy, _v, case
 
 
@@ -23,12 +24,33 @@ def _(a):
 
 
 # ---------------------------------------------------------------- the simulator
+def _unit(q: np.ndarray) -> np.ndarray:
+    """A perturbed attitude made a unit quaternion again (the kernels' domain)."""
+    return q / np.linalg.norm(q)
+
+
+def _wind_params(c: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    """The wind's constants with their structural entries as the Wind made them (a
+    perturbation must not change them): the number of modes is the rows given, the jet a
+    flag."""
+    c = c.copy()
+    c[P.W_NMODES] = float(len(modes))
+    c[P.W_JET] = 1.0 if c[P.W_JET] != 0.0 else 0.0
+    return c
+
+
+@case(P.thrust_axis)
+def _(a):
+    q = _unit(_v(*a))
+    return [(P.thrust_axis(*q.tolist()), PR.thrust_axis(q))]
+
+
 @case(P.vehicle_step)
 def _(a):
     x, lag, dt, wx, wy, wz = a
     got = x.copy()
     total = P.vehicle_step(got, lag.copy(), dt, wx, wy, wz)
-    want = PR.vehicle_step(x, *lag, dt, _v(wx, wy, wz))
+    want = PR.vehicle_step(x, PR.Airframe.of(lag), dt, _v(wx, wy, wz))
     return [(got, want), (total, float(np.sum(want[: P.X_W + 3])))]
 
 
@@ -65,31 +87,27 @@ def _(a):
     return [(P.jet_factor(*a), want)]
 
 
-@case(P.wind_at)
-def _(a):
-    c, modes, px, py, pz = a
-    return [(P.wind_at(*_copy(a)), PR.wind_at(c, modes, _v(px, py, pz)))]
-
-
 @case(P.turbulence_at)
 def _(a):
     c, modes, px, py, pz = a
-    return [(P.turbulence_at(*_copy(a)), PR.turbulence_at(c, modes, _v(px, py, pz)))]
+    c = _wind_params(c, modes)
+    want = PR.turbulence_at(PR.WindParams.of(c), modes, _v(px, py, pz))
+    return [(P.turbulence_at(c.copy(), modes.copy(), px, py, pz), want)]
+
+
+@case(P.wind_at)
+def _(a):
+    c, modes, px, py, pz = a
+    c = _wind_params(c, modes)
+    want = PR.wind_at(PR.WindParams.of(c), modes, _v(px, py, pz))
+    return [(P.wind_at(c.copy(), modes.copy(), px, py, pz), want)]
 
 
 @case(P.rotor_wash_at)
 def _(a):
     x, lag, wx, wy, wz, px, py, pz = a
-    want = PR.rotor_wash_at(x, lag[P.L_DISC], _v(wx, wy, wz), _v(px, py, pz))
+    want = PR.rotor_wash_at(x, PR.Airframe.of(lag), _v(wx, wy, wz), _v(px, py, pz))
     return [(P.rotor_wash_at(*_copy(a)), want)]
-
-
-@case(P.thrust_axis)
-def _(a):
-    q = _v(*a)
-    if abs(float(q @ q) - 1.0) > 1e-9:  # the formula is for a unit quaternion
-        q = q / np.linalg.norm(q)
-    return [(P.thrust_axis(*q), PR.thrust_axis(q))]
 
 
 @case(P.closest_approach)
@@ -145,17 +163,50 @@ def _(a):
 
 # ---------------------------------------------------------------- fresh arguments
 def _fresh_target(rng: np.random.Generator) -> tuple:
-    """A target_step call of any motion (a sortie flies only some of them)."""
+    """A target_step call of any motion (a sortie flies only some of them): kinematic
+    parameters at random, a light target's of a sphere 0.1-0.5 m across (C_d 0.47, with or
+    without buffet), starting near the ground (some below it) in air of a few m/s."""
     kind = int(rng.integers(0, len(P.MOTIONS)))
     c = rng.normal(size=P.T_SIZE) * 3.0
-    c[P.T_MAX_SPEED], c[P.T_MASS], c[P.T_ROPE] = 4.0, 0.2, 5.0
+    c[P.T_MAX_SPEED], c[P.T_ROPE] = 4.0, 5.0
     c[P.T_TWO] = 2.0
-    c[P.T_CL], c[P.T_STROUHAL], c[P.T_DIA], c[P.T_AREA] = 0.1, 0.2, 0.16, 0.02
+    dia = float(rng.uniform(0.1, 0.5))
+    area = math.pi * dia * dia / 4.0
+    c[P.T_DIA], c[P.T_AREA] = dia, area
+    c[P.T_DRAG_K] = 0.5 * PR.RHO * 0.47 * area
+    c[P.T_LIFT], c[P.T_MASS] = float(rng.uniform(-0.05, 0.05)), float(rng.uniform(0.003, 0.2))
+    c[P.T_CL] = float(rng.uniform(0.05, 0.2)) if rng.uniform() < 0.8 else 0.0
+    c[P.T_STROUHAL] = float(rng.uniform(0.1, 0.3))
     times = np.sort(rng.uniform(0.0, 10.0, 6))
     track = np.column_stack([times, rng.normal(size=(6, 3)) * 10.0])
-    x = rng.normal(size=P.TX_SIZE) * 2.0
-    x[6] = rng.uniform(0.0, 2.0 * math.pi)
-    return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *rng.normal(size=3).tolist())
+    x = np.concatenate([rng.normal(size=6) * 2.0, [rng.uniform(0.0, 2.0 * math.pi)]])
+    x[2] += 1.0
+    air = (rng.normal(size=3) * 3.0).tolist()
+    return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *air)
+
+
+def _fresh_rotor_wash(rng: np.random.Generator) -> tuple:
+    """A rotor_wash_at call (a recorded sortie's balloon is rarely in the wash): a vehicle of
+    0.5-2 kg tilted up to about 30 degrees, at 0.3-2 times its hover thrust, 0.02-0.2 m^2 of
+    rotor discs, flying at a few m/s in a few m/s of wind; the point 5 cm to 5 m down its
+    thrust axis and up to about a metre aside, one in ten above the rotors."""
+    mass = float(rng.uniform(0.5, 2.0))
+    x = np.zeros(P.X_SIZE)
+    x[P.X_P : P.X_P + 3] = rng.normal(size=3) * 3.0 + (0.0, 0.0, 5.0)
+    x[P.X_V : P.X_V + 3] = rng.normal(size=3) * 3.0
+    q = np.concatenate([[1.0], rng.normal(size=3) * 0.3])
+    x[P.X_Q : P.X_Q + 4] = q / np.linalg.norm(q)
+    x[P.X_THRUST] = mass * GRAVITY_M_S2 * float(rng.uniform(0.3, 2.0))
+    lag = np.zeros(P.L_SIZE)
+    lag[P.L_RATE], lag[P.L_THRUST], lag[P.L_MASS] = 0.2, 0.1, mass
+    lag[P.L_BODY], lag[P.L_ROTOR] = 0.005, 0.01
+    lag[P.L_DISC] = float(rng.uniform(0.02, 0.2))
+    z_B = PR.thrust_axis(x[P.X_Q : P.X_Q + 4])
+    down = float(rng.uniform(0.05, 5.0)) * (-1.0 if rng.uniform() < 0.1 else 1.0)
+    p = x[P.X_P : P.X_P + 3] - down * z_B + rng.normal(size=3) * 0.3 * abs(down)
+    wind = (rng.normal(size=3) * 2.0).tolist()
+    return (x, lag, *wind, *p.tolist())
 
 
 FRESH["groundstation.sim.physics.target_step"] = _fresh_target
+FRESH["groundstation.sim.physics.rotor_wash_at"] = _fresh_rotor_wash

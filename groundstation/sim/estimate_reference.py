@@ -75,13 +75,15 @@ def estimate_of(
     k: np.ndarray, x: np.ndarray, ring: np.ndarray, att_ring: np.ndarray, now: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The estimate of the truth ``now``: position and velocity ``lag`` old plus their
-    errors; attitude ``att_lag`` old times exp(attitude error) (no renormalising); body rates
+    errors; attitude ``att_lag`` old times exp(e) (no renormalising), e the attitude error
+    process with its body-z part scaled by heading / tilt noise (``K_HEADING``); body rates
     ``att_lag`` old plus the gyro bias. Returns (rings, the 13 floats)."""
     ring, old = delay_push(ring, now)
     att_ring, att_old = delay_push(att_ring, now)
     p = old[1:4] + x[E.E_POS]
     v = old[4:7] + x[E.E_VEL]
-    q = quaternion_product(att_old[7:11], quaternion_exp(x[E.E_ATT]))
+    att_error = x[E.E_ATT] * np.array([1.0, 1.0, k[E.K_HEADING]])
+    q = quaternion_product(att_old[7:11], quaternion_exp(att_error))
     w = att_old[11:14] + x[E.E_BIAS]
     return ring, att_ring, np.concatenate([p, v, q, w])
 
