@@ -393,7 +393,9 @@ def test_replay_json_metadata_are_values_not_strings(log_file, capsys):
     assert meta["sortie"]["seed"] == 0 and meta["sortie"]["law"] == "png"
     assert meta["sortie"]["gains"]["k_a"] == 2.0  # an object, not a JSON string
     assert meta["sortie"]["scenario"] == "cv-top-to-bottom"
-    assert meta["outcome"]["outcome"] == "HIT" and isinstance(meta["outcome"]["miss_m"], float)
+    # the outcome of seed 0 with realistic sensors is not this test's business: its type is
+    assert meta["outcome"]["outcome"] in {"HIT", "MISS"}
+    assert isinstance(meta["outcome"]["miss_m"], float)
 
 
 @pytest.mark.parametrize(
