@@ -68,11 +68,11 @@ def _tick_times_ms(repeat: int, sleep_s: float = 0.0) -> tuple[list[float], list
         loop = sim.loop
         tick = loop.tick
 
-        def timed(state, _tick=tick, _loop=loop):
+        def timed(state, *args, _tick=tick, _loop=loop):
             if sleep_s > 0.0:
                 time.sleep(sleep_s)
             t0 = time.perf_counter()
-            out = _tick(state)
+            out = _tick(state, *args)
             ms = (time.perf_counter() - t0) * 1e3
             (fusing if _loop.last_fusion else plain).append(ms)
             return out
