@@ -5,10 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
-import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 # Only light modules here: `groundstation --help` and `scenarios` must not pay for numpy,
@@ -18,10 +16,20 @@ from onboard.gains import GainError
 from onboard.link.address import add_host_port_option
 
 from .campaigns.tune_options import add_tune_arguments
+from .cli_bench import add_bench_parser, run_bench_command
+from .cli_options import (
+    COUNT,
+    PORT,
+    SEED,
+    SET_HELP,
+    existing_file,
+    scenario_arg,
+    seconds,
+    writable_dir,
+)
 from .scenario import (
     CAMERA_MODES,
     ESTIMATE_PROFILES,
-    SCENARIO_DIR,
     ScenarioError,
     load_scenario,
     parse_overrides,
@@ -34,98 +42,6 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # usage errors: exit 2 without a traceback
         self.print_usage(sys.stderr)
         self.exit(2, f"{self.prog}: error: {message}\n")
-
-
-# ------------------------------------------------------------------ option checks
-# Each returns an argparse ``type``: a bad value becomes "argument --OPT: <what is allowed>,
-# got X" and exit status 2, before any work starts.
-def _int_at_least(lo: int, hi: int | None = None, note: str = "") -> Callable[[str], int]:
-    allowed = f"an integer >= {lo}" if hi is None else f"an integer from {lo} to {hi}"
-    allowed += note
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
-        if value < lo or (hi is not None and value > hi):
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {value}")
-        return value
-
-    return parse
-
-
-def _seconds(minimum: float, inclusive: bool) -> Callable[[str], float]:
-    allowed = f"a number of seconds {'>=' if inclusive else '>'} {minimum:g}"
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
-        if not math.isfinite(value) or value < minimum or (value == minimum and not inclusive):
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
-        return value
-
-    return parse
-
-
-def _existing_file(what: str) -> Callable[[str], str]:
-    def parse(text: str) -> str:
-        p = Path(text)
-        if p.is_dir():
-            raise argparse.ArgumentTypeError(f"{text} is a folder; give {what}")
-        if not p.is_file():
-            raise argparse.ArgumentTypeError(f"{text}: no such file; give {what}")
-        if not os.access(p, os.R_OK):
-            raise argparse.ArgumentTypeError(f"{text}: not readable; give {what}")
-        return text
-
-    return parse
-
-
-def _scenario_arg(text: str) -> str:
-    p = Path(text)
-    if p.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a folder; give a scenario TOML file or name")
-    if not p.exists() and not (not p.suffix and (SCENARIO_DIR / f"{p.name}.toml").is_file()):
-        names = ", ".join(q.stem for q in shipped_scenarios())
-        raise argparse.ArgumentTypeError(
-            f"{text}: no such file or shipped scenario (shipped: {names})"
-        )
-    return text
-
-
-def _writable_dir(text: str) -> str:
-    """A folder that is, or can be created, writable: the nearest existing ancestor decides."""
-    p = Path(text)
-    if p.exists() and not p.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a file; give a folder (it is created)")
-    probe = p.absolute()
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise argparse.ArgumentTypeError(f"{text}: {probe} is a file; give a folder")
-    try:  # a real write: os.access says yes to root even on /proc or a read-only disk
-        os.rmdir(tempfile.mkdtemp(prefix=".peregrine-probe-", dir=probe))
-    except OSError as exc:
-        raise argparse.ArgumentTypeError(
-            f"{text}: cannot write in {probe} ({exc.strerror or exc}); give a writable folder"
-        ) from None
-    return text
-
-
-_PORT = _int_at_least(0, 65535, " (0: any free port)")
-_SEED = _int_at_least(0)
-
-
-_COUNT = _int_at_least(1)
-
-
-_SET_HELP = (
-    "change one scenario value for every sortie (repeatable), e.g. --set camera.delay_s=0 "
-    "--set gains.k_v=100"
-)
 
 
 def _add_backend_args(p: argparse.ArgumentParser) -> None:
@@ -155,20 +71,20 @@ def _build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("sortie", help="run one simulated sortie to its outcome")
     s.add_argument(
-        "scenario", type=_scenario_arg, help="scenario TOML file, or the name of a shipped scenario"
+        "scenario", type=scenario_arg, help="scenario TOML file, or the name of a shipped scenario"
     )
     s.add_argument("--law", default=GuidanceLaw.PNG.value, choices=codes(GuidanceLaw))
-    s.add_argument("--seed", type=_SEED, default=0)
+    s.add_argument("--seed", type=SEED, default=0)
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.add_argument(
-        "--log", metavar="DIR", type=_writable_dir, help="record the sortie to DIR (MCAP)"
+        "--log", metavar="DIR", type=writable_dir, help="record the sortie to DIR (MCAP)"
     )
-    s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=SET_HELP)
     s.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
 
     r = sub.add_parser("replay", help="print a recorded sortie's summary")
-    r.add_argument("file", type=_existing_file("a sortie log (.mcap)"), help="a sortie log (.mcap)")
+    r.add_argument("file", type=existing_file("a sortie log (.mcap)"), help="a sortie log (.mcap)")
     r.add_argument("--json", action="store_true")
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
@@ -181,10 +97,10 @@ def _build_parser() -> argparse.ArgumentParser:
         help="simulator mode (the default unless --mavlink is given)",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
-    sv.add_argument("--port", type=_PORT, default=8000, help="0: any free port")
+    sv.add_argument("--port", type=PORT, default=8000, help="0: any free port")
     sv.add_argument(
         "--scene-port",
-        type=_PORT,
+        type=PORT,
         default=0,
         help="the 3D view's own port on the same address (default 0: any free port)",
     )
@@ -195,7 +111,7 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     sv.add_argument(
         "--data-dir",
-        type=_writable_dir,
+        type=writable_dir,
         help="where named gain sets are kept (default ~/.peregrine)",
     )
 
@@ -208,12 +124,12 @@ def _build_parser() -> argparse.ArgumentParser:
     sv.add_argument(
         "--signing-key",
         metavar="FILE",
-        type=_existing_file("a file of 64 hex digits"),
+        type=existing_file("a file of 64 hex digits"),
         help="MAVLink 2 signing key (live mode)",
     )
     sv.add_argument(
         "--log-dir",
-        type=_writable_dir,
+        type=writable_dir,
         default="logs",
         help="where sorties are recorded (default logs)",
     )
@@ -238,7 +154,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "scenario",
         nargs="?",
         default="cv-top-to-bottom",
-        type=_scenario_arg,
+        type=scenario_arg,
         help="scenario TOML file or shipped name (default cv-top-to-bottom)",
     )
     st.add_argument(
@@ -249,11 +165,11 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--camera-port",
-        type=_PORT,
+        type=PORT,
         default=5600,
         help="TCP port of the camera stream on 127.0.0.1 (0: any free port)",
     )
-    st.add_argument("--seed", type=_SEED, default=0)
+    st.add_argument("--seed", type=SEED, default=0)
     st.add_argument(
         "--set",
         action="append",
@@ -261,7 +177,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="change one scenario value, as for sorties: --set estimate.enabled=false (ideal "
         "sensors), --set camera.false_probability=0.05 (detector faults)",
     )
-    st.add_argument("--duration", type=_seconds(0, False), help="stop after this many seconds")
+    st.add_argument("--duration", type=seconds(0, False), help="stop after this many seconds")
     st.add_argument(
         "--on-ground",
         action="store_true",
@@ -276,13 +192,13 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--offboard-loss",
-        type=_seconds(0, False),
+        type=seconds(0, False),
         default=1.0,
         help="PX4 COM_OF_LOSS_T: seconds without setpoints before HOLD",
     )
     st.add_argument(
         "--camera-blackout-after",
-        type=_seconds(0, True),
+        type=seconds(0, True),
         default=None,
         metavar="S",
         help="fault injection: no camera frames after S s of sortie time",
@@ -290,98 +206,27 @@ def _build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument("name", help="static | moving | wind | outdoor | envelope | range")
-    c.add_argument("--n", type=_COUNT, default=None, help="targets / seeds / tries (see README)")
+    c.add_argument(
+        "--n", type=COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"
+    )
     c.add_argument(
         "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"
     )
     c.add_argument("--camera", default="projected", choices=CAMERA_MODES)
-    c.add_argument("--seed", type=_SEED, default=0)
-    c.add_argument("--workers", type=_COUNT, default=None, help="processes (default: cores)")
-    c.add_argument("--out", type=_writable_dir, help="output folder (default logs/campaigns/...)")
+    c.add_argument("--seed", type=SEED, default=0)
+    c.add_argument("--workers", type=COUNT, default=None, help="processes (default: cores)")
+    c.add_argument("--out", type=writable_dir, help="output folder (default logs/campaigns/...)")
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
-    c.add_argument("--log", metavar="DIR", type=_writable_dir, help="record every sortie to DIR")
-    c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=_SET_HELP)
+    c.add_argument("--log", metavar="DIR", type=writable_dir, help="record every sortie to DIR")
+    c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=SET_HELP)
     c.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
     _add_backend_args(c)
 
-    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (see README)")
-    add_tune_arguments(t, _SET_HELP, count=_COUNT, seed=_SEED, out_dir=_writable_dir)
+    t = sub.add_parser("tune", help="search gains with Optuna over a campaign (docs/tuning.md)")
+    add_tune_arguments(t, SET_HELP, count=COUNT, seed=SEED, out_dir=writable_dir)
     _add_backend_args(t)
 
-    b = sub.add_parser("bench", help="print speed and memory figures (see README)")
-    b.add_argument("--repeat", type=_COUNT, default=5, help="sorties per camera mode")
-    b.add_argument("--all-cores", action="store_true", help="do not pin to one core")
-    b.add_argument("--json", action="store_true")
-    b.add_argument("--campaigns", action="store_true", help="campaign throughput instead")
-    b.add_argument(
-        "--recording",
-        action="store_true",
-        help="recording cost, listing 200 logs, seeking in a 10-minute sortie",
-    )
-    b.add_argument(
-        "--sitl",
-        action="store_true",
-        help="onboard run against the SITL vehicle: loop rate, jitter, latency, CPU, memory",
-    )
-    b.add_argument(
-        "--seconds", type=_seconds(0, False), default=20.0, help="--sitl: how long to fly"
-    )
-    b.add_argument(
-        "--runs",
-        type=_COUNT,
-        default=1,
-        help="--sitl: fly this many times; each target's per-run values and in how many runs "
-        "it was met",
-    )
-    b.add_argument(
-        "--realtime",
-        type=int,
-        metavar="PRIO",
-        help="--sitl: onboard run --realtime PRIO, and the SITL under SCHED_FIFO too",
-    )
-    b.add_argument(
-        "--early-tick",
-        choices=("on", "off"),
-        help="--sitl: onboard run --early-tick on|off (default: the runtime's, on)",
-    )
-    b.add_argument(
-        "--reserve-cpu",
-        choices=("on", "off"),
-        help="--sitl: onboard run --reserve-cpu on|off (default: the runtime's, on)",
-    )
-    b.add_argument(
-        "--rehearse",
-        choices=("on", "off"),
-        help="--sitl: onboard run --rehearse on|off (default: the runtime's, on)",
-    )
-    b.add_argument(
-        "--sitl-placement",
-        choices=("apart", "shared"),
-        default="apart",
-        help="--sitl: apart (default) keeps the SITL off the CPU left to the control thread and "
-        "under SCHED_BATCH, so it does not preempt the onboard run's threads when it wakes, as "
-        "a flight controller of its own, and polls the ground link under SCHED_IDLE while it "
-        "flies, as a ground station on a computer of its own; shared leaves both where the "
-        "system puts them",
-    )
-    b.add_argument(
-        "--video",
-        action="store_true",
-        help="--sitl: the onboard process also streams its camera (H.264/RTP) to a receiver "
-        "here: glass-to-glass latency",
-    )
-    b.add_argument(
-        "--foxglove",
-        dest="foxglove_client",
-        action="store_true",
-        help="--sitl: the onboard process also publishes to Foxglove (onboard run --foxglove), "
-        "a client here subscribed to every channel: what it costs the control tick",
-    )
-    b.add_argument(
-        "--dashboard",
-        action="store_true",
-        help="dashboard with 5 browser tabs instead (needs chromium)",
-    )
+    add_bench_parser(sub)
     return p
 
 
@@ -595,12 +440,23 @@ def _cmd_scenarios(_: argparse.Namespace) -> int:
 _JIT_COMMANDS = ("campaign", "tune", "bench")
 
 
+def _makes_pool(args: argparse.Namespace) -> bool:
+    """Does the command fly its sorties in a local process pool?"""
+    if args.command in ("campaign", "tune"):
+        return args.backend == "process"
+    return args.command == "bench" and args.campaigns
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     if args.command in _JIT_COMMANDS:
         from onboard.jit import use_jit
 
         use_jit()
+        if _makes_pool(args):
+            from .campaigns.pool import start_pool_server
+
+            start_pool_server(getattr(args, "workers", None))
     try:
         _with_profile_set(args)
         if args.command == "sortie":
@@ -632,34 +488,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"groundstation: error: {exc}", file=sys.stderr)
                 return 2
         if args.command == "bench":
-            from .bench import (
-                run_bench,
-                run_campaign_bench,
-                run_dashboard_bench,
-                run_recording_bench,
-                run_sitl_bench,
-            )
-
-            if args.sitl:
-                return run_sitl_bench(
-                    args.seconds,
-                    as_json=args.json,
-                    realtime_priority=args.realtime,
-                    video=args.video,
-                    foxglove=args.foxglove_client,
-                    early_tick=None if args.early_tick is None else args.early_tick == "on",
-                    reserve_cpu=None if args.reserve_cpu is None else args.reserve_cpu == "on",
-                    rehearse=None if args.rehearse is None else args.rehearse == "on",
-                    sitl_placement=args.sitl_placement,
-                    runs=args.runs,
-                )
-            if args.recording:
-                return run_recording_bench(as_json=args.json)
-            if args.dashboard:
-                return run_dashboard_bench(as_json=args.json)
-            if args.campaigns:
-                return run_campaign_bench(as_json=args.json)
-            return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)
+            return run_bench_command(args)
     except (ScenarioError, GainError) as exc:
         print(f"groundstation: error: {exc}", file=sys.stderr)
         return 2

@@ -13,13 +13,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .datatypes import SharedWhenCopied
 from .geometry import camera_mount_rotation
 from .jit import kernel
 
 
 @dataclass(frozen=True)
-class CameraModel(SharedWhenCopied):
+class CameraModel:
     width_px: int = 640
     height_px: int = 480
     hfov_deg: float = 90.0

@@ -11,19 +11,6 @@ from pathlib import Path
 from .gains import GAIN_SPECS, GainError, Gains, load_gains_file
 from .link.address import add_host_port_option
 
-# RuntimeConfig's on/off switches, each an ``onboard run --<field> on|off`` option
-_RUNTIME_SWITCHES = {
-    "early_tick": "tick as soon as the camera thread has fused a detection, not at the next "
-    "deadline (default %(default)s)",
-    "reserve_cpu": "leave one CPU to the control thread: the runtime's other threads "
-    "(receivers, sender, camera, video) kept off it, so their wake-ups do not preempt a tick, "
-    "and the control thread bound to it (freed for 10 s at a time while another program keeps "
-    "it waiting there) (default %(default)s; nothing to do on one CPU or under --realtime)",
-    "rehearse": "wake a little earlier and tick a copy of the loop (its result dropped) just "
-    "before each deadline, so the tick finds its code and data in the caches (default "
-    "%(default)s)",
-}
-
 
 def _positive(unit: str, maximum: float = float("inf")):
     """An argparse type: a finite number > 0 (and <= maximum); otherwise exit 2 naming it."""
@@ -87,12 +74,12 @@ def _run(args) -> int:
             stats_path=Path(args.stats) if args.stats else None,
             log_dir=Path(args.log) if args.log else None,
             realtime_priority=args.realtime,
+            lock_memory=args.lock_memory == "on",
+            cpu=args.cpu,
+            inject_delays_seed=args.inject_delays,
             video=video,
             foxglove=args.foxglove,
-            **{field: getattr(args, field) == "on" for field in _RUNTIME_SWITCHES},
         )
-        if args.realtime is not None and not 1 <= args.realtime <= 99:
-            raise LinkError(f"--realtime {args.realtime}: expected a priority of 1 to 99")
         if not 10.0 <= args.rate <= 1000.0:
             raise LinkError(f"--rate {args.rate}: expected 10 to 1000 Hz")
         runtime = OnboardRuntime(config)
@@ -108,9 +95,28 @@ def _run(args) -> int:
     return runtime.run(args.duration)
 
 
+def _priority(text: str) -> int | None:
+    """``--realtime``: a SCHED_FIFO priority of 1 to 99, or ``off`` (None)."""
+    if text == "off":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 99:
+        raise argparse.ArgumentTypeError(f"expected a priority of 1 to 99 or off, got {text!r}")
+    return value
+
+
+def _check_rt(args) -> int:
+    from .runtime.check_rt import report
+
+    return report(args.seconds, args.priority)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from .link.px4 import DEFAULT_GCS_URL, DEFAULT_ONBOARD_FC_URL
-    from .runtime.runner import RuntimeConfig
+    from .runtime.realtime import DEFAULT_PRIORITY
 
     parser = argparse.ArgumentParser(prog="onboard", description="Peregrine onboard loop")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -161,18 +167,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     r.add_argument("--stats", metavar="FILE", help="write timing figures (JSON) here at exit")
     r.add_argument(
         "--realtime",
-        type=int,
-        metavar="PRIO",
-        help="run the control and camera threads under SCHED_FIFO at this priority (1-99; "
-        "needs CAP_SYS_NICE, else a warning and normal scheduling)",
+        type=_priority,
+        default=DEFAULT_PRIORITY,
+        metavar="PRIO|off",
+        help="run the control thread under SCHED_FIFO at this priority (1-99; default "
+        "%(default)s; off: normal scheduling). Without the permission (LimitRTPRIO, "
+        "CAP_SYS_NICE) one warning line and normal scheduling",
     )
-    for field, help_text in _RUNTIME_SWITCHES.items():  # --early-tick on|off ...
-        r.add_argument(
-            "--" + field.replace("_", "-"),
-            choices=("on", "off"),
-            default="on" if getattr(RuntimeConfig, field) else "off",
-            help=help_text,
-        )
+    r.add_argument(
+        "--lock-memory",
+        choices=("on", "off"),
+        default="on",
+        help="mlockall while the loop runs, so no tick waits for a page (default on; needs "
+        "LimitMEMLOCK=infinity or CAP_IPC_LOCK, else one warning line)",
+    )
+    r.add_argument(
+        "--cpu",
+        type=int,
+        metavar="N",
+        help="bind the control thread to CPU N (default: to the isolated CPUs, isolcpus=, "
+        "when there are any)",
+    )
+    r.add_argument(
+        "--inject-delays",
+        type=int,
+        metavar="SEED",
+        help="fault injection (testing only): delay the control thread's wake-ups, p99 5 ms, "
+        "a 30 ms stall each second and one 150 ms freeze 4 s in, seeded",
+    )
     r.add_argument(
         "--log",
         metavar="DIR",
@@ -205,7 +227,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     r.add_argument(
         "--video-kbps", type=_positive("kbit/s", 50000.0), default=2000.0, help="default 2000"
     )
+    c = sub.add_parser("check-rt", help="what this computer offers a real-time control loop")
+    c.add_argument(
+        "--seconds",
+        type=_positive("seconds", 600.0),
+        default=10.0,
+        help="how long to measure the wake-up latency of a 5 ms periodic sleep (default 10)",
+    )
+    c.add_argument(
+        "--priority",
+        type=_priority,
+        default=DEFAULT_PRIORITY,
+        metavar="PRIO|off",
+        help="measure under SCHED_FIFO at this priority when permitted, as onboard run "
+        "--realtime would (default %(default)s)",
+    )
     args = parser.parse_args(argv)
+    if args.command == "check-rt":
+        return _check_rt(args)
     if args.command == "gains":
         return _gains(args)
     if args.command == "run":

@@ -12,7 +12,6 @@ import numpy as np
 
 from .constants import GRAVITY_M_S2  # declared there, imported from here too
 from .enums import LoopMode  # declared there, imported from here too
-from .values import SharedWhenCopied  # declared there (no numpy), imported from here too
 
 GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
 
@@ -49,7 +48,7 @@ class Detection:
 
 
 @dataclass(frozen=True, slots=True)
-class VehicleParams(SharedWhenCopied):
+class VehicleParams:
     """The airframe numbers the attitude loop needs (paper eq. 23)."""
 
     mass_kg: float = 1.5

@@ -16,8 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .values import SharedWhenCopied
-
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -33,7 +31,28 @@ def ranged(default: float, unit: str, lo: float, hi: float, meaning: str) -> Any
     return field(default=default, metadata={"unit": unit, "min": lo, "max": hi, "meaning": meaning})
 
 
-_gain = ranged
+# the gains panel's groups, in the order it shows them: what each gain does
+GAIN_GROUPS: tuple[str, ...] = (
+    "guidance",
+    "PNG FOV guard",
+    "midcourse",
+    "FOV hold",
+    "attitude",
+    "limits",
+    "baselines (PG, IBVS)",
+    "disturbance and latency",
+    "track loss",
+    "search",
+)
+
+
+def _gain(default: float, unit: str, lo: float, hi: float, meaning: str, group: str) -> Any:
+    """A :func:`ranged` gain with its group (one of :data:`GAIN_GROUPS`)."""
+    assert group in GAIN_GROUPS, group
+    return field(
+        default=default,
+        metadata={**ranged(default, unit, lo, hi, meaning).metadata, "group": group},
+    )
 
 
 def check_ranges(obj: Any, kind: str) -> None:
@@ -53,95 +72,226 @@ def check_ranges(obj: Any, kind: str) -> None:
 
 
 @dataclass(frozen=True)
-class Gains(SharedWhenCopied):
-    k_a: float = _gain(2.0, "m/s^2", 0.0, 10.0, "speed-ramp tangential acceleration (eq. 14)")
-    K_y: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, vertical plane (eq. 8)")
-    K_z: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, horizontal plane (eq. 8)")
-    k_p: float = _gain(0.03, "rad/s/px", 0.0, 0.2, "FOV-holding yaw-rate P gain on e_x (eq. 13)")
-    k_d: float = _gain(0.01, "rad/px", 0.0, 0.1, "FOV-holding yaw-rate D gain on de_x/dt (eq. 13)")
-    k_R: float = _gain(8.0, "1/s", 0.5, 40.0, "attitude-error to body-rate gain (eq. 22)")
-    v_max: float = _gain(12.0, "m/s", 0.5, 30.0, "cap on the desired speed (eq. 14)")
-    a_max: float = _gain(5.0, "m/s^2", 0.5, 30.0, "saturation of the desired acceleration (eq. 17)")
-    omega_max: float = _gain(4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)")
-    v_min: float = _gain(0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)")
-    k_brake: float = _gain(1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)")
+class Gains:
+    k_a: float = _gain(
+        2.0, "m/s^2", 0.0, 10.0, "speed-ramp tangential acceleration (eq. 14)", "guidance"
+    )
+    K_y: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, vertical plane (eq. 8)", "guidance")
+    K_z: float = _gain(3.0, "-", 0.0, 10.0, "PN constant, horizontal plane (eq. 8)", "guidance")
+    k_p: float = _gain(
+        0.03, "rad/s/px", 0.0, 0.2, "FOV-holding yaw-rate P gain on e_x (eq. 13)", "FOV hold"
+    )
+    k_d: float = _gain(
+        0.01, "rad/px", 0.0, 0.1, "FOV-holding yaw-rate D gain on de_x/dt (eq. 13)", "FOV hold"
+    )
+    k_R: float = _gain(
+        8.0, "1/s", 0.5, 40.0, "attitude-error to body-rate gain (eq. 22)", "attitude"
+    )
+    v_max: float = _gain(12.0, "m/s", 0.5, 30.0, "cap on the desired speed (eq. 14)", "limits")
+    a_max: float = _gain(
+        5.0, "m/s^2", 0.5, 30.0, "saturation of the desired acceleration (eq. 17)", "limits"
+    )
+    omega_max: float = _gain(
+        4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)", "limits"
+    )
+    v_min: float = _gain(
+        0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)", "guidance"
+    )
+    k_brake: float = _gain(
+        1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)", "track loss"
+    )
     k_brake_z: float = _gain(
-        3.0, "1/s", 0.1, 10.0, "braking: vertical velocity gain (a descent is stopped first)"
+        3.0,
+        "1/s",
+        0.1,
+        10.0,
+        "braking: vertical velocity gain (a descent is stopped first)",
+        "track loss",
     )
     k_v: float = _gain(
-        1.8, "1/s", 0.2, 200.0, "PG/IBVS baselines: velocity-loop gain (PX4's; 1/dt = eq. 17)"
+        1.8,
+        "1/s",
+        0.2,
+        200.0,
+        "PG/IBVS baselines: velocity-loop gain (PX4's; 1/dt = eq. 17)",
+        "baselines (PG, IBVS)",
     )
-    k_ibvs: float = _gain(1.0, "-", 0.0, 10.0, "IBVS baseline: image-error decay per unit closing")
+    k_ibvs: float = _gain(
+        1.0,
+        "-",
+        0.0,
+        10.0,
+        "IBVS baseline: image-error decay per unit closing",
+        "baselines (PG, IBVS)",
+    )
     k_dob: float = _gain(
-        2.0, "1/s", 0.0, 10.0, "disturbance-observer bandwidth, feed-forward -d^ (0: off)"
+        2.0,
+        "1/s",
+        0.0,
+        10.0,
+        "disturbance-observer bandwidth, feed-forward -d^ (0: off)",
+        "disturbance and latency",
     )
     k_drag: float = _gain(
-        0.17, "1/s", 0.0, 2.0, "airframe drag per mass in the observer model (EKF2_MCOEF)"
+        0.17,
+        "1/s",
+        0.0,
+        2.0,
+        "airframe drag per mass in the observer model (EKF2_MCOEF)",
+        "disturbance and latency",
     )
     fov_margin: float = _gain(
-        8.0, "deg", 0.0, 30.0, "PNG FOV guard: keep the LOS this far inside top/bottom (0 = off)"
+        8.0,
+        "deg",
+        0.0,
+        30.0,
+        "PNG FOV guard: keep the LOS this far inside top/bottom (0 = off)",
+        "PNG FOV guard",
     )
     pur_zone: float = _gain(
-        15.0, "deg", 0.0, 40.0, "PNG pursuit bias: acts within this of the top/bottom (0 = off)"
+        15.0,
+        "deg",
+        0.0,
+        40.0,
+        "PNG pursuit bias: acts within this of the top/bottom (0 = off)",
+        "PNG FOV guard",
     )
-    k_pur: float = _gain(4.0, "1/s", 0.0, 20.0, "PNG pursuit bias: heading-to-LOS rate at the edge")
-    tau_los: float = _gain(0.0, "s", 0.0, 2.0, "low-pass time constant on the LOS change (0 = off)")
-    # latency compensation (README "The state-estimate model"): the runtime already carries
-    # PX4's stamped attitude to the tick (fc_state.state_at), so t_att_lag is for an unstamped
-    # attitude only; the velocity it uses unstamped, LOCAL_POSITION_NED ~20 ms old (EKF2's
-    # output predictor, the 100 Hz stream and the link: the estimate model's lag_s)
+    k_pur: float = _gain(
+        4.0, "1/s", 0.0, 20.0, "PNG pursuit bias: heading-to-LOS rate at the edge", "PNG FOV guard"
+    )
+    tau_los: float = _gain(
+        0.0, "s", 0.0, 2.0, "low-pass time constant on the LOS change (0 = off)", "midcourse"
+    )
+    # latency compensation (docs/simulation.md, "The state-estimate model"): the runtime
+    # already carries PX4's stamped attitude to the tick (fc_state.state_at), so t_att_lag is
+    # for an unstamped attitude only; the velocity it uses unstamped, LOCAL_POSITION_NED
+    # ~20 ms old (EKF2's output predictor, the 100 Hz stream and the link: the estimate
+    # model's lag_s)
     t_att_lag: float = _gain(
-        0.0, "s", 0.0, 0.1, "attitude-estimate latency, predicted away with the gyro (0 = off)"
+        0.0,
+        "s",
+        0.0,
+        0.1,
+        "attitude-estimate latency, predicted away with the gyro (0 = off)",
+        "disturbance and latency",
     )
     t_vel_lag: float = _gain(
-        0.02, "s", 0.0, 0.1, "velocity-estimate latency, predicted with the thrust model (0 = off)"
+        0.02,
+        "s",
+        0.0,
+        0.1,
+        "velocity-estimate latency, predicted with the thrust model (0 = off)",
+        "disturbance and latency",
     )
     tau_zem: float = _gain(
-        1.5, "s", 0.0, 10.0, "PNG midcourse: time constant nulling the ZEM far away (0 = off)"
+        1.5,
+        "s",
+        0.0,
+        10.0,
+        "PNG midcourse: time constant nulling the ZEM far away (0 = off)",
+        "midcourse",
     )
     r_mid: float = _gain(
-        40.0, "m", 5.0, 1000.0, "PNG midcourse: acts beyond this range, fully beyond twice it"
+        40.0,
+        "m",
+        5.0,
+        1000.0,
+        "PNG midcourse: acts beyond this range, fully beyond twice it",
+        "midcourse",
     )
-    # track loss, re-acquisition and search (onboard/control/reacquire.py; README "Track loss")
+    # track loss, re-acquisition and search (onboard/control/reacquire.py; docs/core.md)
     t_coast: float = _gain(
         1.0,
         "s",
         0.0,
         5.0,
         "track stale (PRG_TGT_LOST): fly the law on the DKF prediction this long",
+        "track loss",
     )
     coast_std: float = _gain(
-        40.0, "px", 1.0, 500.0, "coast only while the predicted image point's 1 sigma is below"
+        40.0,
+        "px",
+        1.0,
+        500.0,
+        "coast only while the predicted image point's 1 sigma is below",
+        "track loss",
     )
     t_reacq: float = _gain(
-        3.0, "s", 0.0, 20.0, "after the coast: yaw to the predicted LOS and slow down this long"
+        3.0,
+        "s",
+        0.0,
+        20.0,
+        "after the coast: yaw to the predicted LOS and slow down this long",
+        "track loss",
     )
-    v_reacq: float = _gain(1.0, "m/s", 0.0, 10.0, "re-acquisition: speed along the predicted LOS")
+    v_reacq: float = _gain(
+        1.0, "m/s", 0.0, 10.0, "re-acquisition: speed along the predicted LOS", "track loss"
+    )
     n_confirm: float = _gain(
-        3.0, "-", 1.0, 20.0, "consecutive consistent detections that confirm one off the prediction"
+        3.0,
+        "-",
+        1.0,
+        20.0,
+        "consecutive consistent detections that confirm one off the prediction",
+        "track loss",
     )
     conf_deg: float = _gain(
-        3.0, "deg", 0.1, 30.0, "consistency gate between detections (+3 sigma of the prediction)"
+        3.0,
+        "deg",
+        0.1,
+        30.0,
+        "consistency gate between detections (+3 sigma of the prediction)",
+        "track loss",
     )
     t_wait: float = _gain(
-        0.5, "s", 0.0, 10.0, "no detection since the start this long: search (hold until then)"
+        0.5,
+        "s",
+        0.0,
+        10.0,
+        "no detection since the start this long: search (hold until then)",
+        "search",
     )
     t_search: float = _gain(
-        60.0, "s", 0.0, 300.0, "search this long, then the failsafe (brake and hold)"
+        60.0,
+        "s",
+        0.0,
+        300.0,
+        "search this long, then the failsafe (brake and hold)",
+        "search",
     )
-    w_search: float = _gain(0.6, "rad/s", 0.0, 3.0, "search at hover: yaw-scan rate")
+    w_search: float = _gain(0.6, "rad/s", 0.0, 3.0, "search at hover: yaw-scan rate", "search")
     v_search: float = _gain(
-        8.0, "m/s", 0.0, 20.0, "search when moving at its start: speed along that course (the cue)"
+        8.0,
+        "m/s",
+        0.0,
+        20.0,
+        "search when moving at its start: speed along that course (the cue)",
+        "search",
     )
     weave_deg: float = _gain(
-        40.0, "deg", 0.0, 60.0, "search along a course: yaw-weave amplitude about it (0 = off)"
+        40.0,
+        "deg",
+        0.0,
+        60.0,
+        "search along a course: yaw-weave amplitude about it (0 = off)",
+        "search",
     )
-    t_weave: float = _gain(3.0, "s", 0.5, 60.0, "search along a course: yaw-weave period")
+    t_weave: float = _gain(3.0, "s", 0.5, 60.0, "search along a course: yaw-weave period", "search")
     t_carry: float = _gain(
-        5.0, "s", 0.0, 30.0, "re-acquired track keeps the old depth/velocity if lost < this (0=off)"
+        5.0,
+        "s",
+        0.0,
+        30.0,
+        "re-acquired track keeps the old depth/velocity if lost < this (0=off)",
+        "track loss",
     )
     h_floor: float = _gain(
-        2.0, "m", 0.0, 100.0, "coast/re-acquire/search: never descend below this height above home"
+        2.0,
+        "m",
+        0.0,
+        100.0,
+        "coast/re-acquire/search: never descend below this height above home",
+        "limits",
     )
 
     def __post_init__(self) -> None:
@@ -179,6 +329,7 @@ class GainSpec:
     minimum: float
     maximum: float
     meaning: str
+    group: str
 
 
 GAIN_SPECS: tuple[GainSpec, ...] = tuple(
@@ -189,6 +340,7 @@ GAIN_SPECS: tuple[GainSpec, ...] = tuple(
         f.metadata["min"],
         f.metadata["max"],
         f.metadata["meaning"],
+        f.metadata["group"],
     )
     for f in dataclasses.fields(Gains)
 )

@@ -1,7 +1,6 @@
 """The closed interception loop: DKF -> guidance -> FOV hold -> attitude loop, one tick at a
 time (DESIGN.md §3). The simulator drives this object and so does the MAVLink runtime; it owns
-no clock, socket or camera, only the time stamps it is handed.
-"""
+no clock, socket or camera, only the time stamps it is handed."""
 
 from __future__ import annotations
 
@@ -57,15 +56,13 @@ _NAN2 = (math.nan, math.nan)
 _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's LOS change yet
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
-# an attitude that moved this much more (rad) than the gyro turned it since an on-time last
-# tick was a stale one replaced by a fresh one: the simulator's differences while flying stay
-# under 1.7 mrad (noise, the gyro's bias, the attitude estimate's error; README "Stale attitude")
+# an attitude that moved this much more (rad) than the gyro turned it since an on-time last tick
+# was a stale one replaced: in flight the simulator's differences (noise, bias) stay < 1.7 mrad
+# (docs/core.md)
 ATTITUDE_JUMP_RAD = 0.005
-# beyond this many periods since the last tick the mean gyro rate times the interval is no
-# better than the two attitudes (a stall: the rates' samples arrive late or not at all)
+# beyond this many periods since the last tick (a stall) the gyro's turn is no better a guess
 ATTITUDE_JUMP_MAX_PERIODS = 2.0
-# an attitude the runtime could not carry to the tick (older than fc_state's propagation
-# limit: the stream stalled) is frozen: each tick it falls behind by the body's turn
+# an attitude not carried to the tick (older than fc_state's limit: a stalled stream) is stale
 ATTITUDE_STALE_S = 1e-6
 
 
@@ -167,6 +164,11 @@ class InterceptionLoop:
     def set_gains(self, gains: Gains) -> None:
         """Use ``gains`` from the next tick on (they are validated on construction)."""
         self._pending_gains = gains
+
+    def set_dkf_config(self, config: DkfConfig) -> None:
+        """Use the filter settings ``config`` (target diameter, noises, gate) from the next
+        prediction or fusion on; the track is kept."""
+        self.dkf.config = config
 
     def on_gyro(self, sample: GyroSample) -> None:
         s0, s1, s2 = self._gyro_sum
@@ -472,7 +474,7 @@ class InterceptionLoop:
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(
                     hold, (n0, n1, n2), q_y, dq_y, dq_z, vf, R_WC, self.fov_edges_rad,
-                    range_m, v_t, var_v, gains,
+                    range_m, v_t, var_v, gains, d_hat,
                 )  # fmt: skip
                 a_d = np.array((a0, a1, a2))
             else:
@@ -483,6 +485,7 @@ class InterceptionLoop:
                         range_m=range_m,
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
+                        disturbance_enu_m_s2=d_hat,
                     ),
                     gains,
                 )

@@ -1,10 +1,8 @@
 """Reference sortie outcomes for tests/test_speed_regression.py.
 
 ``python -m tests.speed_reference`` rewrites tests/data/speed_reference.json from the code as
-it is. It was first computed from main (74ac5e3) before the simulator's hot path was
-restructured (#16 item 1), and regenerated once #13's changes to what is flown had merged
-(estimate model, DKF, observer, wind, FOV-aware PNG). Regenerate it only when a change is
-meant to alter the flown numbers, and say so in the commit.
+it is. Regenerate it only when a change is meant to alter the flown numbers, and say so in
+the commit: a change meant only to be faster (or tidier) must fly the same sorties.
 """
 
 from __future__ import annotations

@@ -13,9 +13,9 @@ from groundstation.campaigns.aggregate import median_iqr, miss_stats, success_ra
 from groundstation.campaigns.definitions import parse_laws, static_targets
 from groundstation.campaigns.driver import run_campaign
 
-# the closed-loop figures below are the README's ideal-sensor ones; the state-estimate model's
+# the closed-loop figures below are docs/paper.md's perfect-state ones; the state-estimate model's
 # own checks and its closed-loop figures are in tests/test_estimate.py
-IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # the README's ideal-sensor column
+IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # docs/paper.md's perfect-state column
 
 
 def test_cep_and_spread_of_known_misses():
@@ -151,7 +151,9 @@ def test_static_campaign_png_centimetre_cep_beats_ibvs(tmp_path):
 
 def test_override_reaches_every_sortie_and_the_report(tmp_path):
     # k_v = 1/dt is the proposed law's literal eq. 17 applied to PG: a saturating, limit-cycling
-    # pursuit that lands centimetres off instead of millimetres (README, static targets).
+    # pursuit that lands centimetres off instead of millimetres to a centimetre (docs/paper.md,
+    # static targets; the airframe's rotor drag, which the velocity loop does not model, costs
+    # PG its last millimetres).
     kw = dict(n=4, laws=("pg",), seed=0, workers=1, progress=False)
     base = run_campaign("static", out=tmp_path / "a", overrides=IDEAL, **kw)
     literal = run_campaign(
@@ -163,7 +165,7 @@ def test_override_reaches_every_sortie_and_the_report(tmp_path):
     report = (tmp_path / "b" / "report.md").read_text()
     assert "gains.k_v = 100" in report and "State estimate: off" in report
     miss = {k: r["summary"]["laws"]["pg"]["mean_m"] for k, r in (("a", base), ("b", literal))}
-    assert miss["a"] < 0.01 and miss["b"] > 3 * miss["a"], miss
+    assert miss["a"] < 0.03 and miss["b"] > 3 * miss["a"], miss
     assert literal["outcomes"][0].result["max_normal_accel_m_s2"] > 4.5  # saturates (a_max 5)
 
 
@@ -197,4 +199,5 @@ def test_outdoor_campaign_reports_speed(tmp_path):
     )
     for scenario, by_law in res["summary"]["cells"].items():
         assert by_law["png"]["success_rate"] == 1.0, scenario
-        assert 4.0 <= by_law["png"]["terminal_speed_mean_m_s"] <= 8.0, scenario
+        # the speed ramp gains k_a net of drag: the escaping target is chased past 8 m/s
+        assert 4.0 <= by_law["png"]["terminal_speed_mean_m_s"] <= 9.0, scenario

@@ -71,9 +71,10 @@ def test_png_rising_los_pitches_velocity_up():
     """v = (0, 5, 0), dq_y = 0.01 rad, K_y = 3, k_a = 2, dt = 0.01 (worked by hand):
     sigma_yd = 0.03; |v_d| = 5.02; v_d = (0, 5.017741, 0.150577);
     a = (v_d - v)/dt = (0, 1.774117, 15.057741); |a| = 15.1619 > a_max = 5
-    -> a_d = (0, 0.585058, 4.965653)."""
+    -> (0, 0.585058, 4.965653), plus the believed drag k_drag |v| = 0.17 * 5 along v
+    -> a_d = (0, 1.435058, 4.965653)."""
     out = png_law(_inp([0, 5, 0], dq_y=0.01), G)
-    assert_allclose(out.accel_desired_enu_m_s2, [0.0, 0.585058, 4.965653], atol=1e-5)
+    assert_allclose(out.accel_desired_enu_m_s2, [0.0, 1.435058, 4.965653], atol=1e-5)
     assert out.accel_desired_enu_m_s2[2] > 0  # velocity pitched up toward the target
     assert not out.hovering
 
@@ -86,8 +87,15 @@ def test_png_los_turning_right_turns_velocity_right():
 
 
 def test_png_no_los_change_is_pure_speed_ramp():
+    """k_a net of drag: the believed airframe drag k_drag |v| is added along v."""
     out = png_law(_inp([0, 5, 0]), G)
-    assert_allclose(out.accel_desired_enu_m_s2, [0, G.k_a, 0], atol=1e-9)
+    assert_allclose(out.accel_desired_enu_m_s2, [0, G.k_a + G.k_drag * 5.0, 0], atol=1e-9)
+    # the observer's along-track estimate (a headwind or more drag than believed) adds to it,
+    # its part across the velocity does not
+    inp = _inp([0, 5, 0])
+    inp.disturbance_enu_m_s2 = (0.4, -0.5, 0.0)
+    out = png_law(inp, G)
+    assert_allclose(out.accel_desired_enu_m_s2, [0, G.k_a + G.k_drag * 5.0 + 0.5, 0], atol=1e-9)
     assert_allclose((out.vel_elev_rad, out.vel_azim_rad), (0.0, 0.0))
 
 
@@ -111,9 +119,10 @@ def test_speed_ramp_and_cap():
 
 
 def test_png_at_the_speed_cap_keeps_tangential_acceleration_within_k_a():
+    """Net of the believed drag k_drag |v|, which the ramp adds."""
     for speed in (11.99, 12.0, 12.03, 13.0):
         out = png_law(_inp([0, speed, 0]), G)
-        assert abs(out.accel_desired_enu_m_s2[1]) <= G.k_a + 1e-9, speed
+        assert abs(out.accel_desired_enu_m_s2[1] - G.k_drag * speed) <= G.k_a + 1e-9, speed
 
 
 def test_acceleration_saturation_keeps_direction():
@@ -132,7 +141,7 @@ def test_pursuit_points_velocity_along_los():
 def test_png_against_zero_effort_miss_solution():
     """Planar PN with ideal dynamics against the textbook heading-error solution:
     a_n(t) = N V eps / t_f (1 - t / t_f)^(N - 2); for N = 3 a linear decay to zero."""
-    gains = Gains(k_a=0.0, a_max=30.0)
+    gains = Gains(k_a=0.0, a_max=30.0, k_drag=0.0)  # ideal dynamics: no drag
     V, eps, R0, dt = 10.0, 0.05, 100.0, 0.001
     N = gains.K_z
     p = np.zeros(3)

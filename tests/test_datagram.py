@@ -1,4 +1,4 @@
-"""The setpoint's datagram sent with the GIL held (onboard/link/datagram.py, #16 item 5): the
+"""The setpoint's datagram sent with the GIL held (onboard/link/datagram.py): the
 bytes that arrive are the frame, a refusal is counted and never raises, a closed socket is
 never written to, and the MavLink link uses it for its UDP links and pymavlink otherwise."""
 
@@ -173,74 +173,3 @@ def test_a_listening_link_answers_its_one_client_with_the_gil_held(monkeypatch):
     finally:
         onboard.close()
         px4.close()
-
-
-# ---------------------------------------------------------------------- the send rehearsed
-def _frame(t_ms: int) -> bytes:
-    return SET_ATTITUDE_TARGET.frame(0, 1, 191, (t_ms, *_SETPOINT))
-
-
-@LINUX
-def test_a_rehearsed_send_goes_to_a_socket_of_our_own_and_never_to_the_peer():
-    rx, port = _receiver()
-    link = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
-    try:
-        assert link.rehearse_send(_frame(4)) is False  # no socket of its own opened yet
-        assert link.prepare_send_rehearsal() is None
-        sink = link._rehearsal_sink
-        host, sink_port = sink._sock.getsockname()
-        assert host == "127.0.0.1" and sink_port not in (0, port)  # loopback, its own port
-        # only once the setpoints have gone that way to that peer
-        assert link.rehearse_send(_frame(4)) is False
-        assert _setpoint(link, 10)
-        assert link.rehearse_send(_frame(5)) and link.rehearse_send(_frame(6))
-        time.sleep(0.01)
-        assert link.drain_rehearsals() == 2 and link.drain_rehearsals() == 0
-        assert sink.received == 2
-        assert _setpoint(link, 20)
-        # the peer got the two real setpoints, numbered as without the rehearsals, and no more
-        got = [_decode(rx.recvfrom(2048)[0]) for _ in range(2)]
-        assert [m.get_type() for m in got] == ["SET_ATTITUDE_TARGET"] * 2
-        assert [(m.time_boot_ms, m.get_seq()) for m in got] == [(10, 0), (20, 1)]
-        assert link.sent == 2 and link.send_errors == 0
-        rx.settimeout(0.2)
-        with pytest.raises(TimeoutError):
-            rx.recvfrom(2048)
-    finally:
-        link.close()
-        rx.close()
-    assert sink._sock.fileno() == -1  # closed with the link
-    assert sink.drain() == 0  # and never raises then
-
-
-@LINUX
-def test_no_rehearsed_send_where_the_setpoint_goes_another_way(monkeypatch):
-    port = free_port()
-    signed = MavLink(f"udpout:127.0.0.1:{port}", 1, 191, signing_key=bytes(range(32)))
-    listening = MavLink(f"udpin:127.0.0.1:{free_port()}", 1, 191)
-    try:
-        # a signed link's setpoints go through pymavlink: nothing to rehearse
-        assert signed.prepare_send_rehearsal() is None and _setpoint(signed, 10)
-        assert signed.rehearse_send(_frame(5)) is False
-        # a listening link: only while it has exactly one client (else pymavlink's write)
-        assert listening.prepare_send_rehearsal() is None
-        assert _setpoint(listening, 10) and listening.rehearse_send(_frame(5)) is False  # none
-        a, b = (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2))
-        with a, b:
-            a.bind(("127.0.0.1", 0))
-            b.bind(("127.0.0.1", 0))
-            listening.conn.clients = {a.getsockname()}  # one client, as its reads record it
-            assert _setpoint(listening, 20) and listening.rehearse_send(_frame(6))
-            listening.conn.clients = {a.getsockname(), b.getsockname()}  # pymavlink's pick
-            assert _setpoint(listening, 30) and listening.rehearse_send(_frame(7)) is False
-        # no loopback socket to be had: a note, and the real send untouched
-        plain = MavLink(f"udpout:127.0.0.1:{port}", 1, 191)
-        monkeypatch.setattr(datagram, "_RECV", None)
-        note = plain.prepare_send_rehearsal()
-        assert note and "not rehearsed" in note
-        assert _setpoint(plain, 10) and plain.rehearse_send(_frame(5)) is False
-        assert plain.drain_rehearsals() == 0
-        plain.close()
-    finally:
-        signed.close()
-        listening.close()

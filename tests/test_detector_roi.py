@@ -1,4 +1,4 @@
-"""The detector's region-of-interest search (#16): while it tracks, a window around the
+"""The detector's region-of-interest search: while it tracks, a window around the
 predicted blob is searched first; its answer equals the full-frame search's whenever it is
 used, and the full frame is searched whenever the window is not clean or holds no blob."""
 

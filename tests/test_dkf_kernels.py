@@ -1,6 +1,6 @@
-"""The DKF's numba kernels (onboard/estimation/dkf.py) equal their own Python source bit for
-bit (``k.py_func``) on seeded random inputs, edge values included; with PEREGRINE_JIT=0 there is
-nothing compiled to compare."""
+"""The DKF's numba kernels (onboard/estimation/dkf_kernels.py) equal their own Python source
+bit for bit (``k.py_func``) on seeded random inputs, edge values included; with the JIT off (the
+default outside campaigns: run with PEREGRINE_JIT=1) there is nothing compiled to compare."""
 
 import copy
 import math

@@ -1,4 +1,4 @@
-"""Issue #13 items 5-7: the FOV-aware PNG terms, detector realism and the envelope/range
+"""The FOV-aware PNG terms, detector realism and the envelope/range
 campaign maps."""
 
 import dataclasses

@@ -255,7 +255,7 @@ def test_the_simulator_hands_the_loop_what_state_at_gives_the_runtime_bit_for_bi
     ``vehicle_state_of``) and a twin of the gyro's noise stream. Every tick of a sortie with
     every estimate error on: the same numbers, bit for bit."""
     from groundstation.sim.physics import gyro_mean
-    from onboard.runtime.fc_state import FcState, state_at
+    from onboard.link.fc_state import FcState, state_at
 
     sim = Simulation(load_scenario("cv-top-to-bottom"), seed=1)
     hand = sim._as_the_runtime_hands_it

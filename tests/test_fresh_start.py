@@ -109,3 +109,30 @@ def test_batch_commands_ask_for_the_jit_and_pass_it_to_their_workers(monkeypatch
     monkeypatch.setattr(jit, "ENABLED", False)
     assert jit.use_jit() is True
     assert os.environ[jit.ENV] == "1"
+
+
+def _probe(_: int) -> bool:
+    return "groundstation.sim.simulation" in sys.modules
+
+
+def test_campaign_workers_fork_from_a_server_that_has_the_simulator():
+    """A worker needs no import of its own: it is a fork of the pool's server, which imported
+    the simulator (and loaded its kernels) once."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from groundstation import cli
+    from groundstation.campaigns.pool import pool_context, start_pool_server
+
+    args = cli._build_parser().parse_args
+    assert cli._makes_pool(args(["campaign", "static"]))
+    assert not cli._makes_pool(args(["campaign", "static", "--backend", "ray"]))
+    assert cli._makes_pool(args(["bench", "--campaigns"]))
+    assert not cli._makes_pool(args(["bench"]))
+    assert not cli._makes_pool(args(["sortie", "static-ahead-20m"]))
+    assert start_pool_server(1) is False  # one worker: no pool
+    ctx = pool_context()
+    if ctx.get_start_method() != "forkserver":
+        pytest.skip("no forkserver on this platform")
+    assert start_pool_server(2) is True
+    with ProcessPoolExecutor(2, mp_context=ctx) as pool:
+        assert list(pool.map(_probe, range(2))) == [True, True]

@@ -93,6 +93,7 @@ def _png_args(rng: np.random.Generator, gains: np.ndarray) -> tuple:
         has_vt,
         *vt,
         float(rng.choice([math.nan, 0.0, 4.0])),
+        *(rng.standard_normal(3) * rng.choice([0.0, 1.0, 3.0])).tolist(),
         gains,
     )  # fmt: skip
 

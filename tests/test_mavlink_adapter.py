@@ -12,14 +12,13 @@ import pytest
 from pymavlink import mavutil
 
 from onboard.geometry import attitude_from_yaw_pitch_roll, quat_to_rotmat, rotmat_to_quat
+from onboard.link.frame_encoder import FrameEncoder
 from onboard.link.px4 import (
     CMD_START,
     MODE_HOLD,
     MODE_OFFBOARD,
-    FrameEncoder,
     LinkError,
     MavLink,
-    TlogWriter,
     enu_to_ned,
     flu_to_frd,
     frd_to_flu,
@@ -30,6 +29,7 @@ from onboard.link.px4 import (
     quat_enu_flu_to_ned_frd,
     quat_ned_frd_to_enu_flu,
 )
+from onboard.link.tlog import TlogWriter
 
 from .sitl_rig import free_port
 

@@ -1,6 +1,6 @@
-"""PNG's long-range midcourse term (README "Range"): the schedule, the ZEM-nulling acceleration
-and a kinematic closed loop against the exponential ZEM decay it is built for, beside the
-textbook (t_go / t_go0)^K decay of the paper's PN."""
+"""PNG's long-range midcourse term (docs/core.md, "Midcourse ZEM nulling"): the schedule, the
+ZEM-nulling acceleration and a kinematic closed loop against the exponential ZEM decay it is
+built for, beside the textbook (t_go / t_go0)^K decay of the paper's PN."""
 
 import math
 
@@ -98,7 +98,7 @@ def _settle(t, zem, limit=1.0):
 
 
 def test_midcourse_nulls_the_zem_exponentially_where_pn_takes_most_of_the_flight():
-    gains = Gains(k_a=0.0, a_max=30.0)
+    gains = Gains(k_a=0.0, a_max=30.0, k_drag=0.0)  # a point mass: no drag
     t, zem = _fly(gains)
     zem0, t_go0 = zem[0], 300.0 / (10.0 * math.cos(0.05))
     assert_allclose(zem0, 300.0 * math.sin(0.05), rtol=1e-3)  # 15 m
@@ -162,8 +162,10 @@ def test_velocity_latency_prediction_in_the_loop():
 
 def test_range_sortie_nulls_the_zem_within_seconds():
     """Closed loop in the simulator: a static target 100 m ahead, ideal sensors (the range
-    campaign's 100 m try with n = 1). Measured: ZEM 5.37 m at acquisition, under 1 m for good 3.04 s
-    after it, 88 m away (the paper's PN, tau_zem = 0: 6.88 s, 60 m away), a hit (0.014 m)."""
+    campaign's 100 m try with n = 1). Measured: ZEM 5.4 m at acquisition, under 1 m for good
+    5.28 s after it, 65 m away (the paper's PN, tau_zem = 0: 5.86 s, 58 m away), a hit
+    (0.006 m). The airframe's rotor drag, which turns with the thrust axis, slows the
+    settling: with body drag alone it is 2.7 s, 88 m away."""
     import dataclasses
 
     from groundstation.campaigns.definitions import _build_range, range_metrics
@@ -182,6 +184,6 @@ def test_range_sortie_nulls_the_zem_within_seconds():
     out = run_job(job)
     assert out.result["outcome"] == "HIT" and out.result["miss_m"] < 0.05
     m = range_metrics(out.trace)
-    assert m["zem_acq_m"] == pytest.approx(5.37, abs=0.3)
-    assert m["zem_settle_s"] == pytest.approx(3.04, abs=0.5)
-    assert m["zem_settle_range_m"] > 80.0
+    assert m["zem_acq_m"] == pytest.approx(5.4, abs=0.3)
+    assert m["zem_settle_s"] == pytest.approx(5.28, abs=0.5)
+    assert m["zem_settle_range_m"] > 60.0

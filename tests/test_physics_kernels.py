@@ -11,6 +11,7 @@ import pytest
 from groundstation.scenario import load_scenario
 from groundstation.sim import physics as ph
 from groundstation.sim.simulation import Simulation
+from groundstation.sim.wind import turbulence_modes
 from onboard import jit
 
 pytestmark = pytest.mark.skipif(not jit.ENABLED, reason="PEREGRINE_JIT=0: nothing compiled")
@@ -43,7 +44,9 @@ def test_vehicle_step():
         x[ph.X_THRUST] = x[ph.X_CMD_THRUST] = abs(x[ph.X_THRUST]) * 5.0
         if i % 10 == 0:
             x[ph.X_W : ph.X_W + 3] = x[ph.X_CMD_W : ph.X_CMD_W + 3] = 0.0  # no rotation
-        lag = np.array([rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0, 2), 0.6])
+        lag = np.array(
+            [*rng.uniform(0, 1, 2), rng.uniform(0, 2), 0.6, *rng.uniform(0, [0.02, 0.05, 0.2])]
+        )
         (r1, a1), (r2, a2) = both(ph.vehicle_step, (x, lag), 1.0 / 600.0, *rng.normal(size=3))
         assert same(r1, r2) and same(a1[0], a2[0]), i
 
@@ -68,9 +71,10 @@ def test_target_step_every_motion(kind):
         c[ph.T_DRAG_K], c[ph.T_MASS] = 0.01, abs(c[ph.T_MASS]) * 0.01 + 0.005
         c[ph.T_ROPE] = abs(c[ph.T_ROPE]) + 0.1
         c[ph.T_TWO] = 2.0
+        c[ph.T_DIA], c[ph.T_AREA] = 0.16, 0.02
         times = np.cumsum(rng.uniform(0.1, 1.0, 6))
         track = np.column_stack([times, rng.normal(0.0, 5.0, (6, 3))])
-        x = rng.normal(0.0, 2.0, 6)
+        x = rng.normal(0.0, 2.0, ph.TX_SIZE)
         t = float(rng.uniform(-1.0, 8.0))
         wind = rng.normal(size=3)
         out = []
@@ -92,16 +96,23 @@ def test_jet_factor_and_wind_at():
         c = np.zeros(ph.W_SIZE)
         c[ph.W_MEAN : ph.W_MEAN + 3], c[ph.W_SOURCE : ph.W_SOURCE + 3] = m, s
         c[ph.W_DIA], c[ph.W_JET], c[ph.W_REF] = dia, float(i % 2), rng.uniform(0.2, 1.0)
-        x = rng.normal(0.0, 3.0, 6)
-        assert same(ph.wind_at(x, c, *p), ph.wind_at.py_func(x, c, *p)), i
+        c[ph.W_SIGMA : ph.W_SIGMA + 3] = rng.uniform(0.0, 1.0, 3)
+        c[ph.W_TIME] = rng.uniform(0.0, 100.0)
+        modes = turbulence_modes(rng, float(rng.uniform(0.1, 50.0)), int(rng.integers(1, 20)))
+        c[ph.W_NMODES] = len(modes) if i % 3 else 0
+        assert same(ph.wind_at(c, modes, *p), ph.wind_at.py_func(c, modes, *p)), i
 
 
-def test_gust_step():
+def test_rotor_wash_at():
     rng = np.random.default_rng(4)
     for i in range(CASES):
-        c = rng.normal(0.0, 2.0, ph.W_SIZE)
-        (_, a1), (_, a2) = both(ph.gust_step, (rng.normal(size=6), c), *rng.normal(size=3))
-        assert same(a1[0], a2[0]), i
+        x = rng.normal(0.0, 3.0, ph.X_SIZE)
+        q = rng.normal(size=4)
+        x[ph.X_Q : ph.X_Q + 4] = q / np.linalg.norm(q)
+        x[ph.X_THRUST] = abs(x[ph.X_THRUST]) * 5.0
+        lag = rng.uniform(0.0, 1.0, ph.L_SIZE)
+        args = (*rng.normal(size=3), *(x[0:3] + rng.normal(0.0, 2.0, 3)))
+        assert same(ph.rotor_wash_at(x, lag, *args), ph.rotor_wash_at.py_func(x, lag, *args)), i
 
 
 @pytest.mark.parametrize(
@@ -116,12 +127,11 @@ def test_physics_steps_on_sortie_states(name):
         buf = sim._physics.copy()
         buf[ph.S_VX : ph.S_VX + 6] += rng.normal(0.0, 0.5, 6)
         buf[ph.S_CMD : ph.S_CMD + 5] = (i % 4, *rng.normal(0.0, 2.0, 3), rng.uniform(0, 1))
-        n, ni = int(rng.integers(1, 21)), int(rng.integers(0, 5))
-        normals = rng.standard_normal((30, 3))
+        n = int(rng.integers(1, 21))
         out = []
         for f in (ph.physics_steps, ph.physics_steps.py_func):
             b = buf.copy()
-            out.append((f(i, n, b, sim.target.track, normals, ni), b))
+            out.append((f(i, n, b, sim.target.track, sim.wind.modes), b))
         assert out[0][0] == out[1][0] and same(out[0][1], out[1][1]), (name, i)
         sim.step_control_period()  # on along the sortie
         if sim.done:

@@ -130,7 +130,7 @@ def test_non_mcap_refused_and_names_cannot_leave_the_folder(tmp_path):
     ):
         with pytest.raises(LogError):
             index.resolve(bad)
-    # a campaign's folder inside the log folder is fine (#12 item 14): names are paths in it
+    # a campaign's folder inside the log folder is fine: names are paths in it
     root = (tmp_path / "logs").resolve()
     assert index.resolve("static-n2/a.mcap") == root / "static-n2" / "a.mcap"
     r = subprocess.run(

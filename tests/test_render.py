@@ -1,4 +1,4 @@
-"""The renderer's shortcuts (#16) draw the same frames: the noise frames drawn from the
+"""The renderer's shortcuts draw the same frames: the noise frames drawn from the
 stream's bytes equal ``rng.integers``'s, and the one-pass noise equals the saturating add
 then subtract."""
 

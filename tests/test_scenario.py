@@ -29,7 +29,7 @@ gust_m_s = 0.0
 """
 
 
-def test_issue_example_parses():
+def test_the_documented_example_parses():
     s = parse_scenario(GOOD, "ex.toml")
     assert s.name == "cv-top-to-bottom" and s.duration_s == 30.0
     assert s.target.velocity_m_s == (0.0, 0.0, 1.0)

@@ -167,22 +167,14 @@ def test_end_to_end_sitl_onboard_and_ground_station(tmp_path, rig_factory):
     # loop timing (rate, jitter, overruns) is a benchmark figure (`groundstation bench --sitl`),
     # not asserted here: a shared 2-core machine cannot promise it; the loop must not stall
     assert stats["ticks"] > 0 and stats["rate_hz"] >= 100.0, stats
-    # detections fused on the camera thread, which ticked the early tick itself while the
-    # control thread slept (scheduler.tick_here): counted and timed as ticks of their own kind
-    here = stats["early_ticks_on_camera_thread"]
-    assert 0 < here <= stats["early_ticks"], stats
-    assert stats["tick_work_by_kind"]["early tick on the camera thread"]["ticks"] == here, stats
     # each setpoint's send is timed within its tick: every tick that sent one is a flying tick
     # and no other (on loopback no send is refused: each one counted as sent)
     fly = stats["flying_ticks"]
     assert fly == stats["commands_sent"], stats
-    assert fly < stats["ticks"] + stats["early_ticks"], stats  # those before the start sent none
+    assert fly < stats["ticks"], stats  # those before the start sent none
     assert 0.0 < stats["setpoint_send_median_ms"] <= stats["setpoint_send_p99_ms"], stats
     assert 0.0 < stats["slowest_1pc_send_mean_ms"] < stats["slowest_1pc_work_mean_ms"], stats
-    # the rehearsals' setpoint frames went to the runtime's own socket (the send's kernel path
-    # warmed; never to PX4: every setpoint the SITL flew was a flying tick's, asserted above)
-    if sys.platform.startswith("linux"):  # libc's sendto and recv
-        assert 0 < stats["rehearsed_sends"] <= stats["rehearsals"], stats
+    assert stats["detections_fused"] > 0, stats
 
 
 # ---------------------------------------------------------------------- faults

@@ -20,8 +20,8 @@ from onboard.geometry import (
     rot_z,
     rotmat_to_quat,
 )
+from onboard.link.fc_state import MAX_PROPAGATION_S, FcState, state_at
 from onboard.link.params import PARAM_IDS, ParamTable, mavlink_param_id
-from onboard.runtime.fc_state import MAX_PROPAGATION_S, FcState, state_at
 from onboard.runtime.runner import OnboardRuntime, RuntimeConfig
 
 from .sitl_rig import free_port
@@ -77,12 +77,12 @@ def test_the_runtime_dkf_ranges_an_indoor_balloon_with_its_diameter(tmp_path):
         assert ranges["param"] == pytest.approx(5.0, rel=0.05)
         assert ranges["default"] == pytest.approx(5.0 * 0.3 / 0.16, rel=0.05)
         # set over MAVLink on the ground: the DKF takes it at once
-        rt._param_set("PRG_TGT_DIAM", 0.5)
+        rt.ground._param_set("PRG_TGT_DIAM", 0.5)
         assert rt.loop.dkf.config.target_diameter_m == 0.5
         assert "PRG_TGT_DIAM = 0.5" in (tmp_path / "params.toml").read_text()
     finally:
-        rt.fc.close()
-        rt.gcs.close()
+        rt.fc.link.close()
+        rt.ground.link.close()
 
 
 # ---------------------------------------------------------------------- attitude to the tick

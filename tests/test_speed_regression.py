@@ -1,7 +1,8 @@
-"""The simulator's hot path restructured for speed (#16 item 1) flies the same sorties: each
-case's outcome, miss, intercept time, terminal speed, peak normal acceleration, detection
-counts and the vehicle's final state match a reference computed from main before the change
-(tests/speed_reference.py) to within 1e-9 (absolute, or relative for values above 1)."""
+"""The simulator flies the same sorties as the reference: each case's outcome, miss, intercept
+time, terminal speed, peak normal acceleration, detection counts and the vehicle's final state
+match tests/data/speed_reference.json (written by tests/speed_reference.py) to within 1e-9
+(absolute, or relative for values above 1), so a change made for speed cannot change what is
+flown."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The dashboard's gain studies (issue #16, item 4): the studies `groundstation tune` stored are
+"""The dashboard's gain studies: the studies `groundstation tune` stored are
 listed with their trials and best-so-far curve, and any trial's gains fly in one click beside
 the defaults (the defaults' sortie recorded and overlaid), behind the token."""
 

@@ -15,18 +15,14 @@ import pytest
 pytest.importorskip("av")
 
 from groundstation.app.video import VideoReceiver
+from onboard.link.rtp import MAX_PAYLOAD, RtpDepacketizer, RtpPacketizer, rtp_ts_of, split_annexb
 from onboard.runtime.video import (
-    MAX_PAYLOAD,
     H264RtpSender,
     Overlay,
-    RtpDepacketizer,
-    RtpPacketizer,
     VideoConfig,
     VideoStreamer,
     draw_overlay,
     overlay_of,
-    rtp_ts_of,
-    split_annexb,
 )
 
 W, H = 320, 240
@@ -323,7 +319,7 @@ def test_onboard_runtime_streams_its_camera_with_a_switchable_overlay(tmp_path, 
     finally:
         rt.video.stop()
         rt.video.join(timeout=2)
-        rt.fc.close()
+        rt.fc.link.close()
         fc.close()
     lat = list(receiver.latencies_s)
     assert len(lat) == 2 and all(0 <= x < 5 for x in lat)  # capture time carried across

@@ -13,7 +13,7 @@ const W = (window.peregrine = { received: 0, applied: 0, updates: 0, lastT: null
 // there and waits for it (in a trace of 5 viewers most of each page's busy time). With a
 // software renderer the page's 2D canvases are drawn on the CPU in the page's own process
 // instead (willReadFrequently asks for exactly that): with 5 viewers, a page's main thread went
-// from 79 % to 62 % busy and painted 2-5 frames/s instead of about 1 (README, Benchmark).
+// from 79 % to 62 % busy and painted 2-5 frames/s instead of about 1 (groundstation bench --dashboard).
 W.softwareGl = (() => {
   try {
     const gl = document.createElement("canvas").getContext("webgl");
@@ -44,7 +44,9 @@ async function api(method, path, body) {
   try { data = await r.json(); } catch (e) { data = null; }
   if (!r.ok) {
     const detail = data && data.detail !== undefined ? data.detail : r.statusText;
-    throw new Error(typeof detail === "string" ? detail : JSON.stringify(detail));
+    const err = new Error(typeof detail === "string" ? detail : JSON.stringify(detail));
+    err.data = data; // e.g. {refused: {name: why}} of a gains edit
+    throw err;
   }
   return data;
 }
@@ -115,7 +117,7 @@ function legendVal(u, v, si, idx) {
   }
   return fmtVal(v);
 }
-function fmtVal(v) { return v === null || v === undefined ? "—" : Math.abs(v) >= 100 ? v.toFixed(1) : Math.abs(v) >= 1 ? v.toFixed(2) : v.toFixed(3); }
+const fmtVal = window.fmtNum; // the one rounding rule (web/format.js)
 
 function markerHook(u) {
   const ctx = u.ctx, { top, height } = u.bbox;
@@ -134,7 +136,7 @@ function markerHook(u) {
 }
 
 function makePlot(def, parent) {
-  const series = [{ label: "t (s)", value: (u, v) => (v === null || v === undefined ? "—" : v.toFixed(2)) }];
+  const series = [{ label: "t (s)", value: (u, v) => fmtVal(v) }];
   def.series.forEach((s) => series.push({ label: PV.cmp ? `${s.label} · A` : s.label, stroke: s.color, width: 1.5, spanGaps: true, value: legendVal }));
   if (PV.cmp) def.series.forEach((s, i) => series.push({ label: `${s.label} · B`, stroke: B_COLORS[(PLOT_DEFS.indexOf(def) + i) % B_COLORS.length], width: 1.5, dash: [6, 4], spanGaps: true, value: legendVal }));
   const box = document.createElement("div"); box.className = "plot"; parent.appendChild(box);
@@ -231,20 +233,37 @@ function refreshPlots(force) {
   drawTimeline();
 }
 
-const TIMELINE_LABEL_PX = 165, TIMELINE_MIN_LABEL_PX = 12; // a label's box at most, and least
+// The timeline: one mark per event at its time, its whole label beside it. Labels that would
+// run into each other go on another row (up to TIMELINE_ROWS); a label near the right end
+// ends at its mark instead of starting there. Only a mark with no room on any row shows as
+// its line alone (its text on hover, or zoom in).
+const TIMELINE_ROWS = 4, TIMELINE_ROW_PX = 15;
+let measureCtx = null;
+function labelPx(text, bold) {
+  if (!measureCtx) measureCtx = document.createElement("canvas").getContext("2d");
+  measureCtx.font = `${bold ? "600 " : ""}10px system-ui, sans-serif`; // as #timeline .mark
+  return Math.ceil(measureCtx.measureText(text).width) + 9; // the text, its padding and line
+}
 function drawTimeline() {
   const tl = $("timeline"); const u = W.plots.find((p) => !p.xy); if (!u) return;
   const [min, max] = currentRange();
   const left = u.bbox.left / devicePixelRatio, w = u.bbox.width / devicePixelRatio;
+  const width = tl.clientWidth || left + w;
   const shown = PV.events.filter(([t]) => t !== null && t >= min && t <= max).sort((a, b) => a[0] - b[0]);
-  const xs = shown.map(([t]) => left + ((t - min) / (max - min)) * w);
-  // one row: a label ends where the next mark begins (the whole text on hover, or zoom in);
-  // with no room for any of it, only its line shows
-  const html = shown.map(([t, kind, text], i) => {
-    const room = Math.min(TIMELINE_LABEL_PX, (i + 1 < xs.length ? xs[i + 1] : Infinity) - xs[i] - 1);
-    const fit = room >= TIMELINE_MIN_LABEL_PX ? `max-width:${(room - 5).toFixed(1)}px` : "";
-    return `<span class="mark k-${kind}${fit ? "" : " bare"}" style="left:${xs[i].toFixed(1)}px;${fit}" data-t="${t}" title="t = ${Number(t).toFixed(2)} s: ${esc(text)}">${esc(text)}</span>`;
+  const rowEnd = new Array(TIMELINE_ROWS).fill(-Infinity);
+  let rows = 1;
+  const html = shown.map(([t, kind, text]) => {
+    const x = left + ((t - min) / (max - min)) * w, lw = labelPx(text, kind === "closest");
+    const flip = x + lw > width; // ends at its mark
+    const a = flip ? x - lw : x, b = flip ? x : x + lw;
+    let r = rowEnd.findIndex((end) => end <= a - 2), bare = false;
+    if (r < 0) { r = 0; bare = true; } else { rowEnd[r] = b; rows = Math.max(rows, r + 1); }
+    const cls = `mark k-${kind}${bare ? " bare" : ""}${flip && !bare ? " flip" : ""}`;
+    const pos = flip && !bare ? `right:${(width - x).toFixed(1)}px` : `left:${x.toFixed(1)}px`;
+    return `<span class="${cls}" style="${pos};top:${2 + r * TIMELINE_ROW_PX}px" data-t="${t}" title="t = ${fmtVal(t)} s: ${esc(text)}">${esc(text)}</span>`;
   }).join("");
+  const h = `${6 + rows * TIMELINE_ROW_PX}px`;
+  if (tl.style.height !== h) tl.style.height = h;
   if (html !== tl.dataset.drawn) { tl.innerHTML = html; tl.dataset.drawn = html; }
 }
 const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
@@ -253,29 +272,25 @@ $("timeline").onclick = (ev) => {
   replay("seek", { t_s: parseFloat(m.dataset.t) });
 };
 
-function sortieLabel(info, other) {
+// A compared pair's legend: who each sortie is, and only the gains that differ between them
+// (the rest are the same in both), in the one rounding rule.
+function sortieLabel(info, other, isB) {
   if (!info) return "this sortie";
   const head = `${info.file || "this sortie"} · ${info.scenario} · ${info.law}${info.seed !== undefined && info.seed !== null ? " · seed " + info.seed : ""}`;
-  const g = info.gains || {};
-  let gains;
-  if (!other) gains = info.gainsText || (Object.keys(g).length ? Object.entries(g).map(([k, v]) => `${k} ${v}`).join(" ") : "");
-  else { // B: only the gains that differ from A's
-    const og = other.gains || {};
-    const diff = Object.entries(g).filter(([k, v]) => k in og && og[k] !== v).map(([k, v]) => `${k} ${v} (A: ${og[k]})`);
-    gains = Object.keys(g).length && Object.keys(og).length ? (diff.length ? diff.join(", ") : "same as A") : "";
-  }
-  return head + (gains ? ` · gains: ${gains}` : "");
+  const g = info.gains || {}, og = (other && other.gains) || {};
+  if (!Object.keys(g).length || !Object.keys(og).length) return head;
+  const diff = Object.keys(g).filter((k) => k in og && og[k] !== g[k]).sort();
+  if (!diff.length) return head + (isB ? " · gains: same as A" : "");
+  return head + " · gains: " + diff.map((k) => `${k} ${fmtVal(g[k])}`).join(", ") + (isB ? " (the others as A)" : "");
 }
 function showCompareLegend() {
   const el = $("cmp-legend");
   el.hidden = !PV.cmp;
   if (!PV.cmp) { el.innerHTML = ""; return; }
-  if (PV.ownInfo && !PV.ownInfo.file) { // a sortie flying now: the gains in force
-    PV.ownInfo.gains = gainValues;
-    const st = W.snap && W.snap.status;
-    PV.ownInfo.gainsText = st && st.gains_source ? st.gains_source + (Object.keys(st.gains_edited || {}).length ? " with edits" : "") : "";
-  }
-  el.innerHTML = `<div class="lg-a"><b>A</b> (solid): ${esc(sortieLabel(PV.ownInfo))}</div><div class="lg-b"><b>B</b> (dashed): ${esc(sortieLabel(PV.cmpInfo, PV.ownInfo))}</div>`;
+  const st = W.snap && W.snap.status;
+  if (PV.ownInfo && !PV.ownInfo.file) PV.ownInfo.gains = gainValues; // flying now: the gains in force
+  const a = st && st.state === "idle" ? "nothing flown yet: press Start to fly beside B" : sortieLabel(PV.ownInfo, PV.cmpInfo, false);
+  el.innerHTML = `<div class="lg-a"><b>A</b> (solid): ${esc(a)}</div><div class="lg-b"><b>B</b> (dashed): ${esc(sortieLabel(PV.cmpInfo, PV.ownInfo, true))}</div>`;
 }
 
 // Fetch what the plots show for the sortie on screen (status tells which).
@@ -288,7 +303,7 @@ async function syncPlotSources(st) {
   try {
     if (st.epoch !== loadedEpoch) {
       loadedEpoch = st.epoch;
-      PV.xRange = null; img.track = []; img.eyStart = null; img.frame = null;
+      PV.xRange = null; img.frame = null;
       if (st.replay) {
         const s = await api("GET", `/api/logs/${encodeURIComponent(st.replay.file)}/series`);
         PV.own = s; PV.events = s.events; PV.ownInfo = s.sortie;
@@ -333,7 +348,7 @@ $("btn-add-plot").onclick = () => {
   buildPlots();
 };
 // ------------------------------------------------------------------ image plane
-const img = { canvas: $("image"), frame: null, track: [], eyStart: null };
+const img = { canvas: $("image"), frame: null };
 img.ctx = img.canvas.getContext("2d");
 
 function drawImagePlane(s) {
@@ -352,27 +367,32 @@ function drawImagePlane(s) {
   // cause, dq = atan(k_a / g) -> de_y = c_v tan(dq) / tan(vfov / 2) (eq. 16)
   ctx.setLineDash([6, 4]); ctx.strokeStyle = "#b14ad8"; ctx.lineWidth = 1.5;
   ctx.beginPath(); ctx.moveTo(cu, 0); ctx.lineTo(cu, im.h); ctx.stroke();
-  // the band is fixed to the image: centred on the sortie's first estimate, not the latest
-  const ey0 = (PV.own.columns && PV.own.columns.e_y_px || []).find((v) => v !== null && v !== undefined);
-  if (ey0 !== undefined) img.eyStart = ey0;
-  if (img.eyStart !== null) {
+  // the band is centred where the target sits once the estimate has settled: the median e_y
+  // of the sortie's estimates after their first TRANSIENT_S (not the first, transient one)
+  const c = bandCentre();
+  W.band = null;
+  if (c !== null) {
     const dq = Math.atan((s.k_a || 2) / 9.81);
     const dey = (cv * Math.tan(dq)) / Math.tan(((im.vfov_deg || 73.7) * Math.PI) / 360);
-    for (const y of [cv + img.eyStart - dey, cv + img.eyStart + dey]) {
+    W.band = { centre: c, half: dey };
+    for (const y of [cv + c - dey, cv + c + dey]) {
       ctx.beginPath(); ctx.moveTo(0, y); ctx.lineTo(im.w, y); ctx.stroke();
     }
   }
   ctx.setLineDash([]);
   ctx.strokeStyle = "#ffffff"; ctx.lineWidth = 2;
   ctx.beginPath(); ctx.moveTo(cu - 12, cv); ctx.lineTo(cu + 12, cv); ctx.moveTo(cu, cv - 12); ctx.lineTo(cu, cv + 12); ctx.stroke();
-  if (img.track.length > 1) {
+  const track = recentTrack();
+  W.trackPoints = track.length;
+  if (track.length > 1) {
     ctx.strokeStyle = "#2f6fe0"; ctx.lineWidth = 2; ctx.beginPath();
-    img.track.forEach(([x, y], k) => (k ? ctx.lineTo(cu + x, cv + y) : ctx.moveTo(cu + x, cv + y)));
+    track.forEach(([x, y], k) => (k ? ctx.lineTo(cu + x, cv + y) : ctx.moveTo(cu + x, cv + y)));
     ctx.stroke();
   }
   // markers are outlines drawn clear of the balloon: sized from its apparent diameter
   const dpx = s.range_m && s.target && s.target.diameter_m ? (im.f * s.target.diameter_m) / s.range_m : 0;
-  const r = Math.max(9, dpx / 2 + 6);
+  // (at most MARKER_MAX_PX: near the end the balloon fills the image, the marker must show)
+  const r = Math.min(Math.max(9, dpx / 2 + 6), MARKER_MAX_PX);
   if (s.e_raw_px) { // corner brackets: the balloon shows between them
     const x = cu + s.e_raw_px[0], y = cv + s.e_raw_px[1], a = r + 3, l = Math.max(5, a / 2);
     ctx.strokeStyle = "#ff9f1c"; ctx.lineWidth = 2; ctx.beginPath();
@@ -381,15 +401,50 @@ function drawImagePlane(s) {
     }
     ctx.stroke();
   }
-  W.edgeArrow = null;
+  W.edgeArrow = null; W.endMarker = null; W.estMarker = null;
+  const st = s.status || {};
+  if (!s.e_est_px && (st.state === "finished" || (st.replay && st.outcome)) && track.length) {
+    // the sortie has ended and the loop no longer estimates: where the target was last seen
+    const [ex, ey] = track[track.length - 1], x = cu + ex, y = cv + ey;
+    ctx.save(); ctx.setLineDash([4, 3]); ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
+    ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke(); ctx.restore();
+    ctx.fillStyle = "#0b5e2c"; ctx.font = "bold 12px sans-serif";
+    ctx.fillText(`last estimate · ${st.outcome || "ended"}`, Math.min(Math.max(x + r + 4, 4), im.w - 150), Math.min(Math.max(y + 4, 14), im.h - 6));
+    W.endMarker = { x, y };
+  }
   if (s.e_est_px) {
     const x = cu + s.e_est_px[0], y = cv + s.e_est_px[1];
     if (x >= 0 && x <= im.w && y >= 0 && y <= im.h) {
       ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
       ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke();
+      W.estMarker = { x, y, r };
     } else drawEdgeArrow(ctx, im, cu, cv, x, y);
   }
   ctx.lineWidth = 1;
+}
+
+const TRANSIENT_S = 1.0, TRACK_S = 1.5, MARKER_MAX_PX = 40;
+let bandCache = { n: -1, src: null, c: null };
+function bandCentre() {
+  const src = PV.own, ys = (src.columns && src.columns.e_y_px) || [];
+  if (bandCache.src === src && bandCache.n === ys.length) return bandCache.c;
+  let t0 = null; const vals = [];
+  for (let i = 0; i < ys.length; i++) {
+    if (ys[i] === null || ys[i] === undefined) continue;
+    if (t0 === null) t0 = src.t_s[i];
+    if (src.t_s[i] >= t0 + TRANSIENT_S) vals.push(ys[i]);
+  }
+  vals.sort((a, b) => a - b);
+  bandCache = { n: ys.length, src, c: vals.length ? vals[Math.floor(vals.length / 2)] : null };
+  return bandCache.c;
+}
+// The estimates of the last TRACK_S before the time shown (running or replayed alike).
+function recentTrack() {
+  const src = PV.own, ex = colOf(src, "e_x_px"), ey = colOf(src, "e_y_px"), t = src.t_s, out = [];
+  let i = t.length - 1;
+  while (i >= 0 && t[i] > PV.tNow + 1e-6) i--;
+  for (; i >= 0 && t[i] >= PV.tNow - TRACK_S; i--) if (ex[i] !== null && ey[i] !== null && ex[i] !== undefined) out.push([ex[i], ey[i]]);
+  return out.reverse();
 }
 
 // An estimate outside the image: an arrow on the edge pointing at it, with its distance.
@@ -423,7 +478,7 @@ function showStatus(st) {
   const profile = st.profile === "ideal" ? " · IDEAL SENSORS (analysis only)" : st.profile ? ` · ${st.profile}` : "";
   setBadge("st-scenario", `${st.scenario} · ${st.law} · seed ${st.seed} · ${st.camera}${profile} · ${st.speed === "max" ? "max speed" : st.speed + "×"}`);
   setBadge("st-time", `t = ${Number(st.time_s).toFixed(2)} s`);
-  if (st.outcome) setBadge("st-outcome", `${st.outcome} · miss ${Number(st.miss_m).toFixed(3)} m`, st.outcome === "HIT" ? "ok" : "bad");
+  if (st.outcome) setBadge("st-outcome", `${st.outcome} · miss ${fmtVal(st.miss_m)} m`, st.outcome === "HIT" ? "ok" : "bad");
   else setBadge("st-outcome", "no outcome");
   if (st.dkf) {
     const since = st.dkf.time_since_detection_s;
@@ -437,7 +492,7 @@ function showStatus(st) {
   syncControls(st);
   showStateChange(st);
   syncPlotSources(st);
-  const parts = JSON.stringify([st.recording, st.gains_source, st.gains_edited, st.gains_note]);
+  const parts = JSON.stringify([st.recording, st.gains_source, st.gains_edited, st.gains_note, st.gains_recorded]);
   if (parts !== lastStatusParts) { // rarely changes: not redone every frame
     lastStatusParts = parts;
     showRecording(st.recording);
@@ -446,7 +501,7 @@ function showStatus(st) {
   }
   let applied = "";
   if (st.gains_applied_time_s !== null && st.gains_applied_time_s !== undefined)
-    applied = `last edit applied at t = ${Number(st.gains_applied_time_s).toFixed(2)} s`;
+    applied = `last edit applied at t = ${fmtVal(st.gains_applied_time_s)} s`;
   if (st.gains_pending) applied = st.live ? "edit sent: waiting for the vehicle's PARAM_VALUE" : "edit pending: next control tick";
   setText($("gains-applied"), applied);
   // an edit takes effect after the PUT returns (the next tick; in live mode the vehicle's
@@ -461,7 +516,7 @@ function showRecording(rec) {
   const b = $("rec-banner");
   if (!rec) { b.hidden = true; return; }
   b.hidden = false;
-  if (rec.error) { b.className = "banner err"; b.textContent = `Recording failed: ${rec.error}. The sortie goes on but is no longer recorded.`; }
+  if (rec.error) { b.className = "banner err"; b.textContent = `Recording failed: ${rec.error}. The sortie goes on but is ${rec.file ? "no longer" : "not"} recorded.`; }
   else { b.className = "banner ok"; b.textContent = `${rec.closed ? "Recorded to" : "Recording to"} ${rec.file}`; }
 }
 
@@ -469,7 +524,11 @@ function showRecording(rec) {
 function showGainsInForce(st) {
   if (st.gains_source === undefined) { setBadge("st-gains", "gains: the vehicle's"); return; }
   const ed = Object.entries(st.gains_edited || {});
-  const txt = `gains: ${st.gains_source}` + (ed.length ? " + edits " + ed.map(([k, [a, b]]) => `${k}* ${a}→${b}`).join(", ") : "");
+  let txt = `gains: ${st.gains_source}` + (ed.length ? " + edits " + ed.map(([k, [a, b]]) => `${k}* ${fmtVal(a)}→${fmtVal(b)}`).join(", ") : "");
+  if (st.gains_recorded) { // a replayed sortie: its own gains, those not at their default
+    const rg = Object.entries(st.gains_recorded);
+    txt += rg.length ? " · not default: " + rg.map(([k, v]) => `${k} ${fmtVal(v)}`).join(", ") : " · all default";
+  }
   setBadge("st-gains", txt, ed.length ? "warn" : "");
   $("gains-source").textContent = `flying: ${st.gains_source}${ed.length ? ` with ${ed.length} edit${ed.length > 1 ? "s" : ""}` : ""}`;
   const note = $("gains-note"); note.hidden = !st.gains_note; note.textContent = st.gains_note || "";
@@ -483,19 +542,28 @@ function syncControls(st) {
   const set = (id, v) => { const el = $(id); if (v === null || v === undefined || document.activeElement === el) return; if (el.tagName !== "SELECT" || [...el.options].some((o) => o.value === String(v))) el.value = String(v); };
   set("speed", st.speed);
   if (st.epoch === controlsEpoch || st.live) return;
+  if (st.state !== "replay" && !$("scenario").options.length) return; // not listed yet: next time
   controlsEpoch = st.epoch;
-  if (st.state === "idle") return;
+  // idle too: after a Reset the header names the last sortie's settings, and Start flies them
   set("law", st.law); set("camera", st.camera); set("seed", st.seed);
-  if (!st.replay && [...$("scenario").options].some((o) => o.value === st.scenario)) { set("scenario", st.scenario); }
+  if (!st.replay && [...$("scenario").options].some((o) => o.value === st.scenario) && $("scenario").value !== st.scenario) { set("scenario", st.scenario); loadToml(); }
 }
 
-// The simulator's message line follows the sortie: no "started" left once it has ended.
-let lastState = null;
+// The simulator's message line follows the sortie: no "started" left once it has ended; a
+// page loaded after the end says how it ended.
+let lastState = null, studyFlying = null; // studyFlying: {n, epoch} of a trial flying
+function showTrialEnd(st) { // "trial #n flying" only while it flies
+  if (studyFlying === null || (st.state === "running" && st.epoch === studyFlying.epoch)) return;
+  const tr = studyFlying; studyFlying = null;
+  if (st.epoch === tr.epoch && st.state === "finished") msg($("study-msg"), `trial #${tr.n} flown: ${st.outcome || "no outcome"}${st.miss_m !== null && st.miss_m !== undefined ? `, miss ${fmtVal(st.miss_m)} m` : ""}`, st.outcome === "HIT");
+  else msg($("study-msg"), "", true);
+}
 function showStateChange(st) {
+  showTrialEnd(st);
   if (st.state === lastState || st.live) return;
   const prev = lastState; lastState = st.state;
-  if (prev === null) return;
-  if (st.state === "finished") msg($("sim-msg"), `finished: ${st.outcome || "no outcome"}${st.miss_m !== null && st.miss_m !== undefined ? `, miss ${Number(st.miss_m).toFixed(3)} m` : ""}${st.intercept_time_s !== undefined ? ` at t = ${Number(st.intercept_time_s).toFixed(2)} s` : ""}`, st.outcome === "HIT");
+  if (prev === null && st.state !== "finished") return; // a page (re)loaded: only the outcome is worth saying
+  if (st.state === "finished") msg($("sim-msg"), `finished: ${st.outcome || "no outcome"}${st.miss_m !== null && st.miss_m !== undefined ? `, miss ${fmtVal(st.miss_m)} m` : ""}${st.intercept_time_s !== undefined ? ` at t = ${fmtVal(st.intercept_time_s)} s` : ""}`, st.outcome === "HIT");
   else if (st.state === "running") msg($("sim-msg"), prev === "paused" ? "running" : "started", true);
   else if (st.state === "paused") msg($("sim-msg"), "paused", true);
   else if (st.state === "idle") msg($("sim-msg"), "reset", true);
@@ -544,16 +612,11 @@ function takeSnapshot(s) {
   W.received += 1; W.snap = s;
   if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
-    if (W.lastT !== null && s.t < W.lastT) { img.track = []; img.eyStart = null; }
     W.lastT = s.t;
     if (s.frame_jpeg_b64) {
       const im = new Image();
       im.onload = () => { img.frame = im; };
       im.src = "data:image/jpeg;base64," + s.frame_jpeg_b64;
-    }
-    if (s.e_est_px) {
-      img.track.push(s.e_est_px); if (img.track.length > 60) img.track.shift();
-      if (img.eyStart === null) img.eyStart = s.e_est_px[1];
     }
     if (appendLive(s)) W.applied += 1;
     if (PV.tNow !== s.t) { PV.tNow = s.t; PV.dirty = true; }
@@ -628,8 +691,8 @@ async function loadScenarios() {
     const o = document.createElement("option"); o.value = s.name; o.textContent = `${s.name} (${s.motion})`; o.title = s.description;
     sel.appendChild(o);
   }
-  const st = W.snap && W.snap.status; // the scenario on screen, else the default
-  sel.value = st && st.state !== "idle" && list.some((s) => s.name === st.scenario) ? st.scenario : "cv-top-to-bottom";
+  const st = await api("GET", "/api/status"); // the scenario the header names, else the default
+  sel.value = !st.replay && list.some((s) => s.name === st.scenario) ? st.scenario : "cv-top-to-bottom";
   await loadToml();
 }
 
@@ -648,6 +711,8 @@ $("btn-validate").onclick = async () => {
   catch (e) { msg($("sim-msg"), e.message, false); }
 };
 
+// Start applies the values typed in the gains panel and not yet applied (what an operator
+// who typed them expects to fly); one of them refused, nothing starts and nothing is applied.
 $("btn-start").onclick = async () => {
   const body = { law: $("law").value, seed: parseInt($("seed").value || "0", 10), camera: $("camera").value, speed: $("speed").value };
   if ($("use-toml").checked) body.toml = $("toml").value; else body.scenario = $("scenario").value;
@@ -655,8 +720,23 @@ $("btn-start").onclick = async () => {
     body.wind_mean_m_s = ["wind-x", "wind-y", "wind-z"].map((id) => parseFloat($(id).value || "0"));
     body.gust_m_s = parseFloat($("gust").value || "0");
   }
-  try { showStatus(await api("POST", "/api/sortie/start", body)); msg($("sim-msg"), "started", true); await loadGains(); }
-  catch (e) { msg($("sim-msg"), e.message, false); }
+  const typed = typedGains();
+  if (Object.keys(typed).length) {
+    try { await api("PUT", "/api/gains", typed); }
+    catch (e) {
+      const refused = (e.data && e.data.refused) || {};
+      const names = Object.keys(refused);
+      markBad(names);
+      msg($("sim-msg"), names.length ? "not started: a typed gain is refused (fix or clear it): " + names.map((k) => refusal(k, String(typed[k]), refused[k])).join(" ") : e.message, false);
+      return;
+    }
+  }
+  try {
+    showStatus(await api("POST", "/api/sortie/start", body));
+    const applied = Object.entries(typed).map(([k, v]) => `${k} = ${v}`);
+    msg($("sim-msg"), applied.length ? `started, with your typed value${applied.length > 1 ? "s" : ""} applied: ${applied.join(", ")}` : "started", true);
+    await loadGains();
+  } catch (e) { msg($("sim-msg"), e.message, false); }
 };
 $("btn-pause").onclick = async () => {
   const path = $("btn-pause").textContent === "Resume" ? "/api/sortie/resume" : "/api/sortie/pause";
@@ -726,8 +806,17 @@ function markGains() {
   });
 }
 function filterGains() {
-  const q = $("gain-search").value.trim().toLowerCase();
-  document.querySelectorAll("#gains tr[data-gain]").forEach((tr) => { tr.hidden = !!q && !tr.dataset.search.includes(q); });
+  const raw = $("gain-search").value.trim(), q = raw.toLowerCase();
+  let shown = 0;
+  document.querySelectorAll("#gains tr[data-gain]").forEach((tr) => { tr.hidden = !!q && !tr.dataset.search.includes(q); if (!tr.hidden) shown++; });
+  // a group's heading only over gains shown
+  document.querySelectorAll("#gains tr.group").forEach((gr) => {
+    let e = gr.nextElementSibling, any = false;
+    while (e && e.dataset.gain) { any = any || !e.hidden; e = e.nextElementSibling; }
+    gr.hidden = !any;
+  });
+  const none = $("gains-none");
+  none.hidden = shown > 0; none.textContent = shown ? "" : `no gain matches "${raw}"`;
 }
 $("gain-search").oninput = filterGains;
 function gainsetLink() {
@@ -739,7 +828,7 @@ $("gainsets").onchange = gainsetLink;
 function showGainEdits() {
   const ol = $("gain-edits");
   const edits = PV.events.filter(([, kind]) => kind === "gain");
-  ol.innerHTML = edits.length ? edits.map(([t, , text]) => `<li>${t === null ? "before the sortie" : "t = " + Number(t).toFixed(2) + " s"}: ${esc(text)}</li>`).join("") : "<li class=none>none</li>";
+  ol.innerHTML = edits.length ? edits.map(([t, , text]) => `<li>${t === null ? "before the sortie" : "t = " + fmtVal(t) + " s"}: ${esc(text)}</li>`).join("") : "<li class=none>none</li>";
 }
 
 // One sentence on why a value is refused (the range check is the server's; this words it).
@@ -753,34 +842,36 @@ function refusal(name, raw, detail) {
   return `${name} refused: ${why}; it stays ${gainValues[name]}${unit}.`;
 }
 
-async function applyGains(changes) {
-  if (!Object.keys(changes).length) { msg($("gains-msg"), "nothing changed", true); return; }
-  try {
-    await api("PUT", "/api/gains", changes);
-    msg($("gains-msg"), "applied: " + Object.entries(changes).map(([k, v]) => `${k} = ${v}`).join(", "), true);
-    await loadGains();
-  } catch (e) {
-    const names = Object.keys(changes);
-    const bad = names.find((k) => e.message.includes(k)) || names[0];
-    msg($("gains-msg"), names.length === 1 || bad ? refusal(bad, String(changes[bad]), e.message) : e.message, false);
-    for (const k of names) { // back to the values in force: the field never keeps a refused value
-      const el = document.querySelector(`#gains input[data-gain="${k}"]`);
-      if (el) { el.value = gainValues[k]; el.classList.remove("changed"); }
-    }
-    const el = document.querySelector(`#gains input[data-gain="${bad}"]`); if (el) el.classList.add("bad");
-  }
-}
-$("btn-apply-gains").onclick = () => {
+// The values typed and not applied: name -> number (or the text, which the server refuses).
+function typedGains() {
   const changes = {};
-  document.querySelectorAll("#gains input").forEach((inp) => {
-    inp.classList.remove("bad");
+  document.querySelectorAll("#gains input[data-gain]").forEach((inp) => {
     if (inp.value !== String(gainValues[inp.dataset.gain])) {
       const v = Number(inp.value);
       changes[inp.dataset.gain] = inp.value.trim() === "" || !isFinite(v) ? inp.value : v;
     }
   });
-  return applyGains(changes);
-};
+  return changes;
+}
+function markBad(names) {
+  document.querySelectorAll("#gains input[data-gain]").forEach((inp) => inp.classList.toggle("bad", names.includes(inp.dataset.gain)));
+}
+// Apply: the valid edits fly, every refused one is named with its reason and its field goes
+// back to the value in force.
+async function applyGains(changes) {
+  if (!Object.keys(changes).length) { msg($("gains-msg"), "nothing changed", true); return; }
+  try {
+    const r = await api("PUT", "/api/gains?valid_only=true", changes);
+    const refused = r.refused || {};
+    const applied = Object.entries(changes).filter(([k]) => !(k in refused)).map(([k, v]) => `${k} = ${v}`);
+    await loadGains();
+    const why = Object.keys(refused).map((k) => refusal(k, String(changes[k]), refused[k]));
+    const text = (applied.length ? [`applied: ${applied.join(", ")}.`] : []).concat(why).join(" ");
+    msg($("gains-msg"), text, !why.length);
+    markBad(Object.keys(refused));
+  } catch (e) { msg($("gains-msg"), e.message, false); }
+}
+$("btn-apply-gains").onclick = () => applyGains(typedGains());
 document.querySelector("#gains tbody").onclick = (ev) => {
   const b = ev.target.closest("button[data-reset]"); if (!b) return;
   const n = b.dataset.reset; applyGains({ [n]: gainSpecs[n].default });
@@ -801,6 +892,7 @@ $("gainset-upload").onchange = async (ev) => {
   const f = ev.target.files[0]; if (!f) return;
   const name = ($("gainset-name").value.trim() || f.name.replace(/\.toml$/i, "")).replace(/[^A-Za-z0-9_.-]/g, "_");
   try { await api("POST", "/api/gainsets/upload", { name, toml: await f.text() }); await loadGains(); $("gainsets").value = name; gainsetLink(); msg($("gains-msg"), `uploaded '${name}': press Load to fly it`, true); }
+  // refused: the server's sentence names the file, says nothing was saved and lists every problem
   catch (e) { msg($("gains-msg"), e.message, false); }
   ev.target.value = "";
 };
@@ -836,7 +928,7 @@ async function loadStudies() {
   sel.innerHTML = "";
   for (const s of list) {
     const o = document.createElement("option"); o.value = s.name;
-    o.textContent = `${s.name} · ${s.trials} trials${s.best_value !== null ? " · best " + s.best_value.toFixed(4) : ""}`;
+    o.textContent = `${s.name} · ${s.trials} trials${s.best_value !== null ? " · best " + fmtVal(s.best_value) : ""}`;
     sel.appendChild(o);
   }
   $("study-empty").hidden = list.length > 0;
@@ -856,7 +948,7 @@ async function showStudy(name) {
     const g = Object.entries(t.params).map(([k, v]) => `${k} ${fmtVal(v)}`).join(", ");
     const f = t.figures || {};
     return `<tr data-trial="${t.number}" class="${best && t.number === best.number ? "best" : ""}"><td>#${t.number}${t.defaults ? " (defaults)" : ""}</td><td>${esc(t.state.toLowerCase())}</td>
-      <td>${t.value === null ? "—" : t.value.toFixed(4)}</td><td>${f.success_rate === null || f.success_rate === undefined ? "—" : (100 * f.success_rate).toFixed(0) + " %"}</td>
+      <td>${fmtVal(t.value)}</td><td>${f.success_rate === null || f.success_rate === undefined ? "—" : (100 * f.success_rate).toFixed(0) + " %"}</td>
       <td>${fmtVal(f.cep_m)}</td><td class="gains">${esc(g)}</td>
       <td>${t.value === null ? "" : `<button data-act="fly" title="fly these gains, the defaults overlaid">Fly</button>`}</td></tr>`;
   }).join("");
@@ -866,7 +958,8 @@ async function showStudy(name) {
   ST.plot = new uPlot({
     width: w, height: 170, legend: { show: true },
     scales: { x: { time: false } },
-    axes: [{ label: "trial", labelSize: 16, size: 34 }, { label: "loss (lower is better)", labelSize: 16, size: 52 }],
+    axes: [{ label: "trial", labelSize: 16, size: 34, incrs: [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000], values: (u, vals) => { W.studyTicks = vals; return vals.map((v) => (Number.isInteger(v) ? String(v) : "")); } },
+      { label: "loss (lower is better)", labelSize: 16, size: 52, values: (u, vals) => vals.map(fmtVal) }],
     series: [{ label: "trial" }, { label: "loss", stroke: "#9aa5b1", width: 0, points: { show: true, size: 5, fill: "#9aa5b1" } },
       { label: "best so far", stroke: "#d7263d", width: 2, paths: uPlot.paths.stepped({ align: 1 }), points: { show: false } }],
   }, [x, y, b], box);
@@ -882,6 +975,7 @@ $("trials").onclick = async (ev) => {
   try {
     const st = await api("POST", `/api/studies/${encodeURIComponent(name)}/trials/${n}/fly`, { speed: $("speed").value || "1" });
     msg($("study-msg"), `trial #${n} flying at ${st.speed}×, the defaults' sortie overlaid (B)`, true);
+    studyFlying = { n, epoch: st.epoch };
     showStatus(st);
     await loadGains(); // the trial's gains are in force: the panel shows them
   } catch (e) { msg($("study-msg"), e.message, false); }

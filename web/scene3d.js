@@ -44,10 +44,17 @@
   }
   const idleFps = software ? SCENE_IDLE_FPS_SOFTWARE : SCENE_IDLE_FPS;
   window.peregrineScene = { software, idleFps };
-  // viser's notices (e.g. "Software WebGL rendering detected") go small to the bottom-left
-  // corner, where they cover neither the engagement nor the outcome label
+  // viser's notices (e.g. "Software WebGL rendering detected") go small to the top-left corner
+  // and fade out after a few seconds; viser's control panel (the View control), which in a
+  // view this narrow is a sheet at the bottom, goes small to the top-right corner: neither
+  // covers the bottom of the view (the ground, the engagement's start)
   const notices = document.createElement("style");
-  notices.textContent = ".mantine-Notifications-root{top:auto!important;bottom:6px!important;left:6px!important;right:auto!important;width:260px!important;transform:scale(.8);transform-origin:bottom left;opacity:.85}";
+  notices.textContent = [
+    ".mantine-Notifications-root{top:6px!important;bottom:auto!important;left:6px!important;right:auto!important;width:230px!important;transform:scale(.7);transform-origin:top left;animation:peregrine-fade .8s 6s forwards}",
+    "@keyframes peregrine-fade{to{opacity:0;visibility:hidden}}",
+    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"]{top:4px!important;bottom:auto!important;right:4px!important;max-height:96px!important;min-height:0!important;opacity:.92}',
+    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"] [style*="width: 20em"]{width:12.5em!important}',
+  ].join("\n");
   document.head.appendChild(notices);
   const raf = window.requestAnimationFrame.bind(window);
   let activeUntil = 0, last = 0;

@@ -73,7 +73,7 @@ class GainSpecOut(BaseModel):
     min: float
     max: float
     meaning: str
-    group: str = Field("other", description="the gains panel's group")
+    group: str = Field(description="the gains panel's group (onboard/gains.py)")
 
 
 class GainsOut(BaseModel):
@@ -83,6 +83,10 @@ class GainsOut(BaseModel):
         description="sortie time at which the last edit took effect (None: not yet)"
     )
     pending: bool = Field(description="an edit sent and not yet in force")
+    refused: dict[str, str] = Field(
+        default_factory=dict,
+        description="with ?valid_only=true: each refused edit and why (the others applied)",
+    )
 
 
 class GainSetSaved(BaseModel):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import tomllib
 
-from onboard.gains import Gains, load_gains_file
+from onboard.gains import GainError, Gains, load_gains_file
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,47}$")
 
@@ -19,7 +19,11 @@ def default_data_dir() -> Path:
 
 
 class GainSetError(ValueError):
-    pass
+    """A gain set refused; ``problems`` lists every one found."""
+
+    def __init__(self, message: str, problems: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.problems = problems or [message]
 
 
 class GainSetStore:
@@ -59,8 +63,21 @@ class GainSetStore:
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
-            raise GainSetError(f"{name}: not valid TOML: {exc}") from None
-        gains = Gains.from_mapping(data, source=f"uploaded gain set {name!r}")
+            why = f"not valid TOML: {exc}"
+            raise GainSetError(f"gain set file {name!r} refused, nothing saved: {why}") from None
+        problems = []
+        for k, v in data.items():
+            try:
+                Gains().replace(**{k: v})
+            except (GainError, TypeError) as exc:
+                problems.append(str(exc))
+        if problems:
+            raise GainSetError(
+                f"gain set file {name!r} refused, nothing saved: {len(problems)} problem"
+                f"{'s' if len(problems) > 1 else ''}: " + "; ".join(problems),
+                problems,
+            )
+        gains = Gains.from_mapping(data, source=f"gain set {name!r}")
         self.save(name, gains)
         return gains
 

@@ -8,6 +8,7 @@ whole file."""
 from __future__ import annotations
 
 import bisect
+import functools
 import json
 import math
 from pathlib import Path
@@ -24,6 +25,7 @@ from onboard.gains import GainError, Gains
 from ..recording.reader import inspect_log, iter_messages, scenario_attachment
 from ..scenario import ScenarioError, parse_scenario
 from ..sim.beliefs import true_camera
+from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
 
@@ -117,13 +119,13 @@ class ReplayPlayer:
             old, new = a.to_dict(), b.to_dict()
             for k, v in new.items():
                 if old[k] != v:
-                    out.append([round(t, 3), "gain", f"{k} {old[k]:g} → {v:g}"])
+                    out.append([round(t, 3), "gain", f"{k} {fmt_num(old[k])} → {fmt_num(v)}"])
         miss = self.info.miss_m
         out.append(
             [
                 round(self.closest_time_s, 3),
                 "closest",
-                "closest approach" + ("" if miss is None else f": miss {miss:.3f} m"),
+                "closest approach" + ("" if miss is None else f": miss {fmt_num(miss)} m"),
             ]
         )
         return sorted(out, key=lambda e: e[0])
@@ -143,6 +145,11 @@ class ReplayPlayer:
             "gains": gains,
         }
 
+    def gains_not_default(self) -> dict[str, float]:
+        """The gains the sortie started with that differ from the defaults."""
+        flown, default = self.describe()["gains"], Gains().to_dict()
+        return {k: v for k, v in flown.items() if k in default and v != default[k]}
+
     @staticmethod
     def _at(times: list[float], t: float) -> int:
         return max(bisect.bisect_right(times, t + 1e-9) - 1, 0)
@@ -155,7 +162,7 @@ class ReplayPlayer:
             k = self._at(self.tv, self.closest_time_s)
             closest = self.vp[k]
         label = (
-            f"{self.info.outcome} miss {self.info.miss_m:.3f} m"
+            f"{self.info.outcome} miss {fmt_num(self.info.miss_m)} m"
             if done and self.info.miss_m is not None
             else ""
         )
@@ -225,7 +232,8 @@ class ReplayPlayer:
 
     def series(self, every: int = 1) -> dict[str, Any]:
         """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns and
-        every other numeric /control field (arrays split as ``name.0``, ``name.1``), and the
+        every other numeric /control and /dkf field (``dkf.`` names; arrays split as
+        ``name.0``, ``name.1``; /dkf as last recorded at each /control time), and the
         timeline's markers."""
         # through the one snapshot builder: the plots show what the page shows live
         rows = self.ctrl[::every]
@@ -238,16 +246,18 @@ class ReplayPlayer:
                 cols[k].append(snap[k])
             cols["e_x_px"].append(e[0] if e else None)
             cols["e_y_px"].append(e[1] if e else None)
-            for k, v in c.items():
-                items = list(enumerate(v)) if isinstance(v, list) else [(None, v)]
-                for j, x in items:
-                    if isinstance(x, bool) or not isinstance(x, (int, float, type(None))):
-                        continue
-                    name = k if j is None else f"{k}.{j}"
-                    if name == "t_s":
-                        continue
-                    col = extra.setdefault(name, [None] * i)
-                    col.append(x)
+            d = self.dkf[self._at(self.td, t)] if self.dkf else {}
+            for prefix, msg in (("", c), ("dkf.", d)):  # /dkf as last recorded at t
+                for k, v in msg.items():
+                    items = list(enumerate(v)) if isinstance(v, list) else [(None, v)]
+                    for j, x in items:
+                        if isinstance(x, bool) or not isinstance(x, (int, float, type(None))):
+                            continue
+                        name = prefix + (k if j is None else f"{k}.{j}")
+                        if k == "t_s":
+                            continue
+                        col = extra.setdefault(name, [None] * i)
+                        col.append(x)
             for col in extra.values():
                 if len(col) < i + 1:
                     col.append(None)
@@ -258,10 +268,48 @@ class ReplayPlayer:
             "columns": cols,
             "fields": extra,
             # from the one message definition: the page labels the plots it adds with these
-            "units": {k: u for k, u in messages.units(messages.CONTROL).items() if k in extra},
+            "units": {
+                k: u
+                for k, u in (
+                    *messages.units(messages.CONTROL).items(),
+                    *((f"dkf.{k}", u) for k, u in messages.units(messages.DKF).items()),
+                )
+                if k in extra
+            },
             "events": self.timeline,
             "sortie": self.describe(),
         }
+
+
+OVERLAY_MAX = 20  # sorties overlaid at once
+
+
+def overlay_entry(path: Path, name: str) -> dict[str, Any]:
+    """One recorded sortie as the overlay shows it: who it is, its outcome, the plot columns
+    and the vehicle's position relative to the target (m, east-north-up) at the same times.
+    Kept per file (path, size, modification time): scrubbing or re-opening costs nothing."""
+    st = Path(path).stat()
+    return _overlay_entry(str(path), name, st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _overlay_entry(path: str, name: str, _size: int, _mtime_ns: int) -> dict[str, Any]:
+    p = ReplayPlayer(Path(path), name)
+    s = p.series()
+    rel = []
+    for t in s["t_s"]:
+        v, g = p.vp[p._at(p.tv, t)], p.tp[p._at(p.tt, t)]
+        rel.append([round(v[k] - g[k], 3) for k in range(3)])
+    return {
+        **p.describe(),
+        "outcome": p.info.outcome,
+        "miss_m": p.info.miss_m,
+        "intercept_time_s": p.closest_time_s,
+        "duration_s": p.duration_s,
+        "t_s": s["t_s"],
+        "columns": s["columns"],
+        "rel_m": rel,
+    }
 
 
 def _num(x: float | None, missing: float = math.nan) -> float:

@@ -8,35 +8,27 @@ import asyncio
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException
-from fastapi.responses import Response
+from fastapi.responses import JSONResponse, Response
 
-from onboard.gains import GAIN_SPECS, GainError, Gains
+from onboard.gains import GAIN_GROUPS, GAIN_SPECS, GainError, Gains
 
 from .api_models import GainSetSaved, GainsOut, GainSpecOut
 from .gainsets import GainSetError, GainSetStore
 from .session import SessionError, SimSession
 
-# the gains panel's groups (in this order), like a parameter editor's
-GAIN_GROUPS = {
-    "k_a": "guidance",
-    "K_y": "guidance",
-    "K_z": "guidance",
-    "v_min": "guidance",
-    "k_v": "guidance",
-    "k_ibvs": "guidance",
-    "k_p": "FOV hold",
-    "k_d": "FOV hold",
-    "k_R": "attitude",
-    "v_max": "limits",
-    "a_max": "limits",
-    "omega_max": "limits",
-    "k_brake": "limits",
-}
-_GROUP_ORDER = ["guidance", "FOV hold", "attitude", "limits", "other"]
 
-
-def _group(name: str) -> str:
-    return GAIN_GROUPS.get(name, "other")
+def check_each(gains: Gains, changes: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """Each change checked on its own against ``gains``: (the valid ones, name -> why refused
+    for every other)."""
+    valid, refused = {}, {}
+    for k, v in changes.items():
+        try:
+            gains.replace(**{k: v})
+        except (GainError, TypeError) as exc:
+            refused[k] = str(exc)
+        else:
+            valid[k] = v
+    return valid, refused
 
 
 def router(session: Any, gainsets: GainSetStore) -> APIRouter:
@@ -54,9 +46,9 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
                     min=s.minimum,
                     max=s.maximum,
                     meaning=s.meaning,
-                    group=_group(s.name),
+                    group=s.group,
                 )
-                for s in sorted(GAIN_SPECS, key=lambda s: _GROUP_ORDER.index(_group(s.name)))
+                for s in sorted(GAIN_SPECS, key=lambda s: GAIN_GROUPS.index(s.group))
             ],
             applied_time_s=st["gains_applied_time_s"],
             pending=st["gains_pending"],
@@ -76,20 +68,35 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
     async def get_gains() -> GainsOut:
         return gains_out()
 
-    @r.put("/api/gains")
-    async def put_gains(changes: Annotated[dict[str, Any], Body()]) -> GainsOut:
-        """Change the named gains (the others keep their values)."""
-        try:
-            new = session.gains.replace(**changes)
-        except (GainError, TypeError) as exc:
-            raise HTTPException(422, str(exc)) from None
-        return await apply(new)
+    @r.put("/api/gains", response_model=GainsOut)
+    async def put_gains(
+        changes: Annotated[dict[str, Any], Body()], valid_only: bool = False
+    ) -> GainsOut | JSONResponse:
+        """Change the named gains (the others keep their values). A refused value (unknown
+        name, not a number, out of range) refuses them all (422 naming every one), unless
+        ``valid_only``: then the valid ones are applied and ``refused`` says why the others
+        were not."""
+        valid, refused = check_each(session.gains, changes)
+        if refused and not valid_only:  # nothing applied; every refusal named
+            return JSONResponse(
+                {"detail": "; ".join(refused.values()), "refused": refused}, status_code=422
+            )
+        if not valid:
+            out = gains_out()
+        else:
+            out = await apply(session.gains.replace(**valid))
+        out.refused = refused
+        return out
 
     @r.post("/api/gains/reset")
     async def reset_gains() -> GainsOut:
         """Drop the operator's edits: back to the gain set in force (the defaults, the
         scenario's [gains] or the loaded gain set) in the simulator, the vehicle's own
         parameters as first read in live mode."""
+        reset_edits = getattr(session, "reset_edits", None)
+        if reset_edits is not None:  # the simulator: the operator's edits dropped for good
+            await asyncio.to_thread(reset_edits)
+            return gains_out()
         try:
             gains = session.default_gains()
         except SessionError as exc:
@@ -133,11 +140,13 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
         name: Annotated[str, Body()], toml: Annotated[str, Body()]
     ) -> GainSetSaved:
         """Save an uploaded gain set file (``name = value`` lines) under ``name``, checked
-        first: a bad file changes nothing."""
+        first: a bad file changes nothing and is answered 422 with every problem
+        (``problems``)."""
         try:
             gainsets.save_text(name, toml)
-        except (GainSetError, GainError) as exc:
-            raise HTTPException(422, str(exc)) from None
+        except GainSetError as exc:
+            problems = [{"message": m} for m in exc.problems]  # objects, as every 422's
+            return JSONResponse({"detail": str(exc), "problems": problems}, status_code=422)
         return GainSetSaved(saved=name, names=gainsets.names())
 
     return r

@@ -11,13 +11,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException
 from fastapi.responses import FileResponse
 
-from onboard.gains import GainError
+from onboard.gains import GainError, Gains
 
 from ..recording.reader import LogError, LogIndex, scenario_attachment
-from ..scenario import ScenarioError, parse_scenario, with_changes
+from ..scenario import ScenarioError, parse_scenario
 from ..sim.camera import CAMERA_MODES
 from .api_models import Deleted, ReflyRequest, Status
-from .replay import ReplayPlayer
+from .replay import OVERLAY_MAX, ReplayPlayer, overlay_entry
+from .routes_gains import check_each
 from .routes_sortie import command
 from .session import SessionError, SortieConfig
 
@@ -86,6 +87,26 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
         path.unlink()
         return Deleted(deleted=name)
 
+    @r.get("/api/overlay", tags=["logs"])
+    async def overlay(names: str) -> list[dict[str, Any]]:
+        """Up to OVERLAY_MAX recorded sorties (``names``: comma-separated) for the overlay
+        page: each one's legend, outcome, plot columns and position relative to the target."""
+        wanted = [n for n in names.split(",") if n]
+        if not 1 <= len(wanted) <= OVERLAY_MAX:
+            raise HTTPException(422, f"overlay 1 to {OVERLAY_MAX} sorties, not {len(wanted)}")
+        paths = [log_path(n) for n in wanted]
+
+        def read() -> list[dict[str, Any]]:
+            out = []
+            for path, name in zip(paths, wanted, strict=True):
+                try:
+                    out.append(overlay_entry(path, name))
+                except (LogError, ValueError) as exc:
+                    raise HTTPException(422, f"{name}: {exc}") from None
+            return out
+
+        return await asyncio.to_thread(read)
+
     @r.post("/api/replay/open", tags=["replay"])
     async def replay_open(name: Annotated[str, Body(embed=True)]) -> Status:
         path = log_path(name)
@@ -127,15 +148,22 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:
             scenario = parse_scenario(text, source=name)
-            # the gains it flew (edits included), so the re-fly flies the same sortie
-            flown = rp.describe()["gains"] or scenario.gains
-            scenario = with_changes(scenario, gains={**flown, **(req.gains or {})})
-        except (ScenarioError, GainError) as exc:
+        except ScenarioError as exc:
             raise HTTPException(422, str(exc)) from None
+        # the gains it flew (edits included) with the form's changes: this sortie's only
+        recorded = rp.describe()["gains"] or scenario.gains
+        try:
+            flown = Gains.from_mapping(recorded, source=f"{name}: recorded gains")
+        except GainError as exc:
+            raise HTTPException(422, str(exc)) from None
+        _valid, refused = check_each(flown, req.gains or {})
+        if refused:
+            raise HTTPException(422, "; ".join(refused.values()))
+        gains = flown.replace(**(req.gains or {}))
         camera = rp.info.camera if rp.info.camera in CAMERA_MODES else "projected"
         seed = req.seed if req.seed is not None else (rp.info.seed or 0)
         config = SortieConfig(scenario, req.law, seed, camera, req.speed)
-        command(session, session.start, config, (rp.tt, rp.tp))
+        command(session, session.start, config, (rp.tt, rp.tp), gains, f"re-fly of {name}")
         return command(session, session.compare_with, rp.path, rp.name)
 
     return r

@@ -14,9 +14,9 @@ from typing import Any
 from fastapi import APIRouter, HTTPException
 from pydantic import BaseModel, ConfigDict, Field
 
-from onboard.gains import GainError
+from onboard.gains import GainError, Gains
 
-from ..scenario import ScenarioError, with_changes
+from ..scenario import ScenarioError
 from .api_models import Speed, Status
 from .routes_sortie import command
 from .session import SortieConfig
@@ -167,14 +167,13 @@ def router(session: Any, storage_url: str, log_dir: Path | None) -> APIRouter:
             raise HTTPException(409, f"trial {number} is {trial['state'].lower()}: no gains")
         job = _first_sortie(detail["definition"] or {}, req.job)
         try:
-            flown = with_changes(job.scenario, gains={**job.scenario.gains, **trial["params"]})
-            gains = flown.gains_obj()
-        except (ScenarioError, GainError) as exc:
+            gains = Gains.from_mapping({**job.scenario.gains, **trial["params"]})
+        except GainError as exc:
             raise HTTPException(422, f"trial {number}'s gains: {exc}") from None
         defaults = await asyncio.to_thread(_fly_recorded, job, Path(log_dir))
-        config = SortieConfig(flown, job.law, job.seed, job.camera, req.speed)
-        command(session, session.start, config)
-        command(session, session.set_gains, gains, f"study {name} trial #{number}")
+        config = SortieConfig(job.scenario, job.law, job.seed, job.camera, req.speed)
+        # the trial's gains fly this sortie only: the operator's gains are left as they were
+        command(session, session.start, config, None, gains, f"study {name} trial #{number}")
         return command(session, session.compare_with, defaults, defaults.name)
 
     return r

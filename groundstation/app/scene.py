@@ -36,6 +36,38 @@ LOS_RGB = (250, 170, 0)
 COMPARE_VEHICLE_RGB = (0, 168, 168)
 COMPARE_TARGET_RGB = (0, 110, 110)
 VIEW_PRESETS = ("fit engagement", "follow vehicle", "chase", "top")
+FIT_FILL = 0.8  # "fit engagement": the farthest point this far from the view's centre (of 1)
+FIT_DIRECTION = (-0.6, -0.2, 0.3)  # the fit's eye from the engagement: west-south-west, above
+
+
+def fit_camera(
+    points: np.ndarray,
+    vfov_rad: float,
+    aspect: float,
+    direction: tuple[float, float, float] = FIT_DIRECTION,
+    fill: float = FIT_FILL,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The camera (eye, look-at) from ``direction`` (+z up) that frames ``points`` (N x 3, m):
+    the look-at is the centre of their extent across the view, and the eye as close as the
+    farthest point allows at ``fill`` of the half-view (perspective, ``vfov_rad`` vertical,
+    ``aspect`` width over height)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    back = np.asarray(direction, dtype=float)
+    back /= np.linalg.norm(back)
+    fwd = -back
+    right = np.cross(fwd, (0.0, 0.0, 1.0))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    c0 = (p.min(axis=0) + p.max(axis=0)) / 2.0
+    a, b, z = (p - c0) @ right, (p - c0) @ up, (p - c0) @ fwd
+    centre = c0 + right * (a.min() + a.max()) / 2.0 + up * (b.min() + b.max()) / 2.0
+    a, b = a - (a.min() + a.max()) / 2.0, b - (b.min() + b.max()) / 2.0
+    tan_v = math.tan(vfov_rad / 2.0)
+    tan_h = tan_v * aspect
+    # point i at depth d + z_i shows at |a_i| / ((d + z_i) tan_h) of the half-width
+    d = float(np.max(np.maximum(np.abs(a) / (fill * tan_h), np.abs(b) / (fill * tan_v)) - z))
+    d = max(d, float(np.max(-z)) + 1.0, 3.0)  # in front of every point, and not inside
+    return centre + back * d, centre
 
 
 class SceneView:
@@ -63,8 +95,12 @@ class SceneView:
         # the engagement happens 0-35 m north of the origin, 0-20 m up
         server.initial_camera.position = (-11.0, 1.0, 12.0)
         server.initial_camera.look_at = (0.0, 14.0, 5.0)
+        # the control panel small: at a laptop's 1280 x 800 the view is about 550 px wide and
+        # viser shows it as a sheet at the bottom, which web/scene3d.js moves to the top-right
+        server.gui.configure_theme(control_width="small", show_share_button=False)
         self._views: dict[int, Any] = {}  # client id -> its view preset dropdown
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None  # of the sortie on screen
+        self._extent: np.ndarray | None = None  # the trajectories' points, to frame them
         server.on_client_connect(self._add_view_control)
         server.on_client_disconnect(lambda c: self._views.pop(c.client_id, None))
         self._vehicle = None
@@ -72,7 +108,8 @@ class SceneView:
         self._frustum = None
         self._diameter = None
         self._trail_time_s = -1.0
-        self._closest_shown = False
+        self._closest_shown = self._fitted_done = False
+        self._extent_fixed = False  # a recorded sortie's whole trajectories are the extent
         self._handles: list = []  # every node a sortie added, children before parents
         self._labels: list = []
 
@@ -81,29 +118,46 @@ class SceneView:
         another's camera."""
         dd = client.gui.add_dropdown("View", VIEW_PRESETS, initial_value="fit engagement")
         self._views[client.client_id] = dd
+        fitted = []
+
+        @client.camera.on_update
+        def _(_camera) -> None:  # the first report gives the view's size: frame it then
+            if not fitted:
+                fitted.append(True)
+                self._apply_static_view(client, dd.value)
 
         @dd.on_update
         def _(_event) -> None:
             self._apply_static_view(client, dd.value)
 
     def _apply_static_view(self, client: Any, preset: str) -> None:
-        lo, hi = (
-            self._bounds
-            if self._bounds is not None
-            else (
-                np.array([-5.0, 0.0, 0.0]),
-                np.array([5.0, 35.0, 15.0]),
-            )
-        )
-        centre = (lo + hi) / 2.0
-        size = float(max(np.max(hi - lo), 5.0))
+        if preset not in ("fit engagement", "top"):
+            return
+        pts = self._extent
+        if pts is None or len(pts) < 2:
+            pts = np.array([[-5.0, 0.0, 0.0], [5.0, 35.0, 15.0]])
+        cam = client.camera
+        try:
+            vfov, aspect = float(cam.fov), float(cam.aspect)
+        except (AssertionError, ZeroDivisionError):  # no camera report yet
+            vfov, aspect = math.radians(75.0), 1.3
+        direction = FIT_DIRECTION if preset == "fit engagement" else (0.0, -0.01, 1.0)
+        eye, look = fit_camera(pts, vfov, aspect, direction)
         with client.atomic():
-            if preset == "fit engagement":
-                client.camera.position = centre + np.array([-0.6 * size, -0.2 * size, 0.3 * size])
-                client.camera.look_at = centre
-            elif preset == "top":
-                client.camera.position = centre + np.array([0.0, -0.01, 1.6 * size])
-                client.camera.look_at = centre
+            cam.position = eye
+            cam.look_at = look
+
+    def set_extent(self, points: list) -> None:
+        """Frame these points (a recorded sortie's whole trajectories) in "fit engagement"
+        and "top", now and for viewers who connect later."""
+        self._extent = np.asarray(points, dtype=float).reshape(-1, 3)
+        self._refit()
+
+    def _refit(self) -> None:
+        clients = self.server.get_clients()
+        for cid, dd in list(self._views.items()):
+            if cid in clients and dd.value in ("fit engagement", "top"):
+                self._apply_static_view(clients[cid], dd.value)
 
     def _fit_bounds(self, points: list) -> None:
         if len(points) < 1:
@@ -113,6 +167,9 @@ class SceneView:
         if self._bounds is not None:
             lo, hi = np.minimum(lo, self._bounds[0]), np.maximum(hi, self._bounds[1])
         self._bounds = (lo, hi)
+        if self._extent_fixed:
+            return
+        self._extent = p  # the trails so far (each call has them whole)
 
     def clear(self) -> None:
         """Remove everything a sortie added (the grid stays)."""
@@ -122,10 +179,17 @@ class SceneView:
         self._vehicle = self._target = self._frustum = None
         self._trail_time_s = -1.0
         self._bounds = None
+        self._extent, self._extent_fixed = None, False
 
-    def reset(self, cam: CameraModel, diameter_m: float, state: SceneState) -> None:
+    def reset(
+        self, cam: CameraModel, diameter_m: float, state: SceneState, extent: list | None = None
+    ) -> None:
+        """A new sortie; ``extent``: its whole trajectories when known (a recorded one)."""
         self.clear()
-        self._closest_shown = False
+        self._closest_shown = self._fitted_done = False
+        if extent is not None and len(extent) >= 2:
+            self._extent, self._extent_fixed = np.asarray(extent, dtype=float), True
+            self._refit()
         s = self.server.scene
         self._vehicle = s.add_frame("/vehicle", axes_length=1.2, axes_radius=0.05)
         self._frustum = s.add_camera_frustum(
@@ -212,12 +276,22 @@ class SceneView:
                         ).copy()
             if done and not self._closest_shown:
                 self._closest_shown = True
-                # above the meeting point, clear of the interceptor's and target's labels
-                label = s.add_label(
-                    "/closest_label",
-                    state.outcome_label,
-                    position=tuple(np.array(state.closest_point) + np.array([0.0, 0.0, 1.6])),
+                # above the whole engagement, straight over the meeting point, with a leader
+                # line down to it: clear of the vehicle, which is there
+                cp = np.array(state.closest_point, dtype=float)
+                lo, hi = self._bounds if self._bounds is not None else (cp, cp)
+                size = float(max(np.max(hi - lo), 2.0))
+                top = cp.copy()
+                top[2] = max(float(hi[2]), float(cp[2])) + 0.15 * size
+                label = s.add_label("/closest_label", state.outcome_label, position=tuple(top))
+                leader = s.add_line_segments(
+                    "/closest_leader",
+                    np.array([[cp, top]], dtype=np.float32),
+                    colors=(0, 150, 0),
+                    thickness=1.5,
+                    thickness_units="screen",
                 )
+                self._handles = [leader, *self._handles]
                 marker = s.add_icosphere(
                     "/closest",
                     radius=0.08,
@@ -229,12 +303,11 @@ class SceneView:
                 self._handles = [label, marker, *self._handles]
                 for name_label in self._labels:  # they meet there: one label, the outcome
                     name_label.visible = False
-                clients = self.server.get_clients()
-                for cid, dd in list(self._views.items()):  # the whole engagement, now known
-                    if cid in clients and dd.value in ("fit engagement", "top"):
-                        self._apply_static_view(clients[cid], dd.value)
         if trails_due:
             self._fit_bounds([*trail_vehicle, *trail_target, list(vp), list(tp)])
+        if done and self._closest_shown and not self._fitted_done:
+            self._fitted_done = True
+            self._refit()  # the whole engagement, now known
         moving = [(cid, dd.value) for cid, dd in list(self._views.items())]
         if not any(v in ("follow vehicle", "chase") for _, v in moving):
             return

@@ -138,6 +138,10 @@ def create_app(
     async def favicon() -> Response:
         return Response(status_code=204)
 
+    @app.get("/overlay", include_in_schema=False)
+    async def overlay_page() -> HTMLResponse:
+        return HTMLResponse((web_dir() / "overlay.html").read_text(encoding="utf-8"))
+
     @app.get("/sorties", include_in_schema=False)
     async def sorties_page() -> HTMLResponse:
         return HTMLResponse((web_dir() / "sorties.html").read_text(encoding="utf-8"))

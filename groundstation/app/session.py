@@ -5,10 +5,11 @@ reset, speed, gains) and observed through telemetry snapshots published at a fix
 Commands are queued and carried out by the simulation thread between control ticks, so a gain
 edit takes effect at the next control tick of the running sortie.
 
-The gains rule: the gains in force are a base set (the defaults, a scenario's ``[gains]`` or a
-named gain set) plus the operator's edits. Edits persist from sortie to sortie until the operator
-resets them or starts a scenario (or loads a gain set) that carries gains of its own; that
-replaces base and edits, and :meth:`SimSession.status` says so in ``gains_note``.
+The gains rule (docs/operator-gains.md): the operator's gains are a gain set (the defaults or
+a loaded named set) plus the edits the operator applied; a plain Start flies them, or, when the
+scenario has a ``[gains]`` table, that table (the edits are then dropped and ``gains_note`` names
+them). A re-fly or a study trial flies gains given for that sortie only: the operator's gain set
+and edits are left as they were, and the next plain Start flies them again.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from ..recording.writer import SortieRecorder
 from ..scenario import Scenario, load_scenario, with_changes
 from ..sim.simulation import Simulation
 from .errors import SessionError
+from .numbers import fmt_num
 from .replay import ReplayPlayer
 from .session_replay import SessionReplay
 from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_history
@@ -87,8 +89,11 @@ class SimSession(SessionView, SessionReplay):
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.config = SortieConfig(load_scenario("cv-top-to-bottom"))
-        self.gains = self.config.scenario.gains_obj()
-        self.gains_base = self.gains  # the set the operator's edits are made against
+        self.gain_set = Gains()  # the operator's gain set (the defaults or a loaded one)
+        self.gain_set_source = "defaults"
+        self.gain_edits: dict[str, float] = {}  # the operator's applied edits
+        self.gains = self.gain_set  # in force on the sortie on screen
+        self.gains_base = self.gains  # the set the sortie on screen started from
         self.gains_source = "defaults"
         self.gains_note: str | None = None
         self._gains_edited: tuple[Gains, Gains, dict[str, list[float]]] | None = None
@@ -142,23 +147,35 @@ class SimSession(SessionView, SessionReplay):
             raise box["error"]
         return box.get("value")
 
-    def start(self, config: SortieConfig, target_track=None) -> None:
+    def start(
+        self,
+        config: SortieConfig,
+        target_track=None,
+        sortie_gains: Gains | None = None,
+        sortie_source: str | None = None,
+    ) -> None:
+        """Fly ``config``. ``sortie_gains``: gains for this sortie only (a re-fly, a study
+        trial; ``sortie_source`` names them), else the operator's (module docstring)."""
         if config.speed not in SPEEDS:
             raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
 
         def go():
             sc = config.scenario
-            if sc.gains:  # the scenario carries its own gains: they replace base and edits
-                edited = sorted(self.gains_edited())
-                self.gains_base = sc.gains_obj()
-                self.gains_source = f"scenario {sc.name}"
-                self.gains_note = f"scenario {sc.name} carries its own gains" + (
-                    f"; your edits to {', '.join(edited)} were replaced" if edited else ""
+            keep_compare = self.compare if self.state == "idle" else None
+            if sortie_gains is not None:  # this sortie's own gains: the operator's stay put
+                base, source, note = sortie_gains, sortie_source or "given for this sortie", None
+                gains = base
+            elif sc.gains:  # the scenario has a [gains] table: it replaces the edits
+                dropped = sorted(self.gain_edits)
+                base, source = sc.gains_obj(), f"scenario {sc.name}"
+                note = f"scenario {sc.name} carries its own gains ([gains])" + (
+                    f"; your edits to {', '.join(dropped)} were replaced" if dropped else ""
                 )
-                gains = self.gains_base
-            else:  # operator edits persist
-                gains = self.gains
-                self.gains_note = None
+                self.gain_edits = {}
+                gains = base
+            else:  # the operator's gain set and edits
+                base, source, note = self.gain_set, self.gain_set_source, None
+                gains = base.replace(**self.gain_edits)
             self._close_current("the operator started another sortie")
             self.recorder = None if self.log_dir is None else SortieRecorder(self.log_dir)
             self.sim = Simulation(
@@ -176,7 +193,8 @@ class SimSession(SessionView, SessionReplay):
                 target_track=target_track,
             )
             self.config = config
-            self.gains = gains
+            self.gains, self.gains_base = gains, base
+            self.gains_source, self.gains_note = source, note
             self._gains_pending = None
             self.gains_applied_time_s = None
             self.speed = SPEEDS[config.speed]
@@ -190,6 +208,10 @@ class SimSession(SessionView, SessionReplay):
                 self.scene.reset(
                     self.sim.camera_model, config.scenario.target.diameter_m, self._scene_state()
                 )
+            if keep_compare is not None:  # compared from an idle page: overlaid on this one
+                self.compare = keep_compare
+                if self.scene is not None:
+                    self.scene.overlay(*keep_compare.trails(keep_compare.duration_s))
 
         self.submit(go)
 
@@ -235,6 +257,7 @@ class SimSession(SessionView, SessionReplay):
             self.sim = None
             self.replay = self.compare = None
             self.state = "idle"
+            self._operator_gains_in_force()
             self._trail_vehicle, self._trail_target = [], []
             self._new_epoch()
             if self.scene is not None:
@@ -257,24 +280,53 @@ class SimSession(SessionView, SessionReplay):
 
     def set_gains(self, gains: Gains, source: str | None = None) -> Gains:
         """Use ``gains`` (already validated) from the running sortie's next control tick.
-        With ``source`` (a gain set's name) they become the new base set, without edits."""
+        With ``source`` (a gain set's name) they become the operator's gain set, without
+        edits; otherwise the values changed are the operator's edits (they persist)."""
 
         def go():
             old = self.gains
             if source is not None:
+                self.gain_set, self.gain_set_source, self.gain_edits = gains, source, {}
                 self.gains_base, self.gains_source, self.gains_note = gains, source, None
+            else:
+                base = self.gains_base.to_dict()
+                for k, v in gains.to_dict().items():
+                    if v != getattr(old, k):
+                        self.gain_edits[k] = v
+                    if k in self.gain_edits and self.gain_edits[k] == base[k]:
+                        del self.gain_edits[k]
             self.gains = gains
             t = None if self.sim is None else round(self.sim.time_s, 3)
             for k, v in gains.to_dict().items():
                 before = getattr(old, k)
                 if v != before:
-                    self._event(t, "gain", f"{k} {before:g} → {v:g}")
+                    self._event(t, "gain", f"{k} {fmt_num(before)} → {fmt_num(v)}")
             if self.sim is not None and not self.sim.done:
                 self.sim.loop.set_gains(gains)
                 self._gains_pending = gains
             return gains
 
         return self.submit(go)
+
+    def _operator_gains_in_force(self) -> None:
+        """Nothing flies: the gains shown are those a plain Start flies (a scenario with a
+        [gains] table aside), not the last re-fly's or trial's."""
+        self.gains_base, self.gains_source, self.gains_note = (
+            self.gain_set,
+            self.gain_set_source,
+            None,
+        )
+        self.gains = self.gain_set.replace(**self.gain_edits)
+
+    def reset_edits(self) -> Gains:
+        """Drop the operator's edits: the sortie on screen flies its gain set again, and so
+        does the next plain Start."""
+
+        def go():
+            self.gain_edits = {}
+
+        self.submit(go)
+        return self.set_gains(self.gains_base)
 
     def default_gains(self) -> Gains:
         """What "reset gains" restores: the base set in force, without the operator's edits."""
@@ -298,6 +350,7 @@ class SimSession(SessionView, SessionReplay):
 
     def _new_epoch(self) -> None:
         self.epoch += 1
+        self.gains_applied_time_s = None  # an edit applied to an earlier sortie
         self.events = []
         self.history = _empty_history()
         self._last_history_t = -1.0
@@ -349,7 +402,7 @@ class SimSession(SessionView, SessionReplay):
             self._event(
                 round(sim.closest_time_s, 3),
                 "closest",
-                f"closest approach: {sim.outcome.value}, miss {sim.miss_m:.3f} m",
+                f"closest approach: {sim.outcome.value}, miss {fmt_num(sim.miss_m)} m",
             )
         if sim.time_s - self._last_trail_t >= TRAIL_EVERY_S:
             self._last_trail_t = sim.time_s

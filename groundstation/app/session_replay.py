@@ -29,7 +29,10 @@ class SessionReplay:
             self.config = dataclasses.replace(self.config, speed="1")
             self._trail_vehicle, self._trail_target = [], []
             if self.scene is not None:
-                self.scene.reset(player.camera, player.diameter_m, player.scene_state(0.0))
+                vehicle, target = player.trails(player.duration_s)
+                self.scene.reset(
+                    player.camera, player.diameter_m, player.scene_state(0.0), [*vehicle, *target]
+                )
             self._force_frame = True
             self._publish(force=True)
 
@@ -39,8 +42,7 @@ class SessionReplay:
         other = ReplayPlayer(path, name)
 
         def go():
-            if self.replay is None and self.sim is None:
-                raise SessionError("open a sortie (or run one) before comparing")
+            # idle: shown alone (B) until a sortie is started, which it is then overlaid on
             self.compare = other
             if self.scene is not None:
                 self.scene.overlay(*other.trails(other.duration_s))

@@ -13,6 +13,7 @@ from typing import Any
 
 import cv2
 
+from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
 
@@ -86,9 +87,10 @@ class SessionView:
     @property
     def recording(self) -> dict[str, Any] | None:
         rec = None if self.sim is None else self.recorder
-        if rec is None or rec.path is None:
+        if rec is None or (rec.path is None and rec.error is None):
             return None
-        return {"file": rec.path.name, "error": rec.error, "closed": rec.closed}
+        name = None if rec.path is None else rec.path.name  # None: no file could be made
+        return {"file": name, "error": rec.error, "closed": rec.closed}
 
     def _publish(self, force: bool = False) -> None:
         snap = self.snapshot()
@@ -122,7 +124,7 @@ class SessionView:
             tuple(sim.vehicle.q),
             tuple(sim.target.p),
             closest,
-            f"{sim.outcome.value} miss {sim.miss_m:.3f} m" if sim.done else "",
+            f"{sim.outcome.value} miss {fmt_num(sim.miss_m)} m" if sim.done else "",
         )
 
     # ------------------------------------------------------------------ observations
@@ -189,6 +191,12 @@ class SessionView:
                 time_s=round(self.replay_t, 4),
                 outcome=rp.info.outcome if at_end else None,
                 miss_m=rp.info.miss_m if at_end else None,
+                # the replayed sortie's gains, not the operator's: those that differ from the
+                # defaults
+                gains_source=f"recorded in {rp.name}",
+                gains_edited={},
+                gains_note=None,
+                gains_recorded=rp.gains_not_default(),
             )
         if sim is not None:
             dkf = sim.loop.dkf
@@ -202,7 +210,7 @@ class SessionView:
             }
             if sim.done:
                 out["outcome"] = sim.outcome.value
-                out["miss_m"] = round(sim.miss_m, 4)
+                out["miss_m"] = sim.miss_m  # rounded where shown (numbers.py)
                 out["intercept_time_s"] = round(sim.closest_time_s, 3)
         return out
 

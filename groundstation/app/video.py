@@ -1,5 +1,6 @@
 """The vehicle's live video on the ground: H.264 over RTP/UDP (``onboard run --video``,
-:mod:`onboard.runtime.video`) received, depacketised and decoded with PyAV in its own thread.
+:mod:`onboard.runtime.video`; the wire format is :mod:`onboard.link.rtp`) received,
+depacketised and decoded with PyAV in its own thread.
 
 Only the newest decoded frame is kept (the dashboard's image panel takes it as a JPEG with
 the next telemetry snapshot): a slow page or a stalled decoder drops frames, never queues
@@ -21,7 +22,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from onboard.runtime.video import AccessUnit, RtpDepacketizer, age_of_rtp_ts
+from onboard.link.rtp import AccessUnit, RtpDepacketizer, age_of_rtp_ts
 
 RCVBUF_BYTES = 256 * 1024  # about a second of 2 Mbit/s video at most waits in the kernel
 

@@ -24,7 +24,7 @@ from ..scenario import load_scenario
 from ..sim.simulation import Simulation
 
 BENCH_SCENARIOS = ("static-ahead-20m", "cv-top-to-bottom")
-TARGETS = {  # #16: projected >= 200x per core, rendered >= 20x, tick median <= 0.1 ms
+TARGETS = {  # projected >= 200x per core, rendered >= 20x, tick median <= 0.1 ms
     "rtf_projected": 200.0,
     "rtf_rendered": 20.0,
     "rtf_projected_cpu": 200.0,
@@ -80,27 +80,6 @@ def _tick_times_ms(repeat: int, sleep_s: float = 0.0) -> tuple[list[float], list
         loop.tick = timed  # type: ignore[method-assign]
         sim.run()
     return plain, fusing
-
-
-def wake_cost_ms(sleep_s: float = 0.005, repeat: int = 1) -> dict[str, float]:
-    """What sleeping between ticks costs the next tick on this machine: the loop's tick in a
-    simulated sortie (cv-top-to-bottom), medians and p99 (ms) back to back and with the
-    thread asleep ``sleep_s`` before each tick, as the vehicle's control thread is for most
-    of its period. On a machine that keeps a sleeping thread's caches the two are close; on
-    a shared virtual machine the host may run others on the CPU meanwhile, and the tick then
-    starts with its code and data out of the caches (``groundstation bench --sitl`` prints
-    it with the vehicle's figures)."""
-    hot = [a for xs in _tick_times_ms(repeat) for a in xs]
-    cold = [a for xs in _tick_times_ms(repeat, sleep_s) for a in xs]
-    hot_med, cold_med = float(np.median(hot)), float(np.median(cold))
-    return {
-        "sleep_ms": 1000.0 * sleep_s,
-        "back_to_back_median_ms": hot_med,
-        "back_to_back_p99_ms": _p99(hot),
-        "after_sleep_median_ms": cold_med,
-        "after_sleep_p99_ms": _p99(cold),
-        "ratio_of_medians": cold_med / hot_med if hot_med > 0.0 else float("nan"),
-    }
 
 
 def _frame_times_ms() -> tuple[list[float], list[float], int, list[float], float]:

@@ -118,6 +118,7 @@ def _summarize_static(outcomes):
         laws[law] = {
             **miss_stats(misses),
             "success_rate": success_rate([o.result["outcome"] for o in outs]),
+            "terminal_speed_mean_m_s": _terminal_speed(outs),
             "paper_cep_m": PAPER["static"].get(law),
         }
     return {"laws": laws, "paper_note": PAPER["static"]["note"]}
@@ -163,11 +164,17 @@ def _summarize_moving(outcomes):
             "max_normal_accel_mean_m_s2": float(
                 np.mean([o.result["max_normal_accel_m_s2"] for o in outs])
             ),
+            "terminal_speed_mean_m_s": _terminal_speed(outs),
             "e_x_median_iqr": median_iqr(ex),
             "e_y_median_iqr": median_iqr(ey),
             "paper_m": PAPER["moving"][scenario].get(law),
         }
     return {"cells": cells}
+
+
+def _terminal_speed(outs) -> float:
+    """The vehicle's mean speed at the closest approach (m/s) over a cell's sorties."""
+    return float(np.mean([o.result["terminal_speed_m_s"] for o in outs]))
 
 
 # ------------------------------------------------------------------------- wind
@@ -187,6 +194,7 @@ def _summarize_wind(outcomes):
             **{f"miss_{k}": v for k, v in miss_stats([o.result["miss_m"] for o in outs]).items()},
             "median_uv": (mx, my),
             "iqr_uv": (ix, iy),
+            "terminal_speed_mean_m_s": _terminal_speed(outs),
         }
     return {"cells": cells, "paper": {str(w): PAPER["wind"][w] for w in WIND_SPEEDS_M_S}}
 
@@ -202,9 +210,7 @@ def _summarize_outdoor(outcomes):
         cells.setdefault(scenario, {})[law] = {
             **miss_stats([o.result["miss_m"] for o in outs]),
             "success_rate": success_rate([o.result["outcome"] for o in outs]),
-            "terminal_speed_mean_m_s": float(
-                np.mean([o.result["terminal_speed_m_s"] for o in outs])
-            ),
+            "terminal_speed_mean_m_s": _terminal_speed(outs),
             "intercept_time_mean_s": float(np.mean([o.result["intercept_time_s"] for o in outs])),
             "paper": PAPER["outdoor"][scenario] if law == "png" else None,
         }

@@ -40,14 +40,14 @@ def _fmt(x: Any, digits: int = 3) -> str:
 
 def _md_static(summary, outcomes) -> str:
     lines = [
-        "| law | CEP (median) | mean | 90th pct | max | HIT rate | paper CEP |",
-        "|---|---|---|---|---|---|---|",
+        "| law | CEP (median) | mean | 90th pct | max | HIT rate | terminal speed | paper CEP |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for law, s in summary["laws"].items():
         lines.append(
             f"| {LAW_NAMES.get(law, law)} | {_fmt(s['cep_m'])} m | {_fmt(s['mean_m'])} m | "
             f"{_fmt(s['p90_m'])} m | {_fmt(s['max_m'])} m | {100 * s['success_rate']:.0f} % | "
-            f"{_fmt(s['paper_cep_m'])} |"
+            f"{_fmt(s['terminal_speed_mean_m_s'], 2)} m/s | {_fmt(s['paper_cep_m'])} |"
         )
     lines.append(f"\nPaper: {summary['paper_note']}.\n\nEvery miss (m):\n")
     laws = _laws_of(outcomes)
@@ -83,15 +83,16 @@ def _md_moving(summary) -> str:
         lines.append(f"| {sc} | " + " | ".join(row) + " |")
     lines += [
         "",
-        "| scenario, law | HIT rate | outcomes | mean of max normal accel | "
+        "| scenario, law | HIT rate | outcomes | terminal speed | mean of max normal accel | "
         "median (IQR) e_x/f | median (IQR) e_y/f |",
-        "|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|",
     ]
     for sc, by_law in cells.items():
         for law, c in by_law.items():
             (mx, ix), (my, iy) = c["e_x_median_iqr"], c["e_y_median_iqr"]
             lines.append(
                 f"| {sc}, {law} | {100 * c['success_rate']:.0f} % | {', '.join(c['outcomes'])} | "
+                f"{c['terminal_speed_mean_m_s']:.2f} m/s | "
                 f"{c['max_normal_accel_mean_m_s2']:.2f} m/s² | {mx:.3f} ({ix:.3f}) | "
                 f"{my:.3f} ({iy:.3f}) |"
             )
@@ -103,12 +104,16 @@ def _md_wind(summary) -> str:
     laws = list(next(iter(cells.values())).keys())
     lines = [
         "| wind | "
-        + " | ".join(f"{LAW_NAMES.get(x, x)} HIT rate" for x in laws)
+        + " | ".join(f"{LAW_NAMES.get(x, x)} HIT rate (terminal speed)" for x in laws)
         + " | paper (proposed) |",
         "|---|" + "---|" * (len(laws) + 1),
     ]
     for w, by_law in cells.items():
-        rates = [f"{100 * by_law[x]['success_rate']:.0f} % ({by_law[x]['tries']})" for x in laws]
+        rates = [
+            f"{100 * by_law[x]['success_rate']:.0f} % ({by_law[x]['tries']}; "
+            f"{by_law[x]['terminal_speed_mean_m_s']:.1f} m/s)"
+            for x in laws
+        ]
         paper = summary["paper"][w]["success"] * 100
         lines.append(f"| {w} m/s | " + " | ".join(rates) + f" | {paper:.0f} % (5) |")
     law = "png" if "png" in laws else laws[0]
@@ -226,7 +231,7 @@ def _estimate_note(estimate: dict | None) -> str:
         k: v for k, v in estimate.items() if getattr(EstimateSpec(), k, v) != v and k != "enabled"
     }
     extra = "".join(f", {k} = {v}" for k, v in changed.items())
-    return f"State estimate: on (the README's defaults{extra}). "
+    return f"State estimate: on (the simulator's defaults{extra}). "
 
 
 def write_report(

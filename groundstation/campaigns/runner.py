@@ -7,8 +7,6 @@ process pool on this machine; another engine (a cluster) only has to implement
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -23,6 +21,7 @@ from ..recording.writer import SortieRecorder
 from ..scenario import Scenario
 from ..sim.camera import sphere_in_view
 from ..sim.simulation import Simulation
+from .pool import default_workers, pool_context
 
 TRACE_EVERY_TICKS = 2  # 50 Hz at the default 100 Hz control rate
 
@@ -136,23 +135,6 @@ class SortieRunner(Protocol):
         ...
 
 
-def default_workers() -> int:
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
-
-
-def _pool_context():
-    """Workers fork from a clean server process that has already imported the simulator:
-    no inherited OpenCV or BLAS thread state (unlike plain fork), and no per-worker import
-    cost (unlike spawn). Platforms without forkserver use spawn."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload([__name__])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
 class LocalPoolRunner:
     """A process pool on this machine (``workers == 1`` runs in this process)."""
 
@@ -165,7 +147,7 @@ class LocalPoolRunner:
     def __enter__(self) -> LocalPoolRunner:
         """Keep one pool over several :meth:`run` calls (a tuning study's trials)."""
         if self.workers > 1 and self._pool is None:
-            self._pool = ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=pool_context())
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -189,7 +171,7 @@ class LocalPoolRunner:
                 if on_done:
                     on_done(out)
         else:
-            pool = self._pool or ProcessPoolExecutor(self.workers, mp_context=_pool_context())
+            pool = self._pool or ProcessPoolExecutor(self.workers, mp_context=pool_context())
             try:
                 futures = [pool.submit(run_job, job) for job in jobs]
                 for fut in as_completed(futures):

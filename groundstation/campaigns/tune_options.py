@@ -9,6 +9,12 @@ from typing import Any
 from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import CAMERA_MODES
+from .definitions import CampaignError
+
+
+class TuneError(CampaignError):
+    """A bad tuning option or a study that does not match the command."""
+
 
 OBJECTIVES = ("success-cep", "success-mean", "cep", "success")
 OBJECTIVE_HELP = {

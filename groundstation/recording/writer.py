@@ -76,7 +76,14 @@ class SortieRecorder(ChannelBuilder):
         """Create the file and its sink (None, with ``error`` set, when that fails)."""
         if self._given_sink is not None:
             return self._given_sink
-        self.path, fileobj = open_new_log(self.directory, info.scenario, info.law)
+        try:  # the log folder may have become unusable since the server started
+            self.path, fileobj = open_new_log(self.directory, info.scenario, info.law)
+        except OSError as exc:
+            self.error = (
+                f"cannot create a log file in {self.directory}: {type(exc).__name__}: {exc}"
+            )
+            self.closed = True
+            return None
         try:
             return open_sink(self.path, fileobj, self.mode)
         except OSError as exc:

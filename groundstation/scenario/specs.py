@@ -10,7 +10,7 @@ from pathlib import Path
 from onboard.gains import Gains
 
 Vec3 = tuple[float, float, float]
-MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tethered")
+MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tethered", "balloon")
 SCENARIO_DIR = Path(__file__).parent.parent / "scenarios"
 
 
@@ -26,10 +26,19 @@ class InterceptorSpec:
     size_m: float = 0.3  # diameter used for the hit test
     mass_kg: float = 1.5
     thrust_to_weight: float = 3.0
-    drag_n_s_m: float = 0.25  # linear drag on air-relative velocity
     rate_time_constant_s: float = 0.05
     thrust_time_constant_s: float = 0.03
     max_rate_deg_s: float = 229.18  # 4 rad/s
+    # the airframe in the air (docs/air.md): drag on the air-relative velocity, true values
+    # (the loop believes only its gains' k_drag), and the rotors' downwash
+    drag_n_s_m: float = 0.0  # linear, every direction
+    drag_area_m2: float = 0.02  # body C_d A: quadratic drag 0.5 rho C_d A |v_a| v_a
+    rotor_drag_n_s_m: float = 0.2  # rotor (induced) drag at hover thrust, in the rotor plane
+    # drawn per sortie when drag_max_n_s_m > 0: the drag at 10 m/s over 10 m/s uniform in
+    # [min, max], its rotor share uniform in [0.3, 0.7] (the three fields above then unused)
+    drag_min_n_s_m: float = 0.0
+    drag_max_n_s_m: float = 0.0
+    rotor_disc_area_m2: float = 0.16  # all rotors' discs (the downwash, momentum theory)
 
 
 @dataclass(frozen=True)
@@ -49,6 +58,10 @@ class TargetSpec:
     mass_kg: float = 0.0  # tethered: balloon, gas and added air mass; 0 = from physics
     envelope_mass_kg: float = 0.0015  # tethered: the latex (a ~0.16 m party balloon)
     drag_coefficient: float = 0.47  # tethered: sphere
+    # a light target in the air (tethered, balloon: a free helium balloon; docs/air.md): the
+    # vortex-shedding side force's coefficient amplitude (0: no buffet) and Strouhal number
+    buffet_lift_coefficient: float = 0.1
+    strouhal_number: float = 0.2
 
 
 @dataclass(frozen=True)
@@ -94,10 +107,13 @@ WIND_MODELS = ("uniform", "jet")  # groundstation/sim/wind.py
 class WindSpec:
     mean_m_s: Vec3 = (0.0, 0.0, 0.0)  # jet: the wind at the target's rest position
     gust_m_s: float = 0.0  # 1 sigma per horizontal axis (vertical: 30 %); jet: at the target
-    gust_time_constant_s: float = 2.0
+    gust_time_constant_s: float = 2.0  # a gust's passing time (see turbulence_length_m)
     model: str = "uniform"  # uniform | jet (a fan's round jet along mean_m_s)
     jet_source_m: Vec3 = (0.0, 0.0, 0.0)  # jet: the fan's outlet centre
     jet_diameter_m: float = 0.5  # jet: the fan's outlet diameter
+    # turbulence (docs/air.md): the von Karman field's longitudinal integral length scale;
+    # 0: gust_time_constant_s times the mean wind's speed (at least 1 m/s)
+    turbulence_length_m: float = 0.0
 
 
 @dataclass(frozen=True)

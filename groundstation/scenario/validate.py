@@ -29,10 +29,13 @@ def validate(s: Scenario, problems: Problems) -> None:
         check(t.max_speed_m_s > 0, "target.max_speed_m_s", "must be positive")
     if t.motion == "tethered":
         check(t.tether_length_m > 0, "target.tether_length_m", "must be positive")
+    if t.motion in ("tethered", "balloon"):
         check(t.mass_kg >= 0, "target.mass_kg", "must be positive (0: from the physics)")
         check(t.net_lift_n >= 0, "target.net_lift_n", "must be positive (0: from the physics)")
         check(t.envelope_mass_kg > 0, "target.envelope_mass_kg", "must be positive")
         check(t.drag_coefficient > 0, "target.drag_coefficient", "must be positive")
+        check(t.buffet_lift_coefficient >= 0, "target.buffet_lift_coefficient", "must be >= 0")
+        check(t.strouhal_number > 0, "target.strouhal_number", "must be positive")
         if t.net_lift_n == 0 and t.diameter_m > 0 and t.envelope_mass_kg > 0:
             gross = helium_gross_lift_n(t.diameter_m)
             check(
@@ -47,6 +50,14 @@ def validate(s: Scenario, problems: Problems) -> None:
     check(i.mass_kg > 0, "interceptor.mass_kg", "must be positive")
     check(i.thrust_to_weight > 1, "interceptor.thrust_to_weight", "must exceed 1")
     check(i.drag_n_s_m >= 0, "interceptor.drag_n_s_m", "must not be negative")
+    check(i.drag_area_m2 >= 0, "interceptor.drag_area_m2", "must not be negative")
+    check(i.rotor_drag_n_s_m >= 0, "interceptor.rotor_drag_n_s_m", "must not be negative")
+    check(
+        0 <= i.drag_min_n_s_m <= i.drag_max_n_s_m,
+        "interceptor.drag_min_n_s_m",
+        "the drawn drag needs 0 <= drag_min_n_s_m <= drag_max_n_s_m",
+    )
+    check(i.rotor_disc_area_m2 > 0, "interceptor.rotor_disc_area_m2", "must be positive")
     check(i.rate_time_constant_s > 0, "interceptor.rate_time_constant_s", "must be > 0")
     check(i.thrust_time_constant_s > 0, "interceptor.thrust_time_constant_s", "must be > 0")
     check(i.max_rate_deg_s > 0, "interceptor.max_rate_deg_s", "must be positive")
@@ -69,6 +80,7 @@ def validate(s: Scenario, problems: Problems) -> None:
     check(0 <= c.burst_drop_probability <= 1, "camera.burst_drop_probability", "must be in [0, 1]")
     check(s.wind.gust_m_s >= 0, "wind.gust_m_s", "must not be negative")
     check(s.wind.gust_time_constant_s > 0, "wind.gust_time_constant_s", "must be > 0")
+    check(s.wind.turbulence_length_m >= 0, "wind.turbulence_length_m", "must not be negative")
     w = s.wind
     check(w.model in WIND_MODELS, "wind.model", f"must be one of {', '.join(WIND_MODELS)}")
     if w.model == "jet":

@@ -96,7 +96,7 @@ import numpy as np
 from onboard.datatypes import Detection, VehicleState
 from onboard.geometry import carried_attitude, quat_exp3, quat_mul4
 from onboard.jit import kernel
-from onboard.runtime.fc_state import MAX_PROPAGATION_RATE_RAD_S, MAX_PROPAGATION_S
+from onboard.link.fc_state import MAX_PROPAGATION_RATE_RAD_S, MAX_PROPAGATION_S
 
 from ..scenario import EstimateSpec
 from .physics import X_P, gyro_mean

@@ -34,8 +34,19 @@ _DIVERGED_SPEED2 = DIVERGED_SPEED_M_S**2  # (m/s)^2, compared with |v|^2 at ever
 X_P, X_V, X_Q, X_W, X_ACC, X_THRUST = 0, 3, 6, 10, 13, 16
 X_CMD_W, X_CMD_THRUST, X_RATE_SUM, X_RATE_N = 17, 20, 21, 24
 X_SIZE = 25
-# the per-step-size constants Multicopter.lag(dt): rate lag, thrust lag, drag / mass (1/s), mass
-L_RATE, L_THRUST, L_DRAG, L_MASS = 0, 1, 2, 3
+# the per-step-size constants Multicopter.lag(dt): rate lag, thrust lag, linear drag / mass
+# (1/s), mass (kg), body drag 0.5 rho C_d A / mass (1/m), rotor drag per unit thrust / mass
+# (1/(s N)): the airframe of this sortie (vehicle.py), and its rotors' disc area (m^2, the
+# downwash; 0: none)
+L_RATE, L_THRUST, L_DRAG, L_MASS, L_BODY, L_ROTOR, L_DISC = 0, 1, 2, 3, 4, 5, 6
+L_SIZE = 7
+AIR_DENSITY_KG_M3 = 1.2  # sea level, 20 C (as scenario/physics.py)
+
+
+@kernel("UniTuple(f8, 3)(f8, f8, f8, f8)")
+def thrust_axis(qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
+    """Body z (the thrust axis) in the world of the attitude (qw, qx, qy, qz) (body -> world)."""
+    return 2.0 * (qx * qz + qw * qy), 2.0 * (qy * qz - qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy)
 
 
 @kernel("f8(f8[::1], f8[::1], f8, f8, f8, f8)")
@@ -44,8 +55,13 @@ def vehicle_step(
 ) -> float:
     """Advance the state ``x`` (X_* layout) one step of ``dt`` (s) in the wind (wx, wy, wz)
     (m/s ENU, where the vehicle is at the start of the step), in place; return the sum of
-    position, velocity, attitude and body rates after it (finite iff they all are)."""
+    position, velocity, attitude and body rates after it (finite iff they all are).
+
+    Drag on the air-relative velocity v_a = v - wind (``lag``, L_* layout): linear
+    -k v_a, body -b |v_a| v_a, rotor -r T (v_a - (v_a . z_B) z_B) (the rotor plane's part,
+    proportional to the thrust T)."""
     aw, at, kd, mass = lag[0], lag[1], lag[2], lag[3]
+    kb, kr = lag[4], lag[5]
     w0, w1, w2 = x[10], x[11], x[12]
     qw, qx, qy, qz = x[6], x[7], x[8], x[9]
     vx, vy, vz = x[3], x[4], x[5]
@@ -76,9 +92,15 @@ def vehicle_step(
         qw, qx, qy, qz = qw * n, qx * n, qy * n, qz * n
     # thrust axis z_B in the world
     ft = thrust_n / mass
-    ax = ft * (2.0 * (qx * qz + qw * qy)) - kd * (vx - wx)
-    ay = ft * (2.0 * (qy * qz - qw * qx)) - kd * (vy - wy)
-    az = ft * (1.0 - 2.0 * (qx * qx + qy * qy)) - kd * (vz - wz) - GRAVITY_M_S2
+    zx, zy, zz = thrust_axis(qw, qx, qy, qz)
+    rx, ry, rz = vx - wx, vy - wy, vz - wz  # air-relative velocity
+    air = math.sqrt(rx * rx + ry * ry + rz * rz)
+    along = rx * zx + ry * zy + rz * zz
+    k = kd + kb * air
+    kt = kr * thrust_n
+    ax = ft * zx - k * rx - kt * (rx - along * zx)
+    ay = ft * zy - k * ry - kt * (ry - along * zy)
+    az = ft * zz - k * rz - kt * (rz - along * zz) - GRAVITY_M_S2
     vx += ax * dt
     vy += ay * dt
     vz += az * dt
@@ -148,14 +170,19 @@ def vehicle_command(
 
 
 # motions as the kernel knows them
-MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "takeoff", "escape", "tethered", "track")
+MOTIONS = (
+    "static", "cv", "ca", "sinusoid", "circle", "takeoff", "escape", "tethered", "balloon", "track"
+)  # fmt: skip
+KIND_TETHERED, KIND_BALLOON = MOTIONS.index("tethered"), MOTIONS.index("balloon")
 KIND_TRACK = MOTIONS.index("track")
 # the parameter array Target.params: start position, velocity, acceleration (m, m/s, m/s^2),
 # sinusoid amplitude (m) and angular rate (rad/s), circle centre (m), radius (m) and angular
 # rate, takeoff start (s), escape top speed (m/s), tether anchor (m), drag factor
 # 0.5 rho C_d A (kg/m), net lift (N), mass with added air mass (kg), rope length (m), and the
 # exponent 2.0 of Python's ``x ** 2`` (libm's pow, as the Python code squares: a constant 2
-# would be folded into x * x, which rounds differently in about 0.1 % of cases)
+# would be folded into x * x, which rounds differently in about 0.1 % of cases); a light
+# target's (tethered, balloon) buffet: side-force coefficient amplitude, Strouhal number,
+# diameter (m) and area (m^2)
 T_P0, T_V0, T_A0, T_AMP, T_SIN_W, T_CENTER, T_RADIUS, T_CIRCLE_W = 0, 3, 6, 9, 12, 13, 16, 17
 T_START, T_MAX_SPEED, T_ANCHOR, T_DRAG_K, T_LIFT, T_MASS, T_ROPE, T_TWO = (
     18,
@@ -167,7 +194,10 @@ T_START, T_MAX_SPEED, T_ANCHOR, T_DRAG_K, T_LIFT, T_MASS, T_ROPE, T_TWO = (
     26,
     27,
 )
-T_SIZE = 28
+T_CL, T_STROUHAL, T_DIA, T_AREA = 28, 29, 30, 31
+T_SIZE = 32
+# the target's state Target.x: position, velocity (m, m/s ENU), the buffet's phase (rad)
+TX_SIZE = 7
 
 
 @kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)")
@@ -185,7 +215,8 @@ def target_step(
     """Move the target of motion ``MOTIONS[kind]`` (parameters ``c``, T_* layout; ``track``
     rows (time s, x, y, z m) for a recorded track) to time ``t`` (s), a step of ``dt`` after
     the last, in the wind (wx, wy, wz) (m/s ENU, where it is): its position and velocity
-    ``x`` (m, m/s ENU) in place."""
+    ``x`` (m, m/s ENU) in place. No motion goes below the ground: there the target stays at
+    z = 0 with its vertical velocity no longer downward."""
     if kind == 0:  # static
         return
     if kind == 1:  # cv: p0 + v t
@@ -237,13 +268,21 @@ def target_step(
             v0, v1, v2 = v0 * top / speed, v1 * top / speed, v2 * top / speed
         x[3], x[4], x[5] = v0, v1, v2
         x[0], x[1], x[2] = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
-    elif kind == 7:  # tethered balloon: lift, quadratic drag of the wind, the rope
+    elif kind == 7 or kind == 8:  # a balloon: lift, drag and buffet of the air it is in
         two = c[27]
-        r0, r1, r2 = wx - x[3], wy - x[4], wz - x[5]
+        r0, r1, r2 = wx - x[3], wy - x[4], wz - x[5]  # the air relative to the balloon
         speed = math.sqrt(math.pow(r0, two) + math.pow(r1, two) + math.pow(r2, two))
         k = c[23]
         f0, f1, f2 = k * speed * r0, k * speed * r1, k * speed * r2
         f2 += c[24]
+        if c[28] > 0.0 and speed > 1e-6:
+            # vortex shedding: a side force across the relative wind (horizontal), amplitude
+            # C_L' q A, at the shedding frequency St |r| / D
+            h = math.sqrt(r0 * r0 + r1 * r1)
+            s0, s1 = (r1 / h, -r0 / h) if h > 1e-9 else (1.0, 0.0)
+            side = c[28] * 0.5 * AIR_DENSITY_KG_M3 * speed * speed * c[31] * math.sin(x[6])
+            f0, f1 = f0 + side * s0, f1 + side * s1
+            x[6] = math.fmod(x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt, 2.0 * math.pi)
         m = c[25]
         v0, v1, v2 = x[3] + f0 / m * dt, x[4] + f1 / m * dt, x[5] + f2 / m * dt
         p0, p1, p2 = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
@@ -251,7 +290,7 @@ def target_step(
         d0, d1, d2 = p0 - c[20], p1 - c[21], p2 - c[22]
         dist = math.sqrt(math.pow(d0, two) + math.pow(d1, two) + math.pow(d2, two))
         rope = c[26]
-        if dist > rope:
+        if kind == 7 and dist > rope:
             u0, u1, u2 = d0 / dist, d1 / dist, d2 / dist
             p0, p1, p2 = c[20] + u0 * rope, c[21] + u1 * rope, c[22] + u2 * rope
             vr = v0 * u0 + v1 * u1 + v2 * u2
@@ -259,7 +298,7 @@ def target_step(
                 v0, v1, v2 = v0 - vr * u0, v1 - vr * u1, v2 - vr * u2
         x[0], x[1], x[2] = p0, p1, p2
         x[3], x[4], x[5] = v0, v1, v2
-    elif kind == 8:  # a recorded track, linear between samples, continued at its last velocity
+    elif kind == 9:  # a recorded track, linear between samples, continued at its last velocity
         n = track.shape[0]
         lo, hi = 0, n  # bisect_right over the times
         while lo < hi:
@@ -281,14 +320,22 @@ def target_step(
         x[0] = track[i, 1] + v0 * (t - track[i, 0])
         x[1] = track[i, 2] + v1 * (t - track[i, 0])
         x[2] = track[i, 3] + v2 * (t - track[i, 0])
+    # the ground (z = 0) stops every motion: a target that would go below it stays on it
+    # with no downward velocity (its horizontal motion goes on)
+    if x[2] < 0.0:
+        x[2] = 0.0
+        if x[5] < 0.0:
+            x[5] = 0.0
 
 
-# the wind's state array Wind.x: mean + gust now (m/s ENU), the gust; its parameter array
-# Wind.params: the mean (m/s), the gusts' sigmas (m/s), the gust step's factors a and b for
-# the current step size, 1.0 for the fan jet (0.0 uniform), the jet's profile at the
-# reference point, the fan's outlet centre (m) and diameter (m)
-W_MEAN, W_SIGMA, W_A, W_B, W_JET, W_REF, W_SOURCE, W_DIA = 0, 3, 6, 7, 8, 9, 10, 13
+# the wind's parameter array Wind.params: the mean (m/s), the gusts' sigmas per axis (m/s),
+# the time now (s), the number of turbulence modes, 1.0 for the fan jet (0.0 uniform), the
+# jet's profile at the reference point, the fan's outlet centre (m) and diameter (m)
+W_MEAN, W_SIGMA, W_TIME, W_NMODES, W_JET, W_REF, W_SOURCE, W_DIA = 0, 3, 6, 7, 8, 9, 10, 13
 W_SIZE = 14
+# a turbulence mode Wind.modes row: wavenumber (rad/m, ENU), cosine and sine amplitudes
+M_K, M_C, M_S = 0, 3, 6
+M_SIZE = 9
 JET_DECAY_B = 5.8  # U_c / U_0 = B D / x (Hussein et al. 1994; Pope Table 5.1)
 JET_SPREAD_S = 0.094  # r_1/2 = S x
 _LN2 = math.log(2.0)
@@ -332,26 +379,68 @@ def jet_factor(
     return core * math.exp(-_LN2 * r2 / (r_half * r_half))
 
 
-@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8)")
-def wind_at(x: np.ndarray, c: np.ndarray, px: float, py: float, pz: float) -> tuple:
-    """The wind now (m/s ENU) at (px, py, pz) (m): the state ``x`` times the jet's profile
-    relative to the reference point (uniform: ``x`` itself)."""
+@kernel("UniTuple(f8, 3)(f8[::1], f8[:, ::1], f8, f8, f8)")
+def turbulence_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: float) -> tuple:
+    """The turbulence (m/s ENU, before the jet's profile) at (px, py, pz) (m) at the time
+    c[W_TIME]: the frozen field of ``modes`` (M_* rows, unit variance per axis) carried by the
+    mean wind (Taylor's hypothesis), times the sigmas per axis (wind.py)."""
+    n = int(c[7])
+    if n == 0:
+        return 0.0, 0.0, 0.0
+    t = c[6]
+    qx, qy, qz = px - c[0] * t, py - c[1] * t, pz - c[2] * t
+    g0 = g1 = g2 = 0.0
+    for i in range(n):
+        th = modes[i, 0] * qx + modes[i, 1] * qy + modes[i, 2] * qz
+        cs, sn = math.cos(th), math.sin(th)
+        g0 += modes[i, 3] * cs + modes[i, 6] * sn
+        g1 += modes[i, 4] * cs + modes[i, 7] * sn
+        g2 += modes[i, 5] * cs + modes[i, 8] * sn
+    return c[3] * g0, c[4] * g1, c[5] * g2
+
+
+@kernel("UniTuple(f8, 3)(f8[::1], f8[:, ::1], f8, f8, f8)")
+def wind_at(c: np.ndarray, modes: np.ndarray, px: float, py: float, pz: float) -> tuple:
+    """The wind now (m/s ENU) at (px, py, pz) (m): the mean plus the turbulence there
+    (:func:`turbulence_at`), for the jet times its profile relative to the reference point."""
+    g0, g1, g2 = turbulence_at(c, modes, px, py, pz)
+    w0, w1, w2 = c[0] + g0, c[1] + g1, c[2] + g2
     if c[8] == 0.0:
-        return x[0], x[1], x[2]
+        return w0, w1, w2
     f = jet_factor(c[0], c[1], c[2], c[10], c[11], c[12], c[13], px, py, pz, False) / c[9]
-    return f * x[0], f * x[1], f * x[2]
+    return f * w0, f * w1, f * w2
 
 
-@kernel("void(f8[::1], f8[::1], f8, f8, f8)")
-def gust_step(x: np.ndarray, c: np.ndarray, n0: float, n1: float, n2: float) -> None:
-    """One step of the gusts' Gauss-Markov process (g <- a g + b sigma n for the standard
-    normals n; a, b in ``c`` for the step size) and the total mean + gust, in ``x``."""
-    a, b = c[6], c[7]
-    g0 = a * x[3] + b * c[3] * n0
-    g1 = a * x[4] + b * c[4] * n1
-    g2 = a * x[5] + b * c[5] * n2
-    x[3], x[4], x[5] = g0, g1, g2
-    x[0], x[1], x[2] = c[0] + g0, c[1] + g1, c[2] + g2
+@kernel("UniTuple(f8, 3)(f8[::1], f8[::1], f8, f8, f8, f8, f8, f8)")
+def rotor_wash_at(
+    x: np.ndarray, lag: np.ndarray, wx: float, wy: float, wz: float, px: float, py: float, pz: float
+) -> tuple:
+    """The air the vehicle's rotors push (m/s ENU) at (px, py, pz) (m), from the vehicle's
+    state ``x`` (X_*), its airframe ``lag`` (L_*) and the wind (wx, wy, wz) where it is.
+
+    Momentum theory: hover induced velocity v_h = sqrt(T / (2 rho A)); in edgewise flight at
+    the airspeed V in the rotor plane v_i^2 = (sqrt(V^4 + 4 v_h^4) - V^2) / 2 (Glauert); the
+    fully developed slipstream moves at 2 v_i along -z_B through a disc of the rotors' area
+    contracted by 1/sqrt(2), and spreads and decays beyond as a round turbulent jet
+    (:func:`jet_factor`) whose axis is the slipstream's path relative to the vehicle,
+    -2 v_i z_B - v_air (a fast vehicle leaves its wake behind it). Nothing above the rotors."""
+    area = lag[6]
+    thrust = x[16]
+    if area <= 0.0 or thrust <= 0.0:
+        return 0.0, 0.0, 0.0
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    zx, zy, zz = thrust_axis(qw, qx, qy, qz)
+    ax, ay, az = x[3] - wx, x[4] - wy, x[5] - wz
+    along = ax * zx + ay * zy + az * zz
+    ex, ey, ez = ax - along * zx, ay - along * zy, az - along * zz
+    vv = ex * ex + ey * ey + ez * ez  # edgewise airspeed squared
+    vh2 = thrust / (2.0 * AIR_DENSITY_KG_M3 * area)
+    vi = math.sqrt(0.5 * (math.sqrt(vv * vv + 4.0 * vh2 * vh2) - vv))
+    u = 2.0 * vi
+    m0, m1, m2 = -u * zx - ax, -u * zy - ay, -u * zz - az  # the slipstream's axis
+    dia = math.sqrt(4.0 * area / math.pi) / math.sqrt(2.0)
+    f = jet_factor(m0, m1, m2, x[0], x[1], x[2], dia, px, py, pz, False)
+    return -u * f * zx, -u * f * zy, -u * f * zz
 
 
 @kernel("UniTuple(f8, 7)(f8, f8, f8, f8, f8, f8)")
@@ -404,17 +493,17 @@ OUTCOME_NONE, OUTCOME_HIT, OUTCOME_MISS, OUTCOME_DIVERGED, OUTCOME_CRASHED = 0, 
 
 
 # One sortie's physics in one array (so that a kernel call passes one array, not a dozen):
-# the vehicle's state and constants, the target's constants and state, the wind's state and
-# constants, the closest approach and outcome, the command on its way to the actuators (the
-# step it arrives at, -1 for none; body rates rad/s FLU, normalised thrust; the rate limit
-# rad/s and the maximum thrust N), the target's kind and the step (s). The objects' arrays
+# the vehicle's state and constants, the target's constants and state, the wind's constants
+# (its turbulence modes are the kernel's own argument), the closest approach and outcome,
+# the command on its way to the actuators (the step it arrives at, -1 for none; body rates
+# rad/s FLU, normalised thrust; the rate limit rad/s and the maximum thrust N), the target's
+# kind and the step (s). The objects' arrays
 # become views into it (:func:`sortie_buffer`).
 S_VX = 0
 S_LAG = S_VX + X_SIZE
-S_TC = S_LAG + 4
+S_TC = S_LAG + L_SIZE
 S_TX = S_TC + T_SIZE
-S_WX = S_TX + 6
-S_WC = S_WX + 6
+S_WC = S_TX + TX_SIZE
 S_CS = S_WC + W_SIZE
 S_CMD = S_CS + C_SIZE
 S_KIND = S_CMD + 7
@@ -432,47 +521,44 @@ def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray
     for obj, name, at, size in (
         (vehicle, "x", S_VX, X_SIZE),
         (target, "params", S_TC, T_SIZE),
-        (target, "x", S_TX, 6),
-        (wind, "x", S_WX, 6),
+        (target, "x", S_TX, TX_SIZE),
         (wind, "params", S_WC, W_SIZE),
     ):
         view = buf[at : at + size]
         view[:] = getattr(obj, name)
         setattr(obj, name, view)
-    buf[S_LAG : S_LAG + 4] = vehicle.lag(dt)
+    buf[S_LAG : S_LAG + L_SIZE] = vehicle.lag(dt)
     buf[S_CMD] = -1.0
     buf[S_CMD + 5], buf[S_CMD + 6] = vehicle.max_rate_rad_s, vehicle.params.max_thrust_n
     buf[S_KIND], buf[S_DT] = target.kind, dt
     return buf
 
 
-@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], i8)")
-def physics_steps(
-    k0: int, n: int, buf: np.ndarray, track: np.ndarray, normals: np.ndarray, ni: int
-) -> int:
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])")
+def physics_steps(k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np.ndarray) -> int:
     """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
-    recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps, the gusts
-    drawing rows of standard ``normals`` from ``ni``; the command in ``buf`` reaches the
-    vehicle at the start of its step. Each body feels the wind where it is at the start of
-    the step. After each step, the closest approach inside it in continuous time (relative
-    motion linear over the step) and the outcome; stop at an outcome. Return the number of
-    steps taken."""
+    recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps in the wind
+    with the turbulence ``modes`` (M_* rows); the command in ``buf`` reaches the vehicle at
+    the start of its step. Each body feels the wind where it is at the start of the step; a
+    light target (tethered, balloon) the vehicle's rotor wash too. After each step, the
+    closest approach inside it in continuous time (relative motion linear over the step) and
+    the outcome; stop at an outcome. Return the number of steps taken."""
     vx = buf[S_VX : S_VX + X_SIZE]
-    lag = buf[S_LAG : S_LAG + 4]
+    lag = buf[S_LAG : S_LAG + L_SIZE]
     tc = buf[S_TC : S_TC + T_SIZE]
-    tx = buf[S_TX : S_TX + 6]
-    wx = buf[S_WX : S_WX + 6]
+    tx = buf[S_TX : S_TX + TX_SIZE]
     wc = buf[S_WC : S_WC + W_SIZE]
     cs = buf[S_CS : S_CS + C_SIZE]
     dt = buf[S_DT]
     kind = int(buf[S_KIND])
+    light = kind in (KIND_TETHERED, KIND_BALLOON)  # moved by the air
     two = cs[14]
     hit_r = cs[13]
     miss = cs[3]
     r0x, r0y, r0z = cs[0], cs[1], cs[2]
-    gusty = wc[3] > 0.0
     for k in range(k0, k0 + n):
         t = k * dt
+        wc[W_TIME] = t
         due = buf[S_CMD]
         if due >= 0.0 and due <= k:  # the command reaches the actuators
             c = S_CMD
@@ -480,16 +566,19 @@ def physics_steps(
                 vx, buf[c + 5], buf[c + 6], buf[c + 1], buf[c + 2], buf[c + 3], buf[c + 4]
             )
             buf[S_CMD] = -1.0
-        w0, w1, w2 = wind_at(wx, wc, vx[0], vx[1], vx[2])
+        w0, w1, w2 = wind_at(wc, modes, vx[0], vx[1], vx[2])
+        if light:
+            # the air at the target: the wind there and the wash of the vehicle's rotors
+            a0, a1, a2 = wind_at(wc, modes, tx[0], tx[1], tx[2])
+            b0, b1, b2 = rotor_wash_at(vx, lag, w0, w1, w2, tx[0], tx[1], tx[2])
+            a0, a1, a2 = a0 + b0, a1 + b1, a2 + b2
         fin = vehicle_step(vx, lag, dt, w0, w1, w2)
         px, py, pz = vx[0], vx[1], vx[2]
         vvx, vvy, vvz = vx[3], vx[4], vx[5]
-        if kind != 0:
-            w0, w1, w2 = wind_at(wx, wc, tx[0], tx[1], tx[2])
-            target_step(kind, tc, track, tx, t + dt, dt, w0, w1, w2)
-        if gusty:
-            gust_step(wx, wc, normals[ni, 0], normals[ni, 1], normals[ni, 2])
-            ni += 1
+        if light:
+            target_step(kind, tc, track, tx, t + dt, dt, a0, a1, a2)
+        elif kind != 0:
+            target_step(kind, tc, track, tx, t + dt, dt, 0.0, 0.0, 0.0)
         # closest approach inside the step just taken, then hit/miss, divergence and ground
         r1x, r1y, r1z = tx[0] - px, tx[1] - py, tx[2] - pz
         dist, s, c0, c1, c2, r0d, r1d = closest_approach(r0x, r0y, r0z, r1x, r1y, r1z)

@@ -66,7 +66,6 @@ _OUTCOMES = {
     OUTCOME_DIVERGED: Outcome.DIVERGED,
     OUTCOME_CRASHED: Outcome.CRASHED,
 }
-_NO_NORMALS = np.zeros((0, 3))  # the gusts' draws of a wind without gusts
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
 
 # After the pass the sortie goes on until the vehicle has recovered: slower than this, its
@@ -164,9 +163,12 @@ class Simulation:
         c = scenario.camera
         self.camera_model = true_camera(scenario)  # the camera as it is (the loop's: belief)
         self._R_BC = np.array(self.camera_model.R_BC)  # writable, as the kernels take it
-        self.vehicle = Multicopter(scenario.interceptor)
+        # the airframe's drawn drag (where the scenario gives a range) and a light target's
+        # buffet phase: their own streams
+        air_rng, target_rng = (np.random.default_rng(s) for s in ss.spawn(2))
+        self.vehicle = Multicopter(scenario.interceptor, air_rng)
         self.target = (
-            Target(scenario.target)
+            Target(scenario.target, target_rng)
             if target_track is None
             else TrackTarget(scenario.target, *target_track)
         )
@@ -335,9 +337,8 @@ class Simulation:
         the ``n`` steps."""
         cmds = self._commands
         buf = self._physics
-        wind = self.wind
+        modes = self.wind.modes
         track = self.target.track
-        normals, ni = _NO_NORMALS, 0
         k, end = k0, k0 + n
         while True:
             # commands reach the actuators after their latency: the latest one due now, else
@@ -353,11 +354,7 @@ class Simulation:
                 buf[S_CMD + 1], buf[S_CMD + 2], buf[S_CMD + 3] = rates[0], rates[1], rates[2]
                 buf[S_CMD + 4] = thrust
             m = cmds[0][0] - k if cmds and cmds[0][0] < end else end - k
-            if wind.gusty:
-                normals, ni = wind.prepare(self.dt_s, m)
-            taken = physics_steps(k, m, buf, track, normals, ni)
-            if wind.gusty:
-                wind.used(taken)
+            taken = physics_steps(k, m, buf, track, modes)
             k += taken
             code = buf[S_CS + C_OUTCOME]
             if code != 0.0:

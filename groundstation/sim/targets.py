@@ -14,6 +14,14 @@ and ``advance(t_s, dt_s, wind)`` that moves it to time ``t_s``.
   position (quadratic, C_d 0.47), with its added air mass; lift and mass from the physics
   unless the file gives them (scenario/physics.py). It starts leaning at rest in
   the mean wind where it floats and swings with the gusts
+- balloon: a free helium balloon, the same forces without the rope: it rises at the speed
+  where drag balances its net lift and drifts with the air
+
+A light target (tethered, balloon) feels the air where it is: the wind with its turbulence,
+the interceptor's rotor wash, and the side force of the vortices it sheds (buffet:
+C_L' 0.5 rho |v_a|^2 A sin(phase), across the relative wind, at St |v_a| / D, its starting
+phase drawn per sortie; docs/air.md). No motion goes below the ground (z = 0): a target that
+would stays on it, its vertical velocity no longer downward, its horizontal motion going on.
 """
 
 from __future__ import annotations
@@ -31,8 +39,11 @@ from .physics import (
     T_A0,
     T_AMP,
     T_ANCHOR,
+    T_AREA,
     T_CENTER,
     T_CIRCLE_W,
+    T_CL,
+    T_DIA,
     T_DRAG_K,
     T_LIFT,
     T_MASS,
@@ -43,8 +54,10 @@ from .physics import (
     T_SIN_W,
     T_SIZE,
     T_START,
+    T_STROUHAL,
     T_TWO,
     T_V0,
+    TX_SIZE,
     target_step,
 )
 
@@ -69,11 +82,12 @@ class Target:
     p = _slot(0)
     v = _slot(3)
 
-    def __init__(self, spec: TargetSpec) -> None:
+    def __init__(self, spec: TargetSpec, rng: np.random.Generator | None = None) -> None:
+        """``rng`` draws a light target's buffet phase (0 without it)."""
         self.spec = spec
         s = spec
         self.kind = MOTIONS.index(s.motion)
-        self.x = np.zeros(6)
+        self.x = np.zeros(TX_SIZE)
         self.track = np.zeros((0, 4))  # (time s, x, y, z m) rows of a recorded track
         self.p = list(s.position_m)
         self.v = [0.0, 0.0, 0.0] if s.motion in ("static", "takeoff") else list(s.velocity_m_s)
@@ -100,13 +114,18 @@ class Target:
             self.v = [v + a * w for v, a in zip(s.velocity_m_s, s.amplitude_m, strict=True)]
             c[T_AMP : T_AMP + 3] = s.amplitude_m
             c[T_SIN_W] = w
-        if s.motion == "tethered":
+        self.light = s.motion in ("tethered", "balloon")  # moved by the air
+        if self.light:
             self._anchor = (s.position_m[0], s.position_m[1], s.position_m[2] - s.tether_length_m)
-            self._drag_k = 0.5 * AIR_DENSITY_KG_M3 * s.drag_coefficient * math.pi * self.radius_m**2
+            area = math.pi * self.radius_m**2
+            self._drag_k = 0.5 * AIR_DENSITY_KG_M3 * s.drag_coefficient * area
             self.net_lift_n, self.mass_kg = balloon_lift_and_mass(s)
             c[T_ANCHOR : T_ANCHOR + 3] = self._anchor
             c[T_DRAG_K], c[T_LIFT], c[T_MASS] = self._drag_k, self.net_lift_n, self.mass_kg
             c[T_ROPE] = s.tether_length_m
+            c[T_CL], c[T_STROUHAL] = s.buffet_lift_coefficient, s.strouhal_number
+            c[T_DIA], c[T_AREA] = s.diameter_m, area
+            self.x[6] = 0.0 if rng is None else float(rng.uniform(0.0, 2.0 * math.pi))
         self.params = c
 
     def settle_in_wind(self, wind_at: Callable[[list[float]], Sequence[float]]) -> None:
@@ -143,6 +162,7 @@ class TrackTarget(Target):
 
     def __init__(self, spec: TargetSpec, times_s: list[float], positions_m: list) -> None:
         super().__init__(spec)
+        self.light = False
         if len(times_s) != len(positions_m):
             raise ValueError("a target track needs one position per time")
         rows: list[tuple[float, ...]] = []

@@ -1,6 +1,8 @@
 """Rigid-body multicopter with PX4-like inner loops: body rates follow the commanded rates
-through a first-order lag (rate-limited per axis), collective thrust through another; linear
-drag on the air-relative velocity. World ENU, body FLU, quaternion (w, x, y, z) body -> world.
+through a first-order lag (rate-limited per axis), collective thrust through another; body
+(quadratic) and rotor (induced, in the rotor plane, proportional to thrust) drag on the
+air-relative velocity (docs/air.md). World ENU, body FLU, quaternion (w, x, y, z) body ->
+world.
 
 The step is a compiled kernel (:func:`.physics.vehicle_step`) over the state array
 :attr:`Multicopter.x`: the simulator's physics kernel runs it for every step between two
@@ -17,6 +19,7 @@ from onboard.datatypes import GRAVITY_M_S2, VehicleParams, VehicleState
 from onboard.geometry import attitude_from_yaw_pitch_roll, rotmat_to_quat
 
 from ..scenario import InterceptorSpec
+from ..scenario.physics import AIR_DENSITY_KG_M3
 from .physics import (
     X_ACC,
     X_CMD_THRUST,
@@ -31,6 +34,28 @@ from .physics import (
     vehicle_command,
     vehicle_step,
 )
+
+DRAG_REFERENCE_SPEED_M_S = 10.0  # a drawn drag is its equivalent linear value at this speed
+ROTOR_SHARE_RANGE = (0.3, 0.7)  # a drawn drag's rotor part, of the whole at the reference speed
+
+
+def airframe_drag(
+    spec: InterceptorSpec, rng: np.random.Generator | None
+) -> tuple[float, float, float]:
+    """(linear N s/m, body C_d A m^2, rotor N s/m at hover thrust) of one sortie: the spec's
+    values, or where it gives a range (``drag_max_n_s_m`` > 0) a draw: the equivalent drag at
+    :data:`DRAG_REFERENCE_SPEED_M_S` uniform in [min, max], its rotor share uniform in
+    :data:`ROTOR_SHARE_RANGE`, the rest quadratic body drag (the range's middle and an even
+    split without ``rng``)."""
+    if not spec.drag_max_n_s_m > 0.0:
+        return spec.drag_n_s_m, spec.drag_area_m2, spec.rotor_drag_n_s_m
+    lo, hi = spec.drag_min_n_s_m, spec.drag_max_n_s_m
+    if rng is None:
+        total, share = 0.5 * (lo + hi), 0.5 * sum(ROTOR_SHARE_RANGE)
+    else:
+        total, share = float(rng.uniform(lo, hi)), float(rng.uniform(*ROTOR_SHARE_RANGE))
+    body_area = (1.0 - share) * total / (0.5 * AIR_DENSITY_KG_M3 * DRAG_REFERENCE_SPEED_M_S)
+    return 0.0, body_area, share * total
 
 
 def _slot(i: int, n: int) -> property:
@@ -69,8 +94,11 @@ class Multicopter:
     thrust_n = _scalar(X_THRUST)
     cmd_thrust_n = _scalar(X_CMD_THRUST)
 
-    def __init__(self, spec: InterceptorSpec) -> None:
+    def __init__(self, spec: InterceptorSpec, rng: np.random.Generator | None = None) -> None:
+        """``rng``: draws this sortie's airframe drag where the spec gives a range
+        (``drag_max_n_s_m`` > 0); without it the range's middle with an even split."""
         self.spec = spec
+        self.drag_n_s_m, self.drag_area_m2, self.rotor_drag_n_s_m = airframe_drag(spec, rng)
         self.params = VehicleParams(
             mass_kg=spec.mass_kg, max_thrust_n=spec.thrust_to_weight * spec.mass_kg * GRAVITY_M_S2
         )
@@ -90,15 +118,25 @@ class Multicopter:
         if dt != self._lag_dt:
             s = self.spec
             self._lag_dt = dt
+            hover_n = s.mass_kg * GRAVITY_M_S2
             self._lag = np.array(
                 [
                     1.0 - math.exp(-dt / s.rate_time_constant_s),
                     1.0 - math.exp(-dt / s.thrust_time_constant_s),
-                    s.drag_n_s_m / s.mass_kg,
+                    self.drag_n_s_m / s.mass_kg,
                     s.mass_kg,
+                    0.5 * AIR_DENSITY_KG_M3 * self.drag_area_m2 / s.mass_kg,
+                    self.rotor_drag_n_s_m / (s.mass_kg * hover_n),
+                    s.rotor_disc_area_m2,
                 ]
             )
         return self._lag
+
+    def drag_equivalent_n_s_m(self, airspeed_m_s: float = DRAG_REFERENCE_SPEED_M_S) -> float:
+        """The airframe's drag in level flight at hover thrust at ``airspeed_m_s`` (m/s), over
+        that speed (N s/m): what one linear coefficient would stand for there."""
+        body = 0.5 * AIR_DENSITY_KG_M3 * self.drag_area_m2 * airspeed_m_s
+        return self.drag_n_s_m + self.rotor_drag_n_s_m + body
 
     def command(self, body_rates_flu_rad_s: np.ndarray, thrust_normalised: float) -> None:
         """Body rates (rad/s FLU, clamped to the rate limit per axis) and normalised thrust

@@ -1,28 +1,33 @@
-"""Wind, evaluated at each body's position (vehicle and balloon): a seeded gust process times a
-spatial profile.
+"""Wind, evaluated at each body's position (vehicle and light target): a mean, a turbulence
+field that varies in space and time, and a spatial profile (docs/air.md).
 
-Gusts (both models): each axis a first-order Gauss-Markov (Ornstein-Uhlenbeck) process of
-standard deviation ``gust_m_s`` (vertical at 30 %) and correlation time
-``gust_time_constant_s``: the first-order form of the Dryden spectrum (MIL-F-8785C; MIL-HDBK-
-1797 §3.7), whose time constant is the turbulence length scale over the airspeed. One gust
-vector for the whole scene (the scene is small against the length scales), started in its
-stationary distribution. The defaults of the outdoor scenarios follow MIL-F-8785C's low-
-altitude model for light turbulence at h = 5 m with a 3 m/s wind at 6 m (W20): sigma_u =
-0.1 W20 / (0.177 + 0.000823 h[ft])^0.4 = 0.58 m/s, L_u = h / (0.177 + 0.000823 h)^1.2 = 37 m,
-so L_u / V = 5 s at the interceptor's 7 m/s airspeed. (The same model gives sigma_w / sigma_u
-about 0.5 at 5 m; the vertical share here stays at the earlier 30 %.)
+Turbulence (both models): a frozen field of von Kármán turbulence carried by the mean wind
+(Taylor's hypothesis), the same field for every body, so that two points near each other feel
+correlated gusts and two far apart independent ones. The field is a sum of ``TURBULENCE_MODES``
+random Fourier modes (Kraichnan, Phys. Fluids 13, 1970): wavenumbers drawn from the von
+Kármán energy spectrum E(k) ~ (k l)^4 / (1 + (k l)^2)^(17/6) with l = 1.339 L, L the
+longitudinal integral length scale (MIL-HDBK-1797 §3.7's von Kármán form; MIL-F-8785C), each
+mode's amplitude across its wavenumber (a divergence-free field), then each axis scaled to the
+standard deviation ``gust_m_s`` (vertical at ``VERTICAL_GUST_RATIO``) exactly over space. L is
+``turbulence_length_m``, or where that is 0 ``gust_time_constant_s`` times the mean wind's
+speed (at least 1 m/s): the time a gust takes to pass. The field is seeded by the sortie.
+
+The defaults of the outdoor scenarios follow MIL-F-8785C's low-altitude model for light
+turbulence at h = 5 m with a 3 m/s wind at 6 m (W20): sigma_u = 0.1 W20 / (0.177 + 0.000823
+h[ft])^0.4 = 0.58 m/s, L_u = h / (0.177 + 0.000823 h)^1.2 = 37 m. (The same model gives
+sigma_w / sigma_u about 0.5 at 5 m; the vertical share here stays at 30 %.)
 
 Models (``wind.model``):
 
-- ``uniform``: ``mean_m_s`` + gust everywhere (outdoor).
+- ``uniform``: ``mean_m_s`` + turbulence everywhere (outdoor).
 - ``jet``: a fan's round turbulent jet (indoor, the paper's §V-B fans). The wind at p is
-  ``f(p) (mean_m_s + gust)``: the direction is the jet axis (``mean_m_s``'s direction through
-  ``jet_source_m``), the gusts keep a constant turbulence intensity, and ``mean_m_s`` is the
-  centreline speed at the reference point's distance from the fan (the balloon's rest
-  position: the shipped scenarios put it on the axis), measured there as the paper did ("wind
-  speed at the balloon's location was measured using an anemometer when the balloon was
-  stationary"). f(p) = U(x, r) / U_c(x_ref) with x the distance along the axis from the fan,
-  r from the axis, D = ``jet_diameter_m``:
+  ``f(p) (mean_m_s + turbulence(p))``: the direction is the jet axis (``mean_m_s``'s
+  direction through ``jet_source_m``), the turbulence keeps a constant intensity, and
+  ``mean_m_s`` is the centreline speed at the reference point's distance from the fan (the
+  balloon's rest position: the shipped scenarios put it on the axis), measured there as the
+  paper did ("wind speed at the balloon's location was measured using an anemometer when the
+  balloon was stationary"). f(p) = U(x, r) / U_c(x_ref) with x the distance along the axis
+  from the fan, r from the axis, D = ``jet_diameter_m``:
 
       U(x, r) = U_c(x) exp(-ln 2 (r / r_half(x))^2),  x > 0;   0 behind the fan
       U_c(x) = U_0 min(1, B D / x),  r_half(x) = max(D / 2, S x)
@@ -44,24 +49,35 @@ from ..scenario import WindSpec
 from .physics import (
     JET_DECAY_B,
     JET_SPREAD_S,
-    W_A,
-    W_B,
+    M_SIZE,
     W_DIA,
     W_JET,
     W_MEAN,
+    W_NMODES,
     W_REF,
     W_SIGMA,
     W_SIZE,
     W_SOURCE,
-    gust_step,
+    W_TIME,
     jet_factor,
     wind_at,
 )
 
-__all__ = ["JET_DECAY_B", "JET_SPREAD_S", "VERTICAL_GUST_RATIO", "Wind", "jet_profile"]
+__all__ = [
+    "JET_DECAY_B",
+    "JET_SPREAD_S",
+    "TURBULENCE_MODES",
+    "VERTICAL_GUST_RATIO",
+    "VON_KARMAN_SCALE",
+    "Wind",
+    "jet_profile",
+    "turbulence_modes",
+]
 
 VERTICAL_GUST_RATIO = 0.3
-_BLOCK = 256  # standard normals drawn per call
+TURBULENCE_MODES = 96
+VON_KARMAN_SCALE = 1.339  # l = 1.339 L in the von Karman spectra (MIL-HDBK-1797)
+_NO_MODES = np.zeros((0, M_SIZE))
 
 
 def jet_profile(spec: WindSpec, p: tuple[float, float, float], on_axis: bool = False) -> float:
@@ -84,10 +100,42 @@ def jet_profile(spec: WindSpec, p: tuple[float, float, float], on_axis: bool = F
     )
 
 
+def turbulence_modes(
+    rng: np.random.Generator, length_m: float, n: int = TURBULENCE_MODES
+) -> np.ndarray:
+    """``n`` random Fourier modes (M_* rows: wavenumber rad/m, cosine and sine amplitudes) of
+    isotropic von Kármán turbulence of longitudinal integral length ``length_m`` (m), each
+    axis of unit variance over space. Wavenumbers by stratified sampling of the energy
+    spectrum (one draw in each of n equal-probability bands), directions uniform, amplitudes
+    across the wavenumber."""
+    if not (math.isfinite(length_m) and length_m > 0.0):
+        raise ValueError(f"turbulence length {length_m!r} m must be positive")
+    ell = VON_KARMAN_SCALE * length_m
+    x = np.geomspace(1e-4, 1e4, 8001)  # k l
+    pdf = x**4 / (1.0 + x * x) ** (17.0 / 6.0)
+    cdf = np.concatenate(([0.0], np.cumsum(0.5 * (pdf[1:] + pdf[:-1]) * np.diff(x))))
+    cdf /= cdf[-1]
+    u = (np.arange(n) + rng.uniform(size=n)) / n
+    k = np.interp(u, cdf, x) / ell
+    khat = rng.standard_normal((n, 3))
+    khat /= np.linalg.norm(khat, axis=1, keepdims=True)
+    amps = []
+    for _ in range(2):  # cosine, sine: random directions across the wavenumber
+        a = rng.standard_normal((n, 3))
+        a -= np.sum(a * khat, axis=1, keepdims=True) * khat
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+        amps.append(a)
+    c, s = amps
+    # each axis's variance over space is sum(c_i^2 + s_i^2) / 2: make it exactly 1
+    var = 0.5 * np.sum(c * c + s * s, axis=0)
+    c, s = c / np.sqrt(var), s / np.sqrt(var)
+    return np.ascontiguousarray(np.hstack((khat * k[:, None], c, s)))
+
+
 class Wind:
-    """``at(p)``: the wind (m/s, ENU) at a point now; ``step(dt)`` advances the gusts. The
-    state (mean + gust now, the gust) is the array :attr:`x`, the constants :attr:`params`
-    (:mod:`.physics`' W_* layout); the gusts' standard normals come from :meth:`normals`."""
+    """``at(p)``: the wind (m/s, ENU) at a point now; ``step(dt)`` advances time. The
+    constants are the array :attr:`params` (:mod:`.physics`' W_* layout, the time now in it),
+    the turbulence the array :attr:`modes` (M_* rows; none without gusts)."""
 
     def __init__(
         self,
@@ -96,41 +144,37 @@ class Wind:
         reference_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         self.spec = spec
-        self._rng = rng
         g = spec.gust_m_s
         self._sigma = (g, g, VERTICAL_GUST_RATIO * g)
         self._jet = spec.model == "jet"
-        self.uniform = not self._jet  # the same wind at every point
-        self.gusty = g > 0.0  # step() changes it
+        self.reference_m = tuple(float(c) for c in reference_m)
+        self.uniform = not self._jet and g == 0.0  # the same wind at every point
+        self.gusty = g > 0.0  # the wind changes in time
         self._ref_profile = jet_profile(spec, reference_m, on_axis=True) if self._jet else 1.0
         if self._jet and not self._ref_profile > 0.0:
             raise ValueError("the fan jet does not reach the reference point")
+        mean_speed = math.sqrt(sum(c * c for c in spec.mean_m_s))
+        self.length_m = spec.turbulence_length_m or spec.gust_time_constant_s * max(mean_speed, 1.0)
+        self.modes = turbulence_modes(rng, self.length_m) if g > 0.0 else _NO_MODES
         c = np.zeros(W_SIZE)
         c[W_MEAN : W_MEAN + 3] = spec.mean_m_s
         c[W_SIGMA : W_SIGMA + 3] = self._sigma
+        c[W_TIME] = 0.0
+        c[W_NMODES] = len(self.modes)
         c[W_JET] = 1.0 if self._jet else 0.0
         c[W_REF] = self._ref_profile
         c[W_SOURCE : W_SOURCE + 3] = spec.jet_source_m
         c[W_DIA] = spec.jet_diameter_m
         self.params = c
-        self.x = np.zeros(6)
-        self.x[0:3] = spec.mean_m_s  # mean + gust at the reference point
-        if g > 0.0:
-            # start in the stationary distribution, not at zero
-            m = spec.mean_m_s
-            gust = [s * float(n) for s, n in zip(self._sigma, rng.standard_normal(3), strict=True)]
-            self.x[3:6] = gust
-            self.x[0:3] = (m[0] + gust[0], m[1] + gust[1], m[2] + gust[2])
-        # the gusts' draws, the stream continued a block at a time (the sequence does not
-        # depend on the block)
-        self._normals = np.zeros((0, 3))
-        self._next = 0  # the row of _normals the next step uses
-        self._dt_s = -1.0
+
+    @property
+    def time_s(self) -> float:
+        return float(self.params[W_TIME])
 
     @property
     def velocity_m_s(self) -> tuple[float, float, float]:
-        """Mean + gust at the reference point (m/s ENU)."""
-        return tuple(self.x[0:3].tolist())
+        """Mean + turbulence at the reference point now (m/s ENU)."""
+        return self.at(self.reference_m)
 
     def scale_at(self, p) -> float:
         """The profile factor at ``p``: 1 for uniform wind, U(p) / U(reference) for the jet."""
@@ -140,38 +184,14 @@ class Wind:
 
     def at(self, p) -> tuple[float, float, float]:
         """The wind now at ``p`` (m, ENU)."""
-        if not self._jet:
-            return self.velocity_m_s
-        return wind_at(self.x, self.params, float(p[0]), float(p[1]), float(p[2]))
+        return wind_at(self.params, self.modes, float(p[0]), float(p[1]), float(p[2]))
 
     def mean_at(self, p) -> tuple[float, float, float]:
-        """The mean wind (no gust) at ``p``."""
+        """The mean wind (no turbulence) at ``p``."""
         f = self.scale_at(p)
         m = self.spec.mean_m_s
         return (f * m[0], f * m[1], f * m[2])
 
-    def prepare(self, dt: float, n: int) -> tuple[np.ndarray, int]:
-        """Make ready ``n`` gust steps of ``dt`` (s): the factors for the step size, and
-        standard normals for ``n`` steps from the returned row of the returned array (call
-        :meth:`used` with the steps taken)."""
-        if dt != self._dt_s:  # the factors, once per step size
-            self._dt_s = dt
-            a = math.exp(-dt / self.spec.gust_time_constant_s)
-            self.params[W_A], self.params[W_B] = a, math.sqrt(1.0 - a * a)
-        i = self._next
-        if i + n > len(self._normals):
-            more = self._rng.standard_normal((max(_BLOCK, n), 3))
-            self._normals = np.concatenate((self._normals[i:], more))
-            self._next = i = 0
-        return self._normals, i
-
-    def used(self, n: int) -> None:
-        """``n`` of the prepared steps were taken."""
-        self._next += n
-
     def step(self, dt: float) -> None:
-        if not self.gusty:
-            return
-        normals, i = self.prepare(dt, 1)
-        gust_step(self.x, self.params, normals[i, 0], normals[i, 1], normals[i, 2])
-        self._next = i + 1
+        """Advance the time by ``dt`` (s)."""
+        self.params[W_TIME] += dt

@@ -1,5 +1,5 @@
 """The SITL camera: a TCP server on loopback that streams rendered frames, each with its
-capture time and its age at sending (the protocol is in :mod:`onboard.runtime.camera`).
+capture time and its age at sending (the protocol is in :mod:`onboard.link.sitl_camera`).
 
 Each client gets its own sender thread and a two-frame queue, so a slow or stalled client
 loses old frames and never slows the simulation. Nothing a client sends is read as data.
@@ -14,7 +14,7 @@ import threading
 
 import numpy as np
 
-from onboard.runtime.camera import SITL_HEADER, SITL_MAGIC
+from onboard.link.sitl_camera import pack_header
 
 
 class CameraServer:
@@ -84,12 +84,7 @@ class CameraServer:
         h, w = image_bgr.shape[:2]
         self._seq += 1
         payload = np.ascontiguousarray(image_bgr, dtype=np.uint8).tobytes()
-        data = (
-            SITL_HEADER.pack(
-                SITL_MAGIC, self._seq & 0xFFFFFFFF, w, h, len(payload), capture_time_s, age_s
-            )
-            + payload
-        )
+        data = pack_header(self._seq, w, h, capture_time_s, age_s) + payload
         with self._lock:
             clients = list(self._clients)
         for _, q in clients:

@@ -45,12 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..datatypes import GRAVITY_M_S2, SharedWhenCopied
+from ..datatypes import GRAVITY_M_S2
 from ..jit import kernel
 
 
 @dataclass(frozen=True, slots=True)
-class DisturbanceObserverConfig(SharedWhenCopied):
+class DisturbanceObserverConfig:
     """Observer settings: ``bandwidth_rad_s`` w (0 disables: d^ = 0), the motors' thrust lag
     (s), the clamp on |d^| (m/s^2), the velocity innovation treated as a reset (m/s), the
     cold-start factor (see the module doc) and the airframe's linear drag per unit mass

@@ -33,6 +33,9 @@ class GuidanceInput:
     range_m: float = math.nan
     target_vel_enu_m_s: np.ndarray | None = None
     target_vel_var_m2_s2: float = math.nan
+    # the disturbance observer's d^ (m/s^2, ENU; zero when it is off): the speed ramp
+    # overcomes the believed airframe drag (gains.k_drag) plus d^'s along-track part
+    disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer

@@ -36,6 +36,23 @@ def ramped_speed_floats(speed: float, k_brake: float, v_max: float, k_a: float, 
     return speed + a_t * dt
 
 
+@kernel(
+    "float64(float64, float64, float64, float64, float64, float64, float64, float64)", uses=_LOS
+)
+def drag_feedforward_floats(
+    speed: float, u0: float, u1: float, u2: float, d0: float, d1: float, d2: float, k_drag: float
+) -> float:
+    """The along-track acceleration (m/s^2, >= 0) the speed ramp adds so that the vehicle
+    gains speed at a_t against drag (eq. 14 with drag): the drag the loop believes its
+    airframe has in still air, k_drag |v| (an operator parameter, PX4's EKF2_MCOEF), less the
+    disturbance observer's estimate d^ along the unit velocity u (d^ is what the observer's
+    model, which holds that same drag, leaves unexplained: drag beyond the believed one, a
+    head- or tailwind). The observer's part acts as the speed loop's integral: a steady drag
+    error leaves no steady speed error. Never negative: a tailwind does not brake."""
+    a = k_drag * speed - (d0 * u0 + d1 * u1 + d2 * u2)
+    return _max(a, 0.0)
+
+
 def accel_toward_velocity(v_d: np.ndarray, v: np.ndarray, gains: Gains, dt_s: float):
     """a_d = (v_d - v) / dt, saturated to a_max (paper eq. 17)."""
     return saturate_norm((v_d - v) / dt_s, gains.a_max)
@@ -54,8 +71,8 @@ def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -
 
 
 def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
-    """Field-of-view guard on a desired acceleration (not in the paper; README "Field of
-    view").
+    """Field-of-view guard on a desired acceleration (not in the paper; docs/core.md, "Field
+    of view").
 
     A thrust-vectoring vehicle flies a forward acceleration a_f by pitching its nose down by
     atan(a_f / (g + a_z)) (eqs. 16, 18), and the strapdown camera pitches with it: the speed
@@ -239,7 +256,7 @@ def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     a0, a1, a2, sigma_y, sigma_z, hovering = png_command(
         inp.dt_s, _f3(inp.los_enu), inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
         _f3(inp.velocity_enu_m_s), inp.R_WC, inp.fov_edges_rad, inp.range_m,
-        inp.target_vel_enu_m_s, inp.target_vel_var_m2_s2, gains,
+        inp.target_vel_enu_m_s, inp.target_vel_var_m2_s2, gains, inp.disturbance_enu_m_s2,
     )  # fmt: skip
     return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, hovering)
 
@@ -257,10 +274,12 @@ def png_command(
     target_vel_enu_m_s: np.ndarray | None,
     target_vel_var_m2_s2: float,
     gains: Gains,
+    disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> tuple[float, float, float, float, float, bool]:
-    """:func:`png_law` from floats (:class:`GuidanceInput`'s fields, the LOS and the velocity
-    as three floats each; the loop's tick calls it so): (a_d ENU m/s^2 as three floats,
-    sigma_y, sigma_z (nan while hovering), hovering)."""
+    """:func:`png_law` from floats (:class:`GuidanceInput`'s fields, the LOS, the velocity
+    and d^ as three floats each; the loop's tick calls it so): (a_d ENU m/s^2 as three
+    floats, sigma_y, sigma_z (nan while hovering), hovering)."""
+    e0, e1, e2 = disturbance_enu_m_s2
     l0, l1, l2 = los_enu
     v0, v1, v2 = velocity_enu_m_s
     vt = target_vel_enu_m_s
@@ -270,7 +289,7 @@ def png_command(
     a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
         dt_s, l0, l1, l2, los_elev_rad, d_los_elev_rad, d_los_azim_rad, v0, v1, v2,
         float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom, range_m, vt is not None,
-        t0, t1, t2, target_vel_var_m2_s2, gains.packed,
+        t0, t1, t2, target_vel_var_m2_s2, e0, e1, e2, gains.packed,
     )  # fmt: skip
     if hovering != 0.0:  # the angles are math.nan itself (telemetry compares equal)
         return a0, a1, a2, math.nan, math.nan, True
@@ -280,7 +299,7 @@ def png_command(
 @kernel(
     "UniTuple(float64, 6)(float64, float64, float64, float64, float64, float64, float64, "
     "float64, float64, float64, float64, float64, float64, float64, float64, float64, boolean, "
-    "float64, float64, float64, float64, float64[::1])",
+    "float64, float64, float64, float64, float64, float64, float64, float64[::1])",
     uses=_LOS,
 )
 def png_floats(
@@ -305,13 +324,21 @@ def png_floats(
     t1: float,
     t2: float,
     var_v: float,
+    e0: float,
+    e1: float,
+    e2: float,
     G: np.ndarray,
 ) -> tuple[float, float, float, float, float, float]:
     """:func:`png_law` in floats (compiled): the hold dt (s), the LOS n_t and its elevation
     q_y, the LOS change (dq_y, dq_z), the velocity v, the camera axis (R_WC[:, 2]), the
-    image's (top, bottom) edges, the DKF's range and target velocity (with its variance) and
-    the gains ``G`` (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when
-    hovering else 0)."""
+    image's (top, bottom) edges, the DKF's range and target velocity (with its variance), the
+    disturbance observer's d^ (e0, e1, e2) and the gains ``G``
+    (:func:`~onboard.gains.pack_gains`); returns (a_d, sigma_y, sigma_z, 1 when hovering
+    else 0).
+
+    The speed ramp's tangential acceleration is net of drag: the along-track drag feed-forward
+    (:func:`drag_feedforward_floats`) is added after eq. 17's saturation, so that PN keeps its
+    whole a_max across the velocity, and before the FOV guard, which sees the whole pitch."""
     v_min, k_a, a_max = G[GainIndex.v_min], G[GainIndex.k_a], G[GainIndex.a_max]
     K_y, K_z, tau_zem, r_mid = (
         G[GainIndex.K_y],
@@ -322,6 +349,7 @@ def png_floats(
     pur_zone, k_pur = math.radians(G[GainIndex.pur_zone]), G[GainIndex.k_pur]
     k_brake, v_max = G[GainIndex.k_brake], G[GainIndex.v_max]
     fov_margin = math.radians(G[GainIndex.fov_margin])
+    k_drag = G[GainIndex.k_drag]
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if speed < v_min:
         # below v_min the velocity angles are undefined: accelerate along the LOS (§3.4)
@@ -331,7 +359,7 @@ def png_floats(
     u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
     sigma_y, sigma_z = angles_floats(u0, u1, u2)
     # far away PN's LOS-rate term is mostly noise (v/R small): it fades out as the midcourse
-    # ZEM-nulling term fades in (README "Range")
+    # ZEM-nulling term fades in (docs/core.md, "Midcourse ZEM nulling")
     w_mid = midcourse_floats(range_m, tau_zem, r_mid)
     pn = 1.0 - w_mid
     sigma_yd = sigma_y + pn * K_y * dq_y
@@ -350,7 +378,10 @@ def png_floats(
         k = w_mid * dt
         z0, z1, z2 = zem_floats(v0, v1, v2, has_vt, t0, t1, t2, var_v, l0, l1, l2, tau_zem)
         d0, d1, d2 = d0 + k * z0, d1 + k * z1, d2 + k * z2
-    # eq. 17, saturated, then the FOV guard
+    # eq. 17, saturated, the drag feed-forward along the velocity, then the FOV guard
     a0, a1, a2 = saturate3((d0 - v0) / dt, (d1 - v1) / dt, (d2 - v2) / dt, a_max)
-    _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, a_max)
+    a_drag = _min(drag_feedforward_floats(speed, u0, u1, u2, e0, e1, e2, k_drag), a_max)
+    a0, a1, a2 = a0 + a_drag * u0, a1 + a_drag * u1, a2 + a_drag * u2
+    lim = a_max + a_drag
+    _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, lim)
     return a0, a1, a2, sigma_y, sigma_z, 0.0

@@ -1,5 +1,5 @@
-"""Track loss, re-acquisition and search (not in the paper; README "Track loss, re-acquisition
-and search").
+"""Track loss, re-acquisition and search (not in the paper; docs/core.md, "Track loss,
+re-acquisition and search").
 
 After the DKF's track goes stale (no accepted detection for ``PRG_TGT_LOST``) the loop walks
 down a ladder, each rung bounded in time, and climbs back to tracking as soon as a detection

@@ -332,7 +332,7 @@ class DelayedKalmanFilter:
 
     def _carried(self, m: _Meas) -> tuple[tuple, np.ndarray] | None:
         """The state and covariance to restart a track from at m (capture time m.t), keeping
-        what the old track still knows (DESIGN.md §4; README "Track loss"), or None when it
+        what the old track still knows (DESIGN.md §4; docs/core.md, "Track loss"), or None when it
         knows nothing useful. The image point is m's. The target velocity is the old track's,
         its covariance grown by the random walk over the time without measurements
         (P_vv + q_v dt I), if no component is vaguer than the first-detection prior. While the

@@ -35,14 +35,14 @@ Without size the depth starts from ``init_range_m`` with a wide prior.
 Compiled (``onboard.jit``): the buffer is a window of preallocated arrays (one row per
 prediction: time, inputs, x, F, Q, P and whether x and P are held), and a prediction (with the
 oldest rows leaving), a fusion with its replay, a covariance propagation and the update are
-each one numba kernel over those arrays, compiled at import. The kernels are the filter's only
-implementation (``PEREGRINE_JIT=0`` runs them as Python). Their scalar arithmetic is Python's,
-operation for operation; their matrix products are numpy's expressions, which numba hands to
-OpenBLAS (scipy's build of it; numpy calls its own build), and on the filter's shapes the two
-give numpy's numbers to the bit
-(tests/test_dkf_kernels.py; ``a ** two`` with
-the exponent from the parameter array is libm's pow as Python's ``a ** 2`` is, where a
-literal 2 would compile to a * a, which differs in the last bit for ~1 in 1000 a).
+each one kernel over those arrays, compiled at import when the JIT is on and plain Python
+otherwise. The kernels are the filter's only implementation; their readable statement is
+:mod:`.dkf_reference`. Their scalar arithmetic is Python's, operation for operation; their
+matrix products are numpy's expressions, which numba hands to OpenBLAS (scipy's build of it;
+numpy calls its own build), and on the filter's shapes the two give numpy's numbers to the
+bit (tests/test_dkf_kernels.py; ``a ** two`` with the exponent from the parameter array is
+libm's pow as Python's ``a ** 2`` is, where a literal 2 would compile to a * a, which differs
+in the last bit for ~1 in 1000 a).
 """
 
 from __future__ import annotations

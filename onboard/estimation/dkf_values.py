@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera_model import CameraModel
-from ..datatypes import Detection, SharedWhenCopied
+from ..datatypes import Detection
 from .dkf_kernels import _MAX_ABS_N
 
 _F64 = np.dtype(np.float64)  # the descriptor of ordinary float arrays
@@ -68,7 +68,7 @@ _NO_MATRIX = np.empty((0, 0))  # "not given" for _predict's attitude
 
 
 @dataclass(frozen=True)
-class DkfConfig(SharedWhenCopied):
+class DkfConfig:
     meas_noise_px: float = 1.5  # detector noise on the centre, 1 sigma
     size_noise_px: float = 0.7  # detector noise on the apparent radius, 1 sigma
     size_noise_rel: float = 0.15  # relative error of the radius model (diameter, blob shape)

@@ -47,23 +47,6 @@ def _libc_sendto() -> Callable[..., int] | None:
 _SENDTO = _libc_sendto()
 
 
-def _libc_recv() -> Callable[..., int] | None:
-    """libc's ``recv`` as a function that holds the GIL while it runs (with ``MSG_DONTWAIT``
-    it never waits), or None where there is none."""
-    if _SENDTO is None:
-        return None
-    try:
-        fn = ctypes.PyDLL(None, use_errno=True).recv
-    except (OSError, AttributeError):
-        return None
-    fn.argtypes = (ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int)
-    fn.restype = ctypes.c_ssize_t
-    return fn
-
-
-_RECV = _libc_recv()
-
-
 def sockaddr_in(host: str, port: int) -> bytes:
     """Linux's ``struct sockaddr_in`` for an IPv4 address and port (16 bytes). ValueError
     for anything else (a hostname, IPv6, a port out of range)."""
@@ -111,43 +94,6 @@ class DatagramSender:
             self.last_errno = ctypes.get_errno()
             return False
         return True
-
-
-class RehearsalSink:
-    """A UDP socket of the process's own on 127.0.0.1 (a port the system picks) to which the
-    control thread rehearses its setpoint's send just before the real one
-    (``MavLink.rehearse_send``; onboard/runtime/rehearsal.py): the same system call on the same
-    socket, so the call and the kernel's UDP and IP layers are in the caches when the setpoint
-    goes to PX4 (all of its path when PX4 is on loopback too, as the SITL is). Nothing sent
-    here reaches the vehicle; what arrives is read and dropped in the slack (:meth:`drain`,
-    libc's ``recv`` with the GIL held, as the send)."""
-
-    def __init__(self) -> None:
-        if _RECV is None:
-            raise OSError("no libc recv to drain a rehearsal socket with")
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            sock.bind(("127.0.0.1", 0))
-            self.sockaddr = sockaddr_in(*sock.getsockname())
-        except OSError:
-            sock.close()
-            raise
-        self._sock = sock
-        self._buf = ctypes.create_string_buffer(2048)
-        self.received = 0  # datagrams read and dropped
-
-    def drain(self) -> int:
-        """Read and drop what has arrived (never waits, never raises); returns how many
-        datagrams."""
-        fd = self._sock.fileno()
-        n = 0
-        while fd >= 0 and _RECV(fd, self._buf, len(self._buf), _MSG_DONTWAIT) >= 0:
-            n += 1
-        self.received += n
-        return n
-
-    def close(self) -> None:
-        self._sock.close()
 
 
 def sender_for(sock: socket.socket) -> DatagramSender | None:

@@ -22,6 +22,7 @@ import threading
 import time
 from collections import Counter, deque
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,7 +37,11 @@ from ..constants import (  # declared there, imported from here too
     PX4_SUB_AUTO_LOITER,
 )
 from ..geometry import quat_to_rotmat, rotmat_to_quat
-from .datagram import DatagramSender, RehearsalSink, sender_for
+from .datagram import DatagramSender, sender_for
+
+if TYPE_CHECKING:
+    from .frame_encoder import FrameEncoder
+    from .tlog import TlogWriter
 
 mavutil.set_dialect("common")
 mavlink = mavutil.mavlink
@@ -166,7 +171,6 @@ class MavLink:
             raise LinkError(f"cannot open MAVLink link {url!r}: {exc}") from None
         self.conn.first_byte = False  # never let a stray 0xFE switch us to MAVLink 1
         self._datagrams: DatagramSender | None = None  # send_fields's sends, the GIL held
-        self._rehearsal_sink: RehearsalSink | None = None  # prepare_send_rehearsal's
         if isinstance(self.conn, mavutil.mavudp):  # the kernel stamps each datagram's arrival
             with contextlib.suppress(AttributeError, OSError):
                 self.conn.port.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -384,39 +388,6 @@ class MavLink:
             return next(iter(clients)) if len(clients) == 1 else None  # else pymavlink's pick
         return None if conn.broadcast else conn.destination_addr
 
-    def prepare_send_rehearsal(self) -> str | None:
-        """Open the socket :meth:`rehearse_send` sends to (a :class:`RehearsalSink`), before
-        the loop runs. Returns why it could not (the setpoint then goes out unrehearsed), or
-        None (done, or nothing to do: not a UDP link)."""
-        if self._datagrams is None or self._rehearsal_sink is not None:
-            return None
-        try:
-            self._rehearsal_sink = RehearsalSink()
-        except OSError as exc:
-            return f"setpoint send not rehearsed: no socket of our own on 127.0.0.1 ({exc})"
-        return None
-
-    def rehearse_send(self, frame: bytes) -> bool:
-        """Rehearse a setpoint's send (onboard/runtime/rehearsal.py): ``frame`` sent as
-        :meth:`send_fields` would send it, the same system call on the same socket with the GIL
-        held, but to the socket :meth:`prepare_send_rehearsal` opened on 127.0.0.1, never to
-        the peer, so that path is in the caches for the real send that follows. Only where the
-        last setpoints took that path to the peer that would get this one (a UDP link, unsigned,
-        no send callback, its peer an IPv4 address already sent to); True when the kernel took
-        the datagram."""
-        sink, out, mav = self._rehearsal_sink, self._datagrams, self.mav
-        if sink is None or mav.signing.sign_outgoing or mav.send_callback is not None:
-            return False
-        dest = self._datagram_dest()
-        if dest is None or dest != out.address:
-            return False
-        return out.send_to(frame, sink.sockaddr)
-
-    def drain_rehearsals(self) -> int:
-        """Read and drop what :meth:`rehearse_send` sent (in the slack after a tick)."""
-        sink = self._rehearsal_sink
-        return 0 if sink is None else sink.drain()
-
     def send_frame(self, frame: bytes) -> bool:
         """Pass an already-encoded frame on as it is (another link's message forwarded)."""
         try:
@@ -440,61 +411,6 @@ class MavLink:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.conn.close()
-        if self._rehearsal_sink is not None:
-            self._rehearsal_sink.close()
-
-
-class FrameEncoder:
-    """MAVLink 2 frames of one message type, unsigned, packed directly from the fields in the
-    order of the message's wire format (pymavlink's ``unpacker``; :meth:`MavLink.send_fields`):
-    what pymavlink's ``<name>_encode`` then ``send`` put on the wire, byte for byte (trailing
-    zeros of the payload trimmed, CRC with the message's CRC_EXTRA), without building a message
-    object per frame."""
-
-    def __init__(self, message_class) -> None:
-        self.message_class = message_class
-        self._payload = message_class.unpacker
-        self._header = struct.Struct("<BBBBBBBHB")
-        self._crc_extra = bytes([message_class.crc_extra])
-        self._msg_id = message_class.id
-        self._order = _wire_order(message_class)
-
-    def frame(self, seq: int, system_id: int, component_id: int, fields) -> bytes:
-        payload = self._payload.pack(*fields)
-        n = len(payload)
-        while n > 1 and payload[n - 1] == 0:
-            n -= 1
-        msg_id = self._msg_id
-        head = self._header.pack(
-            mavlink.PROTOCOL_MARKER_V2, n, 0, 0, seq, system_id, component_id,
-            msg_id & 0xFFFF, msg_id >> 16,
-        )  # fmt: skip
-        body = head + payload[:n]
-        crc = _crc16(body[1:] + self._crc_extra)
-        return body + crc.to_bytes(2, "little")
-
-    def message(self, *fields):
-        """The pymavlink message of the same fields (for a signed link)."""
-        flat = iter(fields)
-        args: list = [None] * len(self._order)
-        for i, count in self._order:
-            args[i] = next(flat) if count == 0 else tuple(next(flat) for _ in range(count))
-        return self.message_class(*args)
-
-
-_MCRF4XX = getattr(mavlink, "mcrf4xx", None)  # fastcrc's, which pymavlink uses when installed
-
-
-def _crc16(data: bytes) -> int:
-    """MAVLink's CRC-16/MCRF4XX."""
-    return _MCRF4XX(data, 0xFFFF) if _MCRF4XX is not None else mavlink.x25crc(data).crc
-
-
-def _wire_order(message_class) -> list[tuple[int, int]]:
-    """Per field in wire order: (its position in the constructor, array length or 0)."""
-    names = message_class.fieldnames
-    wire = message_class.ordered_fieldnames
-    return [(names.index(n), k) for n, k in zip(wire, message_class.array_lengths, strict=True)]
 
 
 def _stamp_s(msg) -> float | None:
@@ -522,33 +438,6 @@ def _known(msg) -> bool:
     carries no CRC seed, so random bytes pass as one)."""
     kind = msg.get_type()
     return kind != "BAD_DATA" and not kind.startswith("UNKNOWN")
-
-
-class TlogWriter:
-    """A MAVLink telemetry log (``.tlog``: per frame an 8-byte big-endian UNIX time in
-    microseconds, then the frame as sent or received), the format QGroundControl, MAVProxy
-    and pymavlink read. A new file per run, never an existing one; a write error (a full
-    disk) closes it and is reported through :attr:`error`, it never stops the caller."""
-
-    def __init__(self, path) -> None:
-        self.path = path
-        self._f = open(path, "xb")  # noqa: SIM115 - kept open for the whole run
-        self.error: str | None = None
-
-    def write(self, frame: bytes) -> None:
-        if self._f is None:
-            return
-        try:
-            self._f.write(int(time.time() * 1e6).to_bytes(8, "big") + bytes(frame))
-        except (OSError, ValueError) as exc:
-            self.error = f"tlog {self.path}: {exc}"
-            self.close()
-
-    def close(self) -> None:
-        if self._f is not None:
-            with contextlib.suppress(OSError):
-                self._f.close()
-            self._f = None
 
 
 def load_signing_key(path: str) -> bytes:

@@ -1,6 +1,6 @@
 """The controller-state telemetry the onboard component sends to the ground in one
 ``DEBUG_FLOAT_ARRAY`` (name ``PRG_CTRL``, array_id 1) per message; its layout is derived from
-the message definitions (:data:`onboard.messages.TELEMETRY`) and the README documents it.
+the message definitions (:data:`onboard.messages.TELEMETRY`) and docs/flying.md documents it.
 Floats only; NaN marks a value that does not exist yet (no detection, no estimate).
 """
 

@@ -4,19 +4,13 @@ the detections wait in a queue for the control loop.
 
 Sources: anything OpenCV opens (a device index ``0``, a V4L2 path, a GStreamer pipeline with
 ``!`` in it, a video file, played at its own frame rate) and ``sitl://HOST:PORT``, the SITL
-vehicle's camera stream (protocol below).
-
-SITL camera stream (TCP, little-endian): per frame a 32-byte header ``magic b"PGF1", u32 seq,
-u16 width, u16 height, u32 payload bytes, f64 capture time (SITL clock), f64 age at sending
-(s)`` followed by ``width * height * 3`` bytes of BGR pixels. The age lets the receiver stamp
-the capture time on its own clock without sharing one with the SITL.
+vehicle's camera stream (its wire format: :mod:`onboard.link.sitl_camera`).
 """
 
 from __future__ import annotations
 
 import collections
 import socket
-import struct
 import threading
 import time
 from collections.abc import Callable
@@ -26,11 +20,8 @@ import cv2
 import numpy as np
 
 from ..datatypes import Detection
+from ..link.sitl_camera import SITL_HEADER, parse_header
 from ..perception.detector import Detector
-
-SITL_MAGIC = b"PGF1"
-SITL_HEADER = struct.Struct("<4sIHHIdd")
-MAX_SIDE_PX = 4096
 
 
 class CameraError(RuntimeError):
@@ -94,14 +85,12 @@ class SitlCameraSource:
             except OSError as exc:
                 raise CameraError(f"cannot connect to {self.url}: {exc}") from None
         try:
-            magic, seq, w, h, n, _t_capture, age_s = SITL_HEADER.unpack(
-                self._recv_exact(SITL_HEADER.size)
-            )
+            header = self._recv_exact(SITL_HEADER.size)
             received = self.clock.now()
-            if magic != SITL_MAGIC or not (0 < w <= MAX_SIDE_PX and 0 < h <= MAX_SIDE_PX):
-                raise CameraError("SITL camera stream: not a frame header")
-            if n != w * h * 3 or not (0.0 <= age_s < 5.0):
-                raise CameraError("SITL camera stream: inconsistent frame header")
+            try:
+                seq, w, h, age_s = parse_header(header)
+            except ValueError as exc:
+                raise CameraError(str(exc)) from None
             # straight into the frame's own array: no copy of ~1 MB per frame
             image = np.empty((h, w, 3), np.uint8)
             self._recv_into(memoryview(image).cast("B"))

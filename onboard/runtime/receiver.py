@@ -1,14 +1,10 @@
-"""The flight controller's messages received and parsed off the control thread: a thread waits
-on the link's socket (without holding the GIL), parses what arrives with the link's own
+"""The links' messages received and parsed off the control thread: a thread waits on the
+link's socket (without holding the GIL), parses what arrives with the link's own
 :meth:`~onboard.link.px4.MavLink.poll` and either queues the messages for the control tick to
 drain or hands each batch to ``on_messages`` right away (``onboard run`` takes PX4's state in
 there, under the loop's lock, so the tick only reads it). PX4 streams about 500 messages a
-second at the rates the loop asks for, and parsing and converting them inside the tick was most
-of its work beyond the loop itself.
-
-The flight-controller link is unsigned, so parsing here shares no state with sending
-(:meth:`~onboard.link.px4.MavLink.send` takes the link's lock); the ground link (signed, a few
-messages a second) keeps being polled by the tick.
+second at the rates the loop asks for; parsing and converting them inside the tick would be
+most of its work beyond the loop itself.
 """
 
 from __future__ import annotations
@@ -27,25 +23,17 @@ WAIT_S = 0.05  # longest wait on the socket before checking for stop
 class LinkReceiver(threading.Thread):
     """Parses ``link``'s input into a queue (:meth:`drain` takes everything queued) or, with
     ``on_messages``, hands each batch to it on this thread (an exception it raises is counted
-    in :attr:`errors` and passed to ``on_error``; the thread goes on). ``gate`` (the scheduler's
-    ``wait_for_slack``) is called before waiting on the socket, which is then waited on no
-    longer than the slack it returns (unless ``off_socket_during_ticks`` is False: a link
-    with a few messages a second would be woken before every tick for nothing), and again
-    before parsing what arrived."""
+    in :attr:`errors` and passed to ``on_error``; the thread goes on)."""
 
     def __init__(
         self,
         link: MavLink,
         on_messages: Callable[[list], None] | None = None,
         on_error: Callable[[str], None] | None = None,
-        gate: Callable[[], float | None] | None = None,
-        off_socket_during_ticks: bool = True,
     ) -> None:
         super().__init__(name=f"rx {link.url}", daemon=True)
         self.link = link
         self.errors = 0
-        self._gate = gate
-        self._bounded = off_socket_during_ticks
         self._on_messages = on_messages
         self._on_error = on_error
         self._queue: collections.deque = collections.deque()
@@ -55,25 +43,15 @@ class LinkReceiver(threading.Thread):
 
     def run(self) -> None:
         while not self._stop_event.is_set():
-            wait_s = WAIT_S
-            if self._gate is not None:
-                # held here, not on the socket, while the control thread ticks: a datagram
-                # arriving then does not wake this thread, which would take the GIL from the
-                # tick as it lets it go (its kernels release it) and hold it to the gate
-                slack_s = self._gate()
-                if slack_s is not None and self._bounded:
-                    wait_s = min(WAIT_S, slack_s)
             if self._waitable is not None:
                 try:
-                    ready, _, _ = select.select([self._waitable], [], [], wait_s)
+                    ready, _, _ = select.select([self._waitable], [], [], WAIT_S)
                 except (OSError, ValueError):  # the link was closed under us
                     return
                 if not ready:
                     continue
             else:  # a source with nothing to wait on: poll at 1 kHz
                 time.sleep(0.001)
-            if self._gate is not None:
-                self._gate()
             msgs = self.link.poll()
             if not msgs:
                 continue

@@ -2,7 +2,7 @@
 tick (``onboard run``'s telemetry to the ground, the log and STATUSTEXT of its events,
 heartbeats and TIMESYNC requests). None of it feeds the command, so none of it has to delay
 the tick: the tick takes a snapshot of what changes (references and numbers, no encoding) and
-this thread builds and sends the messages in the slack before the next deadline.
+this thread builds and sends the messages.
 
 Without :meth:`start` (``OnboardRuntime.tick`` called directly, as the tests do)
 :meth:`submit` runs the work at once on the caller's thread.
@@ -19,18 +19,12 @@ _STOP = object()
 
 class Sender(threading.Thread):
     """Runs submitted calls one at a time in submission order. An exception in one is counted
-    in :attr:`errors` and passed to ``on_error``; the thread goes on. ``gate`` is called
-    before each (the scheduler's ``wait_for_slack``)."""
+    in :attr:`errors` and passed to ``on_error``; the thread goes on."""
 
-    def __init__(
-        self,
-        on_error: Callable[[str], None] | None = None,
-        gate: Callable[[], None] | None = None,
-    ) -> None:
+    def __init__(self, on_error: Callable[[str], None] | None = None) -> None:
         super().__init__(name="sender", daemon=True)
         self.errors = 0
         self._on_error = on_error
-        self._gate = gate
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._running = False
         self._held: list[tuple[Callable[..., object], tuple]] = []
@@ -60,8 +54,6 @@ class Sender(threading.Thread):
             if batch is _STOP:
                 return
             for fn, args in batch:
-                if self._gate is not None:
-                    self._gate()
                 try:
                     fn(*args)
                 except Exception as exc:

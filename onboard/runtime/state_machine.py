@@ -75,8 +75,7 @@ class Decision:
 
 
 class OffboardStateMachine:
-    """Its attributes are immutable values (numbers, enumerations, strings), each step rebinding
-    them: the runtime's rehearsal steps a shallow copy, which must leave this one untouched."""
+    """The offboard state machine: :meth:`step` once per tick with that tick's inputs."""
 
     def __init__(
         self, done_size_frac: float = 0.2, hold_speed_m_s: float = 0.3, auto_start: bool = False

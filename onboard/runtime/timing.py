@@ -1,17 +1,13 @@
 """The control thread's timing figures: achieved rate and jitter over the last second (sent
-in the telemetry), and over the run (ten minutes at most) the period, the work per tick, the
-overruns and the capture-to-command latency (``onboard run --stats``, ``groundstation bench
---sitl``). Pure bookkeeping: the runner hands it the times."""
+in the telemetry), and over the run (ten minutes at most) the period, how late each wake-up
+was, the work per tick, the overruns and the capture-to-command latency (``onboard run
+--stats``, ``groundstation bench --sitl``). Pure bookkeeping: the runner hands it the
+times."""
 
 from __future__ import annotations
 
 import math
 from collections import deque
-
-EARLY_TICK = "early tick"  # brought forward by a fused detection (scheduler.py "Early ticks")
-EARLY_TICK_HERE = "early tick on the camera thread"  # one the fusing thread ticked itself
-EARLY_KINDS = (EARLY_TICK, EARLY_TICK_HERE)
-ON_THE_GRID = "on the grid"  # at its deadline, not rehearsed
 
 
 def percentile(xs, q: float) -> float | None:
@@ -28,8 +24,7 @@ def to_ms(x: float | None) -> float | None:
 
 
 def rate_hz(recent: list[tuple[float, float]]) -> float:
-    """The achieved rate of the grid over (tick start s, period s) pairs, oldest first (early
-    ticks are not in them: the rate the grid kept between them)."""
+    """The achieved rate over (tick start s, period s) pairs, oldest first."""
     if len(recent) < 2:
         return 0.0
     span = sum(per for _, per in recent) - recent[0][1]
@@ -50,11 +45,8 @@ class LoopTiming:
         self.overruns = 0
         self._recent: deque[tuple[float, float]] = deque()  # (tick start, period), last 1 s
         self.periods_all: deque[float] = deque(maxlen=keep)
+        self.wake_late_s: deque[float] = deque(maxlen=keep)  # tick start - its deadline
         self.tick_work_s: deque[float] = deque(maxlen=keep)
-        # how each tick's wake-up went (scheduler.WAKE_KINDS: early, rehearsed, ...), in step
-        self.tick_kinds: deque[str] = deque(maxlen=keep)
-        self._early = False  # the tick running was brought forward
-        self._kind = ON_THE_GRID
         self.tick_cpu_s: deque[float] = deque(maxlen=keep)  # the ticking thread's CPU time
         # the setpoint's send in each tick (NaN: none sent: not flying), in step with tick_work_s
         self.send_s: deque[float] = deque(maxlen=keep)
@@ -63,61 +55,41 @@ class LoopTiming:
         self.latency_beyond_camera_s: deque[float] = deque(maxlen=keep)
         self.latency_after_detection_s: deque[float] = deque(maxlen=keep)
         self._last_start: float | None = None
-        self.early_ticks = 0
-        self.lock_waits_s: deque[float] = deque(maxlen=keep)  # tick start -> the loop's lock
-        # the overran ticks (the last 20): how each was woken, when (s after the first tick's
-        # start), its work and its CPU time (s; None where not measured): a wait (the GIL, the
-        # CPU, the host) or work of its own
-        self.overran: deque[tuple[str, float, float, float | None]] = deque(maxlen=20)
         self._first_start: float | None = None
-        self.early_gaps_s: deque[float] = deque(maxlen=keep)  # previous tick -> early tick
+        # the overran ticks (the last 20): when (s after the first tick's start), the work and
+        # the CPU time in it (s): a wait (the CPU, the host) or work of its own
+        self.overran: deque[tuple[float, float, float | None]] = deque(maxlen=20)
 
-    def tick_started(self, start_s: float, early: bool = False, kind: str | None = None) -> None:
-        """A tick started at ``start_s``; ``early``: brought forward by a detection (its
-        interval from the previous tick is short by design: counted apart, not as jitter);
-        ``kind``: how its wake-up went (the scheduler's ``woken_as``; by default early or on
-        the grid), its work figures kept apart by it."""
-        self._early = early
-        self._kind = kind if kind is not None else (EARLY_TICK if early else ON_THE_GRID)
+    def tick_started(self, start_s: float, late_s: float = 0.0) -> None:
+        """A tick started at ``start_s``, ``late_s`` after its deadline."""
         if self._first_start is None:
             self._first_start = start_s
         self._send_s = math.nan
+        self.wake_late_s.append(late_s)
         if self._last_start is not None:
             per = start_s - self._last_start
-            if early:
-                self.early_ticks += 1
-                self.early_gaps_s.append(per)
-            else:
-                self.periods_all.append(per)
-                self._recent.append((start_s, per))
-                while self._recent and self._recent[0][0] < start_s - 1.0:
-                    self._recent.popleft()
+            self.periods_all.append(per)
+            self._recent.append((start_s, per))
+            while self._recent and self._recent[0][0] < start_s - 1.0:
+                self._recent.popleft()
         self._last_start = start_s
-
-    def lock_waited(self, s: float) -> None:
-        """How long the tick waited for the loop's lock (a fusion, a receiver batch or the
-        sender's DKF state holding it); part of its work."""
-        self.lock_waits_s.append(s)
 
     def setpoint_sent(self, took_s: float) -> None:
         """The running tick's setpoint took ``took_s`` (wall time) to pack and hand to the
-        link: part of its work (on a UDP link, the system call delivers the datagram and wakes
-        the process waiting for it)."""
+        link: part of its work."""
         self._send_s = took_s
 
     def tick_done(self, work_s: float, cpu_s: float | None = None) -> bool:
         """Record a tick's work (wall time, and the control thread's CPU time in it: the
-        difference is waiting for the GIL, a lock or the CPU); True when it overran its
-        period."""
+        difference is waiting for the CPU or a lock); True when it overran its period."""
         self.tick_work_s.append(work_s)
-        self.tick_kinds.append(self._kind)
         self.send_s.append(self._send_s)
         self._send_s = math.nan
         if cpu_s is not None:
             self.tick_cpu_s.append(cpu_s)
         if work_s > self.period_s:
             self.overruns += 1
-            self.overran.append((self._kind, self._last_start - self._first_start, work_s, cpu_s))
+            self.overran.append((self._last_start - self._first_start, work_s, cpu_s))
             return True
         return False
 
@@ -143,31 +115,11 @@ class LoopTiming:
     def jitter_p99_ms(self) -> float:
         return jitter_p99_ms(self._recent, self.period_s)
 
-    def work_by_kind(self) -> dict[str, dict]:
-        """The ticks' work by how their wake-up went: for each kind its ticks, median and p99
-        (ms) and how many of the run's slowest 1 % (at or above the whole run's p99) it has:
-        what the tail is made of."""
-        works = list(self.tick_work_s)
-        tail_from = percentile(works, 0.99)
-        by: dict[str, list[float]] = {}
-        for kind, work in zip(self.tick_kinds, works, strict=False):
-            by.setdefault(kind, []).append(work)
-        return {
-            kind: {
-                "ticks": len(ws),
-                "median_ms": to_ms(percentile(ws, 0.5)),
-                "p99_ms": to_ms(percentile(ws, 0.99)),
-                "in_slowest_1pc": sum(w >= tail_from for w in ws),
-            }
-            for kind, ws in by.items()
-        }
-
     def flying_figures(self) -> dict:
         """The setpoint's send and the ticks that flew the vehicle (sent a setpoint: the sortie,
-        not the ticks before the start or after the end, when the loop runs on and sends
-        nothing), in ms: the send's median and p99; the flying ticks' count, work median, p99
-        and max; and in the slowest 1 % of the flying ticks (at or above their p99) the mean
-        work and the mean part of it the send took: how much of the tail is the send."""
+        not the ticks before the start or after the end), in ms: the send's median and p99;
+        the flying ticks' count, work median, p99 and max; and in the slowest 1 % of them the
+        mean work and the mean part of it the send took."""
         pairs = zip(self.tick_work_s, self.send_s, strict=False)
         flying = [(w, s) for w, s in pairs if not math.isnan(s)]  # NaN: nothing sent
         works = [w for w, _ in flying]
@@ -189,34 +141,26 @@ class LoopTiming:
     def figures(self) -> dict:
         per = self.periods_all
         jit = [abs(p - self.period_s) for p in per]
-        by_kind = self.work_by_kind()
-        early = [
-            w for k, w in zip(self.tick_kinds, self.tick_work_s, strict=False) if k in EARLY_KINDS
-        ]
+        late = self.wake_late_s
         return {
             "ticks": len(per) + 1 if per else 0,
             "rate_hz": (len(per) / sum(per)) if per else None,
             "period_median_ms": to_ms(percentile(per, 0.5)),
             "jitter_p99_ms": to_ms(percentile(jit, 0.99)),
             "jitter_max_ms": None if not jit else 1000 * max(jit),
+            "wake_late_median_ms": to_ms(percentile(late, 0.5)),
+            "wake_late_p99_ms": to_ms(percentile(late, 0.99)),
+            "wake_late_max_ms": to_ms(max(late, default=None)),
             "tick_work_median_ms": to_ms(percentile(self.tick_work_s, 0.5)),
             "tick_work_p99_ms": to_ms(percentile(self.tick_work_s, 0.99)),
             "tick_work_max_ms": to_ms(max(self.tick_work_s, default=None)),
-            "early_tick_work_median_ms": to_ms(percentile(early, 0.5)),
-            "early_tick_work_p99_ms": to_ms(percentile(early, 0.99)),
-            "tick_work_by_kind": by_kind,
             "tick_cpu_median_ms": to_ms(percentile(self.tick_cpu_s, 0.5)),
             "tick_cpu_p99_ms": to_ms(percentile(self.tick_cpu_s, 0.99)),
             **self.flying_figures(),
             "overruns": self.overruns,
             "overran_ticks": [
-                {"woken_as": k, "at_s": at, "work_ms": to_ms(w), "cpu_ms": to_ms(c)}
-                for k, at, w, c in self.overran
+                {"at_s": at, "work_ms": to_ms(w), "cpu_ms": to_ms(c)} for at, w, c in self.overran
             ],
-            "early_ticks": self.early_ticks,
-            "lock_wait_p99_ms": to_ms(percentile(self.lock_waits_s, 0.99)),
-            "lock_wait_max_ms": to_ms(max(self.lock_waits_s, default=None)),
-            "early_gap_median_ms": to_ms(percentile(self.early_gaps_s, 0.5)),
             "latency_total_median_ms": to_ms(percentile(self.latency_total_s, 0.5)),
             "latency_beyond_camera_median_ms": to_ms(percentile(self.latency_beyond_camera_s, 0.5)),
             "latency_beyond_camera_p99_ms": to_ms(percentile(self.latency_beyond_camera_s, 0.99)),
