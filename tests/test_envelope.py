@@ -165,12 +165,13 @@ def test_closed_loop_hits_a_target_28_deg_up():
     no_ladder = plain.replace(t_coast=0.0, t_reacq=0.0, t_search=0.0)
     res = Simulation(sc, "png", seed=3, gains=no_ladder, keep_records=False).run()
     assert res.outcome == "TARGET_LOST"
-    # ... and with them it finds the target again and hits (measured 0.147 m: the target
-    # leaving the top edge is seen at the centroid of its visible part, which holds the LOS
-    # inside the image; 0.044 m when a clipped disc reported its true centre)
+    # ... and with them it finds the target again and passes it near (measured 0.58 m with
+    # the airframe's drawn drag, docs/air.md; 0.147 m with the former linear drag, where the
+    # target leaving the top edge is seen at the centroid of its visible part; 0.044 m when a
+    # clipped disc also reported its true centre): only the FOV-aware law above is a sure hit
     sim = Simulation(sc, "png", seed=3, gains=plain, keep_records=True)
     res = sim.run()
-    assert res.outcome == "HIT" and res.miss_m < 0.2, res
+    assert res.outcome in ("HIT", "MISS") and res.miss_m < 1.0, res
     assert any(f.telemetry.mode is not LoopMode.TRACKING for f in sim.records[10:])
 
 
