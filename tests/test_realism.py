@@ -270,3 +270,12 @@ def test_ideal_sensors_are_opt_in_and_labelled(capsys):
     assert '"profile": "outdoor-gnss"' in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["sortie", "static-ahead-20m", "--profile", "perfect"])
+
+
+def test_a_campaign_report_names_ideal_sensors():
+    from groundstation.campaigns.report import _estimate_note
+
+    s = load_scenario("static-ahead-20m")
+    ideal = dataclasses.asdict(dataclasses.replace(s.estimate, profile="ideal"))
+    assert "ideal sensors, analysis only" in _estimate_note(ideal)
+    assert "error profile outdoor-gnss" in _estimate_note(dataclasses.asdict(s.estimate))
