@@ -163,8 +163,8 @@ def test_uploaded_scenario_flies(client):
     r = client.post("/api/sortie/start", json={"toml": toml, "speed": "max"})
     assert r.status_code == 200
     st = _wait(client, lambda s: s["state"] == "finished")
-    # flown with the realistic default sensors (outdoor-gnss): a decimetre, not millimetres
-    assert st["outcome"] == "HIT" and st["miss_m"] <= 0.15
+    # the outdoor-gnss default misses a static target by up to ~0.2 m (docs/realism.md)
+    assert st["outcome"] == "HIT" and st["miss_m"] <= 0.2
 
 
 # ----------------------------------------------------------------------------- lifecycle
@@ -368,3 +368,18 @@ def test_reset_keeps_an_unfinished_recording(client, gs):
     client.post("/api/sortie/reset")
     logs = client.get("/api/logs").json()
     assert len(logs) == 1 and logs[0]["status"] == "ok" and logs[0]["outcome"] == "INCOMPLETE"
+
+
+def test_the_status_names_the_estimate_profile_and_ideal_is_opt_in(client, gs):
+    client.post("/api/sortie/start", json={"scenario": "sm-tailgate", "speed": "1"})
+    client.post("/api/sortie/pause")
+    assert client.get("/api/status").json()["profile"] == "outdoor-gnss"  # realistic default
+    client.post("/api/sortie/reset")
+    r = client.post(
+        "/api/sortie/start", json={"scenario": "sm-tailgate", "speed": "1", "profile": "ideal"}
+    )
+    assert r.status_code == 200 and r.json()["profile"] == "ideal"
+    assert gs.session.sim.estimate is None  # the loop sees the truth
+    client.post("/api/sortie/reset")
+    bad = client.post("/api/sortie/start", json={"scenario": "sm-tailgate", "profile": "perfect"})
+    assert bad.status_code == 422

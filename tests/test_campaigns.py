@@ -13,6 +13,8 @@ from groundstation.campaigns.aggregate import median_iqr, miss_stats, success_ra
 from groundstation.campaigns.definitions import parse_laws, static_targets
 from groundstation.campaigns.driver import run_campaign
 
+from .as_written import AS_WRITTEN, set_args  # the conditions these figures were measured in
+
 # the closed-loop figures below are docs/paper.md's perfect-state ones; the state-estimate model's
 # own checks and its closed-loop figures are in tests/test_estimate.py
 IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # docs/paper.md's perfect-state column
@@ -102,6 +104,7 @@ def test_moving_campaign_end_to_end(tmp_path):
             "--json",
             "--set",
             "estimate.enabled=false",  # ideal sensors (the model: tests/test_estimate.py)
+            *set_args(AS_WRITTEN),  # the camera these figures were measured with
         ],
         capture_output=True,
         text=True,
@@ -154,13 +157,16 @@ def test_override_reaches_every_sortie_and_the_report(tmp_path):
     # pursuit that lands centimetres off instead of millimetres to a centimetre (docs/paper.md,
     # static targets; the airframe's rotor drag, which the velocity loop does not model, costs
     # PG its last millimetres).
+    # (with the camera these figures were measured with: a camera 3 cm above the centre of
+    # mass, which PG aims at the target, biases its pass by about as much as k_v = 100 does)
     kw = dict(n=4, laws=("pg",), seed=0, workers=1, progress=False)
-    base = run_campaign("static", out=tmp_path / "a", overrides=IDEAL, **kw)
+    ideal = {**AS_WRITTEN, **IDEAL}
+    base = run_campaign("static", out=tmp_path / "a", overrides=ideal, **kw)
     literal = run_campaign(
-        "static", out=tmp_path / "b", overrides={**IDEAL, "gains.k_v": 100}, **kw
+        "static", out=tmp_path / "b", overrides={**ideal, "gains.k_v": 100}, **kw
     )
-    assert literal["meta"]["overrides"] == {**IDEAL, "gains.k_v": 100}
-    assert base["meta"]["overrides"] == IDEAL
+    assert literal["meta"]["overrides"] == {**ideal, "gains.k_v": 100}
+    assert base["meta"]["overrides"] == ideal
     assert "--set gains.k_v=100" in literal["meta"]["command"]
     report = (tmp_path / "b" / "report.md").read_text()
     assert "gains.k_v = 100" in report and "State estimate: off" in report
@@ -181,7 +187,12 @@ def test_wind_campaign_png_always_hits_in_still_air(tmp_path):
         overrides=IDEAL,
     )
     cells = res["summary"]["cells"]
-    assert cells["0"]["png"]["success_rate"] == 1.0
+    # every still-air try hits the balloon; a sortie's outcome also counts its recovery: the
+    # brake comes when the track goes stale, 0.5 s after the balloon left the image 1 m above
+    # the floor, and one of the four (seed 0, descending fastest) reaches the floor: CRASHED
+    still = [o.result for o in res["outcomes"] if dict(o.labels)["wind_m_s"] == 0]
+    assert len(still) == 4 and all(r["miss_m"] <= r["hit_radius_m"] for r in still), still
+    assert cells["0"]["png"]["success_rate"] >= 0.75
     assert set(cells) == {"0", "2", "4", "6"}
     assert all(0.0 <= c["png"]["success_rate"] <= 1.0 for c in cells.values())
     assert (tmp_path / "w" / "success_rate.png").exists()

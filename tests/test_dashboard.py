@@ -631,3 +631,22 @@ def test_gain_studies_are_listed_and_a_trial_flies_beside_the_defaults(station, 
     assert float(page.input_value('#gains input[data-gain="K_y"]')) == 4.5
     legend = "document.querySelector('#plots').textContent.includes('· B')"
     page.wait_for_function(f"window.peregrine.plots.length >= 5 && {legend}")
+
+
+def test_the_header_labels_ideal_sensors(station, page):
+    from groundstation.sim.profiles import with_profile
+
+    s = station.session
+    s.start(SortieConfig(with_profile(load_scenario("sm-tailgate"), "ideal"), "png", 0,
+                         "projected", "1"))  # fmt: skip
+    goto(page, station)
+    page.wait_for_function(
+        "document.querySelector('#st-scenario').textContent.includes('IDEAL SENSORS')"
+    )
+    s.reset()
+    s.start(SortieConfig(load_scenario("sm-tailgate"), "png", 0, "projected", "1"))
+    page.wait_for_function(
+        "document.querySelector('#st-scenario').textContent.includes('outdoor-gnss')"
+    )
+    assert "IDEAL" not in page.text_content("#st-scenario")
+    s.reset()

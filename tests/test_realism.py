@@ -219,3 +219,63 @@ def test_a_target_half_the_believed_size_is_still_hit():
     r = sim.result()
     assert r.outcome == "HIT" and r.miss_m <= r.hit_radius_m == pytest.approx(0.225), r
     assert np.median(ratios) > 1.5  # the believed size, not the true one, sets the range
+
+
+@pytest.mark.parametrize("profile", [None, "ideal"])
+def test_the_recording_names_the_profile_and_the_lowest_altitude(tmp_path, profile):
+    from groundstation.recording.reader import inspect_log
+    from groundstation.recording.writer import SortieRecorder
+    from groundstation.sim.profiles import with_profile
+
+    rec = SortieRecorder(tmp_path)
+    s = with_profile(load_scenario("static-ahead-20m"), profile)
+    r = Simulation(s, seed=0, keep_records=False, observers=[rec]).run()
+    info = inspect_log(rec.path)
+    assert info.metadata["sortie"]["estimate_profile"] == (profile or "outdoor-gnss")
+    out = info.metadata["outcome"]
+    assert float(out["min_alt_after_pass_m"]) == pytest.approx(r.min_alt_after_pass_m, abs=1e-5)
+    assert out["profile"].strip('"') == r.profile == (profile or "outdoor-gnss")
+
+
+# ----------------------------------------------------------------------------- profiles
+def test_error_profiles_are_drawn_per_sortie_within_their_ranges():
+    from groundstation.sim.profiles import PROFILES
+
+    s = load_scenario("static-ahead-20m")
+    assert s.estimate.profile == "outdoor-gnss"  # realistic by default
+    draws = [Simulation(s, seed=k).estimate_spec for k in range(6)]
+    for key, (lo, hi) in PROFILES["outdoor-gnss"].ranges.items():
+        values = [getattr(d, key) for d in draws]
+        assert all(lo <= v <= hi for v in values), key
+        if hi > lo:
+            assert len(set(values)) == len(values), key  # a new draw every sortie
+    assert Simulation(s, seed=3).estimate_spec == draws[3]  # seeded
+    assert 0.02 <= draws[0].lag_s <= 0.06 and draws[0].heading_noise_deg >= 1.0
+    # the loop's velocity-lag compensation stays the operator's, whatever the draw
+    assert {Simulation(s, seed=k).loop.gains.t_vel_lag for k in range(3)} == {0.02}
+    # a key the scenario sets is flown as written
+    fixed = with_changes(s, estimate=dataclasses.replace(s.estimate, lag_s=0.045))
+    assert Simulation(fixed, seed=1).estimate_spec.lag_s == 0.045
+    indoor = Simulation(load_scenario("indoor-tethered-wind-2"), seed=0)
+    assert indoor.profile == "indoor-mocap" and indoor.estimate_spec.vel_noise_m_s <= 0.06
+
+
+def test_ideal_sensors_are_opt_in_and_labelled(capsys):
+    from groundstation.cli import main
+
+    assert main(["sortie", "static-ahead-20m", "--profile", "ideal"]) == 0
+    text = capsys.readouterr().out
+    assert "ideal sensors (analysis only)" in text and "lowest" in text
+    assert main(["sortie", "static-ahead-20m", "--json"]) == 0
+    assert '"profile": "outdoor-gnss"' in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["sortie", "static-ahead-20m", "--profile", "perfect"])
+
+
+def test_a_campaign_report_names_ideal_sensors():
+    from groundstation.campaigns.report import _estimate_note
+
+    s = load_scenario("static-ahead-20m")
+    ideal = dataclasses.asdict(dataclasses.replace(s.estimate, profile="ideal"))
+    assert "ideal sensors, analysis only" in _estimate_note(ideal)
+    assert "error profile outdoor-gnss" in _estimate_note(dataclasses.asdict(s.estimate))

@@ -10,12 +10,14 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from onboard.enums import GuidanceLaw, codes
 
+from ..scenario import ESTIMATE_PROFILES
 from ..sim.camera import CAMERA_MODES
 from .session import SPEEDS
 
 LawName = Literal[codes(GuidanceLaw)]  # type: ignore[valid-type]
 CameraMode = Literal[CAMERA_MODES]  # type: ignore[valid-type]
 Speed = Literal[tuple(SPEEDS)]  # type: ignore[valid-type]
+ProfileName = Literal[ESTIMATE_PROFILES]  # type: ignore[valid-type]
 
 
 class Meta(BaseModel):
@@ -36,6 +38,11 @@ class StartRequest(BaseModel):
     speed: Speed = "1"
     wind_mean_m_s: list[float] | None = Field(None, min_length=3, max_length=3)
     gust_m_s: float | None = Field(None, ge=0.0)
+    profile: ProfileName | None = Field(
+        None,
+        description="state-estimate error profile (default: the scenario's, realistic); "
+        "ideal = ideal sensors, analysis only, labelled in the status",
+    )
 
 
 class ReflyRequest(BaseModel):

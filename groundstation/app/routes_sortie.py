@@ -11,6 +11,7 @@ from typing import Any
 from fastapi import APIRouter, HTTPException
 
 from ..scenario import load_scenario, parse_scenario, shipped_scenarios
+from ..sim.profiles import with_profile
 from .api_models import LiveAck, SpeedRequest, StartRequest, Status
 from .session import SessionError, SortieConfig, with_wind
 
@@ -41,7 +42,7 @@ def scenario_from(req: StartRequest):
             tuple(req.wind_mean_m_s) if req.wind_mean_m_s else scenario.wind.mean_m_s,
             scenario.wind.gust_m_s if req.gust_m_s is None else req.gust_m_s,
         )
-    return scenario
+    return with_profile(scenario, req.profile)
 
 
 def router(session: Any) -> APIRouter:

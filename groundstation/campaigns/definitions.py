@@ -368,7 +368,7 @@ def range_metrics(trace: dict[str, Any]) -> dict[str, Any]:
     t, zem = zem_series(trace)
     # up to the pass (the nearest traced sample): after it the vehicle brakes to recover
     rng = np.linalg.norm(np.subtract(trace["target_pos_m"], trace["vehicle_pos_m"]), axis=1)
-    end = int(np.argmin(rng)) + 1 if len(rng) else len(t)
+    end = len(rng) - int(np.argmin(rng[::-1])) if len(rng) else len(t)  # the last nearest
     t, zem = t[:end], zem[:end]
     i0 = int(np.searchsorted(t, acq[0]))
     after = zem[i0:]

@@ -223,15 +223,18 @@ def _estimate_note(estimate: dict | None) -> str:
     """One sentence naming the state-estimate model the sorties flew with."""
     if not estimate:
         return ""
-    if not estimate.get("enabled", True):
-        return "State estimate: off (ideal sensors, the loop saw the truth). "
+    if not estimate.get("enabled", True) or estimate.get("profile") == "ideal":
+        return "State estimate: off (ideal sensors, analysis only: the loop saw the truth). "
     from ..scenario import EstimateSpec
 
     changed = {
-        k: v for k, v in estimate.items() if getattr(EstimateSpec(), k, v) != v and k != "enabled"
+        k: v
+        for k, v in estimate.items()
+        if getattr(EstimateSpec(), k, v) != v and k not in ("enabled", "profile")
     }
     extra = "".join(f", {k} = {v}" for k, v in changed.items())
-    return f"State estimate: on (the simulator's defaults{extra}). "
+    profile = estimate.get("profile", EstimateSpec().profile)
+    return f"State estimate: on (error profile {profile}, docs/realism.md{extra}). "
 
 
 def write_report(
