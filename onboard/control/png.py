@@ -95,8 +95,8 @@ def min_pitch_rad(los_elev_rad: float, top_edge_rad: float, margin_rad: float) -
 
 
 def fov_guard(a_d: np.ndarray, inp: GuidanceInput, gains: Gains) -> np.ndarray:
-    """Field-of-view guard on a desired acceleration (not in the paper; README "Field of
-    view").
+    """Field-of-view guard on a desired acceleration (not in the paper; docs/core.md, "Field
+    of view").
 
     A thrust-vectoring vehicle flies a forward acceleration a_f by pitching its nose down by
     atan(a_f / (g + a_z)) (eqs. 16, 18), and the strapdown camera pitches with it: the speed
@@ -382,7 +382,7 @@ def png_floats(
     u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
     sigma_y, sigma_z = angles_floats(u0, u1, u2)
     # far away PN's LOS-rate term is mostly noise (v/R small): it fades out as the midcourse
-    # ZEM-nulling term fades in (README "Range")
+    # ZEM-nulling term fades in (docs/core.md, "Midcourse ZEM nulling")
     w_mid = midcourse_floats(range_m, tau_zem, r_mid)
     pn = 1.0 - w_mid
     sigma_yd = sigma_y + pn * K_y * dq_y
