@@ -18,6 +18,7 @@ from groundstation.app.numbers import fmt_num
 from groundstation.app.session import SortieConfig
 from groundstation.scenario import load_scenario
 
+from .as_written import load_as_written
 from .browser_support import needs_chromium
 
 pytestmark = needs_chromium
@@ -340,15 +341,19 @@ def test_timeline_zoom_and_recorded_fields(station, page):
 
     # zoom one plot: every time plot follows
     box = page.locator(".plot").first.locator(".u-over").bounding_box()
+    whole = page.evaluate(
+        "(u => u.scales.x.max - u.scales.x.min)(window.peregrine.plots.find(u => !u.xy))"
+    )  # the whole sortie, recovery after the pass included
     page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
     page.mouse.wheel(0, -300)
     # the wheel zooms in the page's event handler (later on a loaded machine): wait for it
     page.wait_for_function(
-        "window.peregrine.plots.some(u => !u.xy && u.scales.x.max - u.scales.x.min < 5.0)"
+        "window.peregrine.plots.some(u => !u.xy && u.scales.x.max - u.scales.x.min < "
+        f"{0.9 * whole})"
     )
     ranges = page.evaluate("window.peregrine.plots.filter(u => !u.xy)"
                            ".map(u => [u.scales.x.min, u.scales.x.max])")  # fmt: skip
-    assert all(r == ranges[0] for r in ranges) and ranges[0][1] - ranges[0][0] < 5.0
+    assert all(r == ranges[0] for r in ranges) and ranges[0][1] - ranges[0][0] < 0.9 * whole
     page.dblclick(".plot .u-over")
     page.wait_for_function("window.peregrine.plots[0].scales.x.min === 0")
     # a legend entry toggles its series
@@ -399,7 +404,8 @@ def test_timeline_zoom_and_recorded_fields(station, page):
 def test_timeline_labels_of_events_close_together_do_not_overlap(station, page):
     s = station.session
     s.set_gains(s.default_gains())
-    s.start(SortieConfig(load_scenario("cv-top-to-bottom"), speed="5"))
+    # ideal perception: no track-loss events crowding the rows, only the edits under test
+    s.start(SortieConfig(load_as_written("cv-top-to-bottom"), speed="5"))
     for k_p in (0.04, 0.05, 0.06):  # three edits a few ticks apart: a few pixels on the page
         t = max(s.sim.time_s, 1.0)
         while s.sim.time_s < t + 0.05:
@@ -418,9 +424,9 @@ def test_timeline_labels_of_events_close_together_do_not_overlap(station, page):
     )
     gains = [m for m in marks if "k_p" in m["text"]]
     assert [m["text"] for m in gains] == ["k_p 0.03 → 0.04", "k_p 0.04 → 0.05", "k_p 0.05 → 0.06"]
-    assert gains[1]["left"] - gains[0]["left"] < 20  # close enough to have overlapped
+    assert gains[1]["left"] - gains[0]["left"] < 30  # close enough to have overlapped
     for a, b in itertools.combinations(marks, 2):  # no label runs into another on its row
-        if a["top"] == b["top"]:
+        if a["top"] == b["top"] and not (a["bare"] and b["bare"]):  # (ticks: text on hover)
             assert a["right"] <= b["left"] + 0.01 or b["right"] <= a["left"] + 0.01, (a, b)
     assert all(m["whole"] and not m["bare"] for m in gains)  # each on a row with room
     assert all(m["title"].endswith(m["text"]) for m in marks)  # every text whole on hover

@@ -251,18 +251,19 @@ function drawTimeline() {
   const width = tl.clientWidth || left + w;
   const shown = PV.events.filter(([t]) => t !== null && t >= min && t <= max).sort((a, b) => a[0] - b[0]);
   const rowEnd = new Array(TIMELINE_ROWS).fill(-Infinity);
-  let rows = 1;
+  let rows = 1, ticks = false; // marks with no room for their label: ticks on a row of their own
   const html = shown.map(([t, kind, text]) => {
     const x = left + ((t - min) / (max - min)) * w, lw = labelPx(text, kind === "closest");
     const flip = x + lw > width; // ends at its mark
     const a = flip ? x - lw : x, b = flip ? x : x + lw;
     let r = rowEnd.findIndex((end) => end <= a - 2), bare = false;
-    if (r < 0) { r = 0; bare = true; } else { rowEnd[r] = b; rows = Math.max(rows, r + 1); }
+    if (r < 0) { r = TIMELINE_ROWS; bare = ticks = true; } else { rowEnd[r] = b; rows = Math.max(rows, r + 1); }
     const cls = `mark k-${kind}${bare ? " bare" : ""}${flip && !bare ? " flip" : ""}`;
     const pos = flip && !bare ? `right:${(width - x).toFixed(1)}px` : `left:${x.toFixed(1)}px`;
-    return `<span class="${cls}" style="${pos};top:${2 + r * TIMELINE_ROW_PX}px" data-t="${t}" title="t = ${fmtVal(t)} s: ${esc(text)}">${esc(text)}</span>`;
-  }).join("");
-  const h = `${6 + rows * TIMELINE_ROW_PX}px`;
+    const row = bare ? -1 : r; // the ticks' row is placed below the labels once they are counted
+    return `<span class="${cls}" style="${pos};top:${row < 0 ? "TICKS" : `${2 + row * TIMELINE_ROW_PX}px`}" data-t="${t}" title="t = ${fmtVal(t)} s: ${esc(text)}">${esc(text)}</span>`;
+  }).join("").replaceAll("top:TICKS", `top:${2 + rows * TIMELINE_ROW_PX}px`);
+  const h = `${6 + (rows + (ticks ? 1 : 0)) * TIMELINE_ROW_PX}px`;
   if (tl.style.height !== h) tl.style.height = h;
   if (html !== tl.dataset.drawn) { tl.innerHTML = html; tl.dataset.drawn = html; }
 }
