@@ -196,7 +196,9 @@ def test_a_rendered_sortie_flies_the_same_with_and_without_the_window(overrides)
     )
     assert sim_roi.camera.detections == sim_full.camera.detections
     stats = sim_roi.camera.detector.stats
-    assert stats.windowed > 0.8 * (stats.windowed + stats.full)  # the window did the work
+    # the window did most of the work: the frames after the pass, while the vehicle recovers
+    # with the target behind it, search the whole frame
+    assert stats.windowed > 0.5 * (stats.windowed + stats.full)
     if overrides:
         assert f_roi.false_detections > 0 and f_roi.dropped > 0
 

@@ -11,6 +11,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from onboard.enums import GuidanceLaw
+
 from ..scenario import load_scenario
 
 SCRUB_S = 3.0
@@ -28,7 +30,7 @@ def _fly(log_dir: Path, n: int) -> list[str]:
     for k in range(n):
         rec = SortieRecorder(log_dir)
         gains = Gains(K_y=2.0 + 0.25 * (k % 8))
-        law = ("png", "pg")[k % 2]
+        law = (GuidanceLaw.PNG.value, GuidanceLaw.PG.value)[k % 2]
         Simulation(scenario, law, k, "projected", gains, keep_records=False, observers=(rec,)).run()
         names.append(rec.path.name)
     return names
