@@ -27,6 +27,8 @@ from groundstation.campaigns.tune_options import DEFAULT_SATURATION_PENALTY
 from groundstation.cli import main
 from onboard.gains import GAIN_SPECS, Gains
 
+from .as_written import AS_WRITTEN
+
 TARGET = "static-ahead-20m,cv-top-to-bottom"  # two short sorties per seed
 
 
@@ -150,7 +152,11 @@ def test_a_worker_waits_out_another_holding_the_sqlite_file(tmp_path, monkeypatc
 
 
 def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():
-    defn = TuneDefinition(TARGET, parse_gain_space("K_y,K_z"), n=1)
+    # the idealised conditions the ranking was measured in (a seed-0 miss under the realistic
+    # sensors would make the defaults' own HIT rate a coin toss at n = 1)
+    defn = TuneDefinition(
+        TARGET, parse_gain_space("K_y,K_z"), n=1, overrides=tuple(AS_WRITTEN.items())
+    )
     jobs = build_tune_jobs(defn, 0)
     runner = LocalPoolRunner(1)
     defaults = evaluate(jobs, {}, runner, defn)

@@ -404,9 +404,12 @@ function drawImagePlane(s) {
   }
   W.edgeArrow = null; W.endMarker = null; W.estMarker = null;
   const st = s.status || {};
-  if (!s.e_est_px && (st.state === "finished" || (st.replay && st.outcome)) && track.length) {
-    // the sortie has ended and the loop no longer estimates: where the target was last seen
-    const [ex, ey] = track[track.length - 1], x = cu + ex, y = cv + ey;
+  const ended = !s.e_est_px && (st.state === "finished" || (st.replay && st.outcome));
+  const last = ended ? (track.length ? track[track.length - 1] : lastEstimate()) : null;
+  if (last) {
+    // the sortie has ended and the loop no longer estimates (after the pass it flies on while
+    // it recovers): where the target was last seen
+    const [ex, ey] = last, x = cu + ex, y = cv + ey;
     ctx.save(); ctx.setLineDash([4, 3]); ctx.strokeStyle = "#19c15b"; ctx.lineWidth = 2.5;
     ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke(); ctx.restore();
     ctx.fillStyle = "#0b5e2c"; ctx.font = "bold 12px sans-serif";
@@ -424,19 +427,29 @@ function drawImagePlane(s) {
   ctx.lineWidth = 1;
 }
 
+// the sortie's last estimated image error (px), or null
+function lastEstimate() {
+  const ex = colOf(PV.own, "e_x_px"), ey = colOf(PV.own, "e_y_px");
+  for (let i = Math.min(ex.length, ey.length) - 1; i >= 0; i--) if (ex[i] !== null && ey[i] !== null) return [ex[i], ey[i]];
+  return null;
+}
+
 const TRANSIENT_S = 1.0, TRACK_S = 1.5, MARKER_MAX_PX = 40;
 let bandCache = { n: -1, src: null, c: null };
 function bandCentre() {
   const src = PV.own, ys = (src.columns && src.columns.e_y_px) || [];
-  if (bandCache.src === src && bandCache.n === ys.length) return bandCache.c;
+  // the estimates up to the pass: after it the vehicle recovers with the target behind it
+  const st = (W.snap && W.snap.status) || {}, tPass = st.intercept_time_s ?? Infinity;
+  if (bandCache.src === src && bandCache.n === ys.length && bandCache.tPass === tPass) return bandCache.c;
   let t0 = null; const vals = [];
   for (let i = 0; i < ys.length; i++) {
+    if (src.t_s[i] > tPass) break;
     if (ys[i] === null || ys[i] === undefined) continue;
     if (t0 === null) t0 = src.t_s[i];
     if (src.t_s[i] >= t0 + TRANSIENT_S) vals.push(ys[i]);
   }
   vals.sort((a, b) => a - b);
-  bandCache = { n: ys.length, src, c: vals.length ? vals[Math.floor(vals.length / 2)] : null };
+  bandCache = { n: ys.length, src, tPass, c: vals.length ? vals[Math.floor(vals.length / 2)] : null };
   return bandCache.c;
 }
 // The estimates of the last TRACK_S before the time shown (running or replayed alike).
