@@ -11,6 +11,8 @@ from groundstation.sim import estimate as sim_estimate
 from groundstation.sim import estimate_reference as ER  # noqa: N812
 from groundstation.sim import physics as P  # noqa: N812
 from groundstation.sim import physics_reference as PR  # noqa: N812
+from groundstation.sim import target_kernels as TK  # noqa: N812
+from groundstation.sim import target_reference as TR  # noqa: N812
 from onboard.datatypes import GRAVITY_M_S2
 from tests.kernel_cases import FRESH, _copy, _v, case
 
@@ -73,12 +75,13 @@ def _(a):
     return [(got[P.X_CMD_W : P.X_CMD_W + 3], rates), (got[P.X_CMD_THRUST], thrust)]
 
 
-@case(P.target_step)
+@case(TK.target_step)
 def _(a):
-    kind, c, track, x, t, dt, wx, wy, wz = a
+    kind, c, track, x, t, dt, wx, wy, wz, ix, iy, iz = a
     got = x.copy()
-    P.target_step(kind, c.copy(), track.copy(), got, t, dt, wx, wy, wz)
-    return [(got, PR.target_state(P.MOTIONS[kind], c, track, x, t, dt, _v(wx, wy, wz)))]
+    TK.target_step(kind, c.copy(), track.copy(), got, t, dt, wx, wy, wz, ix, iy, iz)
+    want = TR.target_state(TK.MOTIONS[kind], c, track, x, t, dt, _v(wx, wy, wz), _v(ix, iy, iz))
+    return [(got, want)]
 
 
 @case(P.jet_factor)
@@ -165,24 +168,41 @@ def _(a):
 def _fresh_target(rng: np.random.Generator) -> tuple:
     """A target_step call of any motion (a sortie flies only some of them): kinematic
     parameters at random, a light target's of a sphere 0.1-0.5 m across (C_d 0.47, with or
-    without buffet), starting near the ground (some below it) in air of a few m/s."""
-    kind = int(rng.integers(0, len(P.MOTIONS)))
-    c = rng.normal(size=P.T_SIZE) * 3.0
-    c[P.T_MAX_SPEED], c[P.T_ROPE] = 4.0, 5.0
-    c[P.T_TWO] = 2.0
+    without buffet), starting near the ground (some below it) in air of a few m/s; a
+    manoeuvre's side +-1, its direction a unit vector, triggered or not (half each, with the
+    interceptor within or beyond the trigger range, one in ten unknown: nan)."""
+    kind = int(rng.integers(0, len(TK.MOTIONS)))
+    c = rng.normal(size=TK.T_SIZE) * 3.0
+    c[TK.T_MAX_SPEED], c[TK.T_ROPE] = 4.0, 5.0
+    c[TK.T_TWO] = 2.0
     dia = float(rng.uniform(0.1, 0.5))
     area = math.pi * dia * dia / 4.0
-    c[P.T_DIA], c[P.T_AREA] = dia, area
-    c[P.T_DRAG_K] = 0.5 * PR.RHO * 0.47 * area
-    c[P.T_LIFT], c[P.T_MASS] = float(rng.uniform(-0.05, 0.05)), float(rng.uniform(0.003, 0.2))
-    c[P.T_CL] = float(rng.uniform(0.05, 0.2)) if rng.uniform() < 0.8 else 0.0
-    c[P.T_STROUHAL] = float(rng.uniform(0.1, 0.3))
+    c[TK.T_DIA], c[TK.T_AREA] = dia, area
+    c[TK.T_DRAG_K] = 0.5 * TR.RHO * 0.47 * area
+    c[TK.T_LIFT], c[TK.T_MASS] = float(rng.uniform(-0.05, 0.05)), float(rng.uniform(0.003, 0.2))
+    c[TK.T_CL] = float(rng.uniform(0.05, 0.2)) if rng.uniform() < 0.8 else 0.0
+    c[TK.T_STROUHAL] = float(rng.uniform(0.1, 0.3))
+    c[TK.T_SIDE] = 1.0 if rng.uniform() < 0.5 else -1.0
+    c[TK.T_TRIGGER] = float(rng.uniform(-2.0, 15.0))
+    c[TK.T_JINK_SPEED], c[TK.T_JINK_ACCEL] = float(rng.uniform(0.5, 4.0)), 8.0
+    c[TK.T_MAN_W] = float(rng.uniform(0.3, 3.0))
+    d = rng.normal(size=3)
+    c[TK.T_DIR : TK.T_DIR + 3] = d / np.linalg.norm(d)
     times = np.sort(rng.uniform(0.0, 10.0, 6))
     track = np.column_stack([times, rng.normal(size=(6, 3)) * 10.0])
-    x = np.concatenate([rng.normal(size=6) * 2.0, [rng.uniform(0.0, 2.0 * math.pi)]])
+    x = np.zeros(TK.TX_SIZE)
+    x[:6] = rng.normal(size=6) * 2.0
     x[2] += 1.0
+    x[TK.TX_PHASE] = rng.uniform(0.0, 2.0 * math.pi)
+    if rng.uniform() < 0.5:  # a manoeuvre under way
+        x[TK.TX_TRIGGERED] = 1.0
+        side = rng.normal(size=2)
+        x[TK.TX_DIR : TK.TX_DIR + 2] = side / np.linalg.norm(side)
+        x[TK.TX_GAINED] = float(rng.uniform(0.0, 3.0))
     air = (rng.normal(size=3) * 3.0).tolist()
-    return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *air)
+    near = x[:3] + rng.normal(size=3) * float(rng.uniform(1.0, 20.0))
+    interceptor = [math.nan] * 3 if rng.uniform() < 0.1 else near.tolist()
+    return (kind, c, track, x, float(rng.uniform(0, 12)), 0.005, *air, *interceptor)
 
 
 def _fresh_rotor_wash(rng: np.random.Generator) -> tuple:
@@ -208,5 +228,5 @@ def _fresh_rotor_wash(rng: np.random.Generator) -> tuple:
     return (x, lag, *wind, *p.tolist())
 
 
-FRESH["groundstation.sim.physics.target_step"] = _fresh_target
+FRESH["groundstation.sim.target_kernels.target_step"] = _fresh_target
 FRESH["groundstation.sim.physics.rotor_wash_at"] = _fresh_rotor_wash

@@ -1,7 +1,7 @@
-"""Each physics kernel (groundstation/sim/physics.py) compiled computes bit for bit what its own
-Python source (``k.py_func``) computes, on seeded random inputs: states, parameters, every
-target motion, both wind models, the command clamp (NaN included) and whole stretches of a
-sortie's physics from real scenarios."""
+"""Each physics kernel (groundstation/sim/physics.py, target_kernels.py) compiled computes
+bit for bit what its own Python source (``k.py_func``) computes, on seeded random inputs:
+states, parameters, every target motion, both wind models, the command clamp (NaN included)
+and whole stretches of a sortie's physics from real scenarios."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import pytest
 
 from groundstation.scenario import load_scenario
 from groundstation.sim import physics as ph
+from groundstation.sim import target_kernels as tk
 from groundstation.sim.simulation import Simulation
 from groundstation.sim.wind import turbulence_modes
 from onboard import jit
@@ -62,25 +63,26 @@ def test_vehicle_command_clamps_like_python():
         assert same(a1[0], a2[0]), i
 
 
-@pytest.mark.parametrize("kind", range(len(ph.MOTIONS)), ids=ph.MOTIONS)
+@pytest.mark.parametrize("kind", range(len(tk.MOTIONS)), ids=tk.MOTIONS)
 def test_target_step_every_motion(kind):
     rng = np.random.default_rng(10 + kind)
     for i in range(CASES // 2):
-        c = rng.normal(0.0, 3.0, ph.T_SIZE)
-        c[ph.T_MAX_SPEED] = abs(c[ph.T_MAX_SPEED]) + 0.5
-        c[ph.T_DRAG_K], c[ph.T_MASS] = 0.01, abs(c[ph.T_MASS]) * 0.01 + 0.005
-        c[ph.T_ROPE] = abs(c[ph.T_ROPE]) + 0.1
-        c[ph.T_TWO] = 2.0
-        c[ph.T_DIA], c[ph.T_AREA] = 0.16, 0.02
+        c = rng.normal(0.0, 3.0, tk.T_SIZE)
+        c[tk.T_MAX_SPEED] = abs(c[tk.T_MAX_SPEED]) + 0.5
+        c[tk.T_DRAG_K], c[tk.T_MASS] = 0.01, abs(c[tk.T_MASS]) * 0.01 + 0.005
+        c[tk.T_ROPE] = abs(c[tk.T_ROPE]) + 0.1
+        c[tk.T_TWO] = 2.0
+        c[tk.T_DIA], c[tk.T_AREA] = 0.16, 0.02
         times = np.cumsum(rng.uniform(0.1, 1.0, 6))
         track = np.column_stack([times, rng.normal(0.0, 5.0, (6, 3))])
-        x = rng.normal(0.0, 2.0, ph.TX_SIZE)
+        x = rng.normal(0.0, 2.0, tk.TX_SIZE)
         t = float(rng.uniform(-1.0, 8.0))
         wind = rng.normal(size=3)
+        interceptor = x[:3] + rng.normal(0.0, 8.0, 3)
         out = []
-        for f in (ph.target_step, ph.target_step.py_func):
+        for f in (tk.target_step, tk.target_step.py_func):
             xc = x.copy()
-            f(kind, c, track, xc, t, 1.0 / 600.0, *wind)
+            f(kind, c, track, xc, t, 1.0 / 600.0, *wind, *interceptor)
             out.append(xc)
         assert same(out[0], out[1]), (kind, i)
 

@@ -10,7 +10,10 @@ from pathlib import Path
 from onboard.gains import Gains
 
 Vec3 = tuple[float, float, float]
-MOTIONS = ("static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tethered", "balloon")
+MOTIONS = (
+    "static", "cv", "ca", "sinusoid", "circle", "escape", "takeoff", "tethered", "balloon",
+    "turn", "weave", "jink", "evade", "surge",
+)  # fmt: skip
 SCENARIO_DIR = Path(__file__).parent.parent / "scenarios"
 
 
@@ -45,13 +48,25 @@ class InterceptorSpec:
 class TargetSpec:
     motion: str
     position_m: Vec3  # start position (tethered: rest position)
-    velocity_m_s: Vec3 = (0.0, 0.0, 0.0)  # cv, ca, sinusoid drift, escape start, takeoff climb
+    # cv, ca, sinusoid drift, escape start, takeoff climb; the manoeuvres' start velocity
+    velocity_m_s: Vec3 = (0.0, 0.0, 0.0)
     acceleration_m_s2: Vec3 = (0.0, 0.0, 0.0)  # ca, escape
     amplitude_m: Vec3 = (0.0, 0.0, 0.0)  # sinusoid
-    period_s: float = 0.0  # sinusoid, circle (negative: clockwise circle)
+    period_s: float = 0.0  # sinusoid, circle (negative: clockwise circle); weave, surge: least
     radius_m: float = 0.0  # circle
-    max_speed_m_s: float = 30.0  # escape
-    start_s: float = 0.0  # takeoff: climb starts at this time
+    max_speed_m_s: float = 30.0  # escape; evade from rest
+    start_s: float = 0.0  # takeoff: climb starts at this time; turn: the turn starts
+    # the manoeuvres (groundstation/sim/targets.py, docs/agility.md); ranges are drawn per
+    # sortie, uniform between their ends
+    lateral_accel_m_s2: float = 0.0  # turn (+ left, - right), evade (its size)
+    period_max_s: float = 0.0  # weave, surge: the period's upper end (<= period_s: fixed)
+    amplitude_min_m: float = 0.0  # weave: the sideways amplitude's range
+    amplitude_max_m: float = 0.0
+    trigger_range_m: float = 0.0  # jink; evade (0: from the start): the interceptor this near
+    jink_speed_m_s: float = 2.5  # jink: the sideways speed of the dart
+    jink_accel_m_s2: float = 8.0  # jink: its acceleration
+    side: float = 0.0  # jink, evade: +1 left of the line of sight, -1 right, 0 drawn
+    speed_change_m_s: float = 0.0  # surge: the speed's amplitude
     diameter_m: float = 0.3
     tether_length_m: float = 1.0  # tethered
     net_lift_n: float = 0.0  # tethered: buoyancy minus weight; 0 = from helium physics

@@ -27,6 +27,7 @@ def validate(s: Scenario, problems: Problems) -> None:
         check(t.period_s != 0, "target.period_s", "circle needs a non-zero period")
     if t.motion == "escape":
         check(t.max_speed_m_s > 0, "target.max_speed_m_s", "must be positive")
+    validate_manoeuvre(s, problems)
     if t.motion == "tethered":
         check(t.tether_length_m > 0, "target.tether_length_m", "must be positive")
     if t.motion in ("tethered", "balloon"):
@@ -142,6 +143,55 @@ def validate(s: Scenario, problems: Problems) -> None:
             s.gains_obj()
         except GainError as exc:
             problems.add("gains", str(exc))
+
+
+MAX_TARGET_ACCEL_M_S2 = 50.0  # a manoeuvre's acceleration beyond this is a typing error
+
+
+def validate_manoeuvre(s: Scenario, problems: Problems) -> None:
+    """The manoeuvring motions' parameters (turn, weave, jink, evade, surge)."""
+    t, check = s.target, problems.check
+    m = t.motion
+    speed = math.sqrt(sum(c * c for c in t.velocity_m_s))
+    horizontal = math.hypot(t.velocity_m_s[0], t.velocity_m_s[1])
+    lat_ok = abs(t.lateral_accel_m_s2) <= MAX_TARGET_ACCEL_M_S2
+    lat_range = f"must be within +-{MAX_TARGET_ACCEL_M_S2} m/s^2"
+    if m in ("weave", "surge"):
+        check(t.period_s > 0, "target.period_s", f"{m} needs a positive period (its least)")
+        check(t.period_max_s >= 0, "target.period_max_s", "must not be negative")
+    if m == "turn":
+        check(horizontal > 0, "target.velocity_m_s", "a turn needs a horizontal velocity")
+        check(lat_ok, "target.lateral_accel_m_s2", lat_range)
+    if m == "weave":
+        check(
+            0 <= t.amplitude_min_m <= t.amplitude_max_m and t.amplitude_max_m > 0,
+            "target.amplitude_max_m",
+            "a weave needs 0 <= amplitude_min_m <= amplitude_max_m, amplitude_max_m > 0",
+        )
+    if m == "jink":
+        check(t.trigger_range_m > 0, "target.trigger_range_m", "a jink needs a positive range")
+        check(t.jink_speed_m_s > 0, "target.jink_speed_m_s", "must be positive")
+        check(
+            0 < t.jink_accel_m_s2 <= MAX_TARGET_ACCEL_M_S2,
+            "target.jink_accel_m_s2",
+            f"must be in (0, {MAX_TARGET_ACCEL_M_S2}] m/s^2",
+        )
+    if m == "evade":
+        check(
+            0 < t.lateral_accel_m_s2 <= MAX_TARGET_ACCEL_M_S2,
+            "target.lateral_accel_m_s2",
+            f"evasion needs a lateral acceleration in (0, {MAX_TARGET_ACCEL_M_S2}] m/s^2",
+        )
+        check(t.trigger_range_m >= 0, "target.trigger_range_m", "must not be negative")
+        check(t.max_speed_m_s > 0, "target.max_speed_m_s", "must be positive")
+    if m == "surge":
+        check(speed > 0, "target.velocity_m_s", "a surge needs a velocity to change")
+        check(
+            0 <= t.speed_change_m_s <= speed / 2,
+            "target.speed_change_m_s",
+            f"must be in [0, {speed / 2:g}] m/s (half the speed: it never flies backwards)",
+        )
+    check(t.side in (-1.0, 0.0, 1.0), "target.side", "must be 1 (left), -1 (right) or 0 (drawn)")
 
 
 # how far a calibration may be from the camera flown before it is a different camera (the

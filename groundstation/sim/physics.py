@@ -1,13 +1,14 @@
 """The simulator's physics as compiled kernels (:mod:`onboard.jit`): the multicopter's step,
-the target's motions, the wind (gusts, the fan jet's profile) and :func:`physics_steps`, which
-runs every physics step between two events (camera frame, control tick, command arrival) in
-one call: vehicle, target and wind, then the closest approach inside the step and the
-outcome. The Python classes (:class:`~.vehicle.Multicopter`, :class:`~.targets.Target`,
-:class:`~.wind.Wind`) keep their state in float64 arrays these kernels update in place.
+the wind (gusts, the fan jet's profile) and :func:`physics_steps`, which runs every physics
+step between two events (camera frame, control tick, command arrival) in one call: vehicle,
+target (:func:`.target_kernels.target_step`) and wind, then the closest approach inside the
+step and the outcome. The Python classes (:class:`~.vehicle.Multicopter`,
+:class:`~.targets.Target`, :class:`~.wind.Wind`) keep their state in float64 arrays these
+kernels update in place.
 
-All of them live in this one module: numba's on-disk cache is keyed on the source file of the
-function it compiled, so a kernel that calls another must be cached from the same file or an
-edit to the callee would leave a stale compiled caller. The arithmetic is the Python code's,
+numba's on-disk cache is keyed on the source file of the function it compiled, so a kernel
+that calls a kernel of another file names it in its ``uses`` (onboard/jit.py): an edit to
+the callee then drops the caller's cached code. The arithmetic is the Python code's,
 operation for operation (no fast-math): ``x ** 2`` is libm's ``pow`` in Python, so the
 kernels call ``math.pow(x, two)`` with ``two`` = 2.0 passed in at run time (a constant 2
 would be folded into ``x * x``, which rounds differently in about 0.1 % of cases).
@@ -24,10 +25,12 @@ from onboard.datatypes import GRAVITY_M_S2
 from onboard.jit import kernel
 
 from ..scenario.physics import AIR_DENSITY_KG_M3, helium_gross_lift_n
+from .target_kernels import KIND_BALLOON, KIND_TETHERED, T_SIZE, TX_SIZE, target_step
 
 # what these kernels read from other files (their cache is dropped when one changes): the air
-# density of scenario/physics.py
+# density of scenario/physics.py, the targets' kernel
 _USES = (helium_gross_lift_n,)
+_USES_STEPS = (helium_gross_lift_n, target_step)
 
 PASS_RADIUS_M = 3.0  # a closest approach nearer than this is the pass once range opens
 DIVERGED_SPEED_M_S = 60.0
@@ -172,168 +175,6 @@ def vehicle_command(
         t = 1.0
     x[17], x[18], x[19] = c0, c1, c2
     x[20] = t * max_thrust_n
-
-
-# motions as the kernel knows them
-MOTIONS = (
-    "static", "cv", "ca", "sinusoid", "circle", "takeoff", "escape", "tethered", "balloon", "track"
-)  # fmt: skip
-KIND_TETHERED, KIND_BALLOON = MOTIONS.index("tethered"), MOTIONS.index("balloon")
-KIND_TRACK = MOTIONS.index("track")
-# the parameter array Target.params: start position, velocity, acceleration (m, m/s, m/s^2),
-# sinusoid amplitude (m) and angular rate (rad/s), circle centre (m), radius (m) and angular
-# rate, takeoff start (s), escape top speed (m/s), tether anchor (m), drag factor
-# 0.5 rho C_d A (kg/m), net lift (N), mass with added air mass (kg), rope length (m), and the
-# exponent 2.0 of Python's ``x ** 2`` (libm's pow, as the Python code squares: a constant 2
-# would be folded into x * x, which rounds differently in about 0.1 % of cases); a light
-# target's (tethered, balloon) buffet: side-force coefficient amplitude, Strouhal number,
-# diameter (m) and area (m^2)
-T_P0, T_V0, T_A0, T_AMP, T_SIN_W, T_CENTER, T_RADIUS, T_CIRCLE_W = 0, 3, 6, 9, 12, 13, 16, 17
-T_START, T_MAX_SPEED, T_ANCHOR, T_DRAG_K, T_LIFT, T_MASS, T_ROPE, T_TWO = (
-    18,
-    19,
-    20,
-    23,
-    24,
-    25,
-    26,
-    27,
-)
-T_CL, T_STROUHAL, T_DIA, T_AREA = 28, 29, 30, 31
-T_SIZE = 32
-# the target's state Target.x: position, velocity (m, m/s ENU), the buffet's phase (rad)
-TX_SIZE = 7
-
-
-@kernel("void(i8, f8[::1], f8[:, ::1], f8[::1], f8, f8, f8, f8, f8)", uses=_USES)
-def target_step(
-    kind: int,
-    c: np.ndarray,
-    track: np.ndarray,
-    x: np.ndarray,
-    t: float,
-    dt: float,
-    wx: float,
-    wy: float,
-    wz: float,
-) -> None:
-    """Move the target of motion ``MOTIONS[kind]`` (parameters ``c``, T_* layout; ``track``
-    rows (time s, x, y, z m) for a recorded track) to time ``t`` (s), a step of ``dt`` after
-    the last, in the wind (wx, wy, wz) (m/s ENU, where it is): its position and velocity
-    ``x`` (m, m/s ENU) in place. No motion goes below the ground: there the target stays at
-    z = 0 with its vertical velocity no longer downward."""
-    if kind == 0:  # static
-        return
-    if kind == 1:  # cv: p0 + v t
-        x[0] = c[0] + c[3] * t
-        x[1] = c[1] + c[4] * t
-        x[2] = c[2] + c[5] * t
-    elif kind == 2:  # ca: p0 + v t + a t^2 / 2
-        x[0] = c[0] + c[3] * t + 0.5 * c[6] * t * t
-        x[1] = c[1] + c[4] * t + 0.5 * c[7] * t * t
-        x[2] = c[2] + c[5] * t + 0.5 * c[8] * t * t
-        x[3] = c[3] + c[6] * t
-        x[4] = c[4] + c[7] * t
-        x[5] = c[5] + c[8] * t
-    elif kind == 3:  # sinusoid: p0 + v t + amplitude sin(w t)
-        w = c[12]
-        sn, cs = math.sin(w * t), math.cos(w * t)
-        x[0] = c[0] + c[3] * t + c[9] * sn
-        x[1] = c[1] + c[4] * t + c[10] * sn
-        x[2] = c[2] + c[5] * t + c[11] * sn
-        x[3] = c[3] + c[9] * w * cs
-        x[4] = c[4] + c[10] * w * cs
-        x[5] = c[5] + c[11] * w * cs
-    elif kind == 4:  # circle about the centre plus a drift
-        r, w = c[16], c[17]
-        cs, sn = math.cos(w * t), math.sin(w * t)
-        x[0] = c[13] + r * cs + c[3] * t
-        x[1] = c[14] + r * sn + c[4] * t
-        x[2] = c[15] + c[5] * t
-        x[3] = -r * w * sn + c[3]
-        x[4] = r * w * cs + c[4]
-        x[5] = c[5]
-    elif kind == 5:  # takeoff: rests until start_s, then climbs at v
-        tc = t - c[18]
-        if tc < 0.0:  # max(t - start_s, 0.0)
-            tc = 0.0
-        x[0] = c[0] + c[3] * tc
-        x[1] = c[1] + c[4] * tc
-        x[2] = c[2] + c[5] * tc
-        if t > c[18]:
-            x[3], x[4], x[5] = c[3], c[4], c[5]
-        else:
-            x[3], x[4], x[5] = 0.0, 0.0, 0.0
-    elif kind == 6:  # escape: accelerates up to its top speed
-        v0, v1, v2 = x[3] + c[6] * dt, x[4] + c[7] * dt, x[5] + c[8] * dt
-        two = c[27]
-        speed = math.sqrt(math.pow(v0, two) + math.pow(v1, two) + math.pow(v2, two))
-        top = c[19]
-        if speed > top:
-            v0, v1, v2 = v0 * top / speed, v1 * top / speed, v2 * top / speed
-        x[3], x[4], x[5] = v0, v1, v2
-        x[0], x[1], x[2] = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
-    elif kind == 7 or kind == 8:  # a balloon: lift, drag and buffet of the air it is in
-        two = c[27]
-        r0, r1, r2 = wx - x[3], wy - x[4], wz - x[5]  # the air relative to the balloon
-        speed = math.sqrt(math.pow(r0, two) + math.pow(r1, two) + math.pow(r2, two))
-        k = c[23]
-        f0, f1, f2 = k * speed * r0, k * speed * r1, k * speed * r2
-        f2 += c[24]
-        if c[28] > 0.0 and speed > 1e-6:
-            # vortex shedding: a side force across the relative wind (horizontal), amplitude
-            # C_L' q A, at the shedding frequency St |r| / D
-            h = math.sqrt(r0 * r0 + r1 * r1)
-            s0, s1 = (r1 / h, -r0 / h) if h > 1e-9 else (1.0, 0.0)
-            side = c[28] * 0.5 * AIR_DENSITY_KG_M3 * speed * speed * c[31] * math.sin(x[6])
-            f0, f1 = f0 + side * s0, f1 + side * s1
-            phase = x[6] + 2.0 * math.pi * c[29] * speed / c[30] * dt
-            if phase > 2.0 * math.pi:  # kept in [0, 2 pi) (a step adds far less than 2 pi)
-                phase -= 2.0 * math.pi
-            x[6] = phase
-        m = c[25]
-        v0, v1, v2 = x[3] + f0 / m * dt, x[4] + f1 / m * dt, x[5] + f2 / m * dt
-        p0, p1, p2 = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
-        # the rope: project back onto the sphere and drop the outward radial velocity
-        d0, d1, d2 = p0 - c[20], p1 - c[21], p2 - c[22]
-        dist = math.sqrt(math.pow(d0, two) + math.pow(d1, two) + math.pow(d2, two))
-        rope = c[26]
-        if kind == 7 and dist > rope:
-            u0, u1, u2 = d0 / dist, d1 / dist, d2 / dist
-            p0, p1, p2 = c[20] + u0 * rope, c[21] + u1 * rope, c[22] + u2 * rope
-            vr = v0 * u0 + v1 * u1 + v2 * u2
-            if vr > 0.0:
-                v0, v1, v2 = v0 - vr * u0, v1 - vr * u1, v2 - vr * u2
-        x[0], x[1], x[2] = p0, p1, p2
-        x[3], x[4], x[5] = v0, v1, v2
-    elif kind == 9:  # a recorded track, linear between samples, continued at its last velocity
-        n = track.shape[0]
-        lo, hi = 0, n  # bisect_right over the times
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if t < track[mid, 0]:
-                hi = mid
-            else:
-                lo = mid + 1
-        i = lo - 1
-        if i < 0:
-            i = 0
-        if i > n - 2:
-            i = n - 2
-        span = track[i + 1, 0] - track[i, 0]
-        v0 = (track[i + 1, 1] - track[i, 1]) / span
-        v1 = (track[i + 1, 2] - track[i, 2]) / span
-        v2 = (track[i + 1, 3] - track[i, 3]) / span
-        x[3], x[4], x[5] = v0, v1, v2
-        x[0] = track[i, 1] + v0 * (t - track[i, 0])
-        x[1] = track[i, 2] + v1 * (t - track[i, 0])
-        x[2] = track[i, 3] + v2 * (t - track[i, 0])
-    # the ground (z = 0) stops every motion: a target that would go below it stays on it
-    # with no downward velocity (its horizontal motion goes on)
-    if x[2] < 0.0:
-        x[2] = 0.0
-        if x[5] < 0.0:
-            x[5] = 0.0
 
 
 # the wind's parameter array Wind.params: the mean (m/s), the gusts' sigmas per axis (m/s),
@@ -542,13 +383,14 @@ def sortie_buffer(vehicle: Any, target: Any, wind: Any, dt: float) -> np.ndarray
     return buf
 
 
-@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])", uses=_USES)
+@kernel("i8(i8, i8, f8[::1], f8[:, ::1], f8[:, ::1])", uses=_USES_STEPS)
 def physics_steps(k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np.ndarray) -> int:
     """Integrate the vehicle, target and wind of ``buf`` (S_* layout; ``track`` rows for a
     recorded target track) from step ``k0`` (time k0 dt, s) over ``n`` steps in the wind
     with the turbulence ``modes`` (M_* rows); the command in ``buf`` reaches the vehicle at
     the start of its step. Each body feels the wind where it is at the start of the step; a
-    light target (tethered, balloon) the vehicle's rotor wash too. After each step, the
+    light target (tethered, balloon) the vehicle's rotor wash too; a manoeuvring target sees
+    where the vehicle is at the end of the step (jink, evade). After each step, the
     closest approach inside it in continuous time (relative motion linear over the step) and
     the outcome; stop at an outcome. Return the number of steps taken."""
     vx = buf[S_VX : S_VX + X_SIZE]
@@ -584,9 +426,9 @@ def physics_steps(k0: int, n: int, buf: np.ndarray, track: np.ndarray, modes: np
         px, py, pz = vx[0], vx[1], vx[2]
         vvx, vvy, vvz = vx[3], vx[4], vx[5]
         if light:
-            target_step(kind, tc, track, tx, t + dt, dt, a0, a1, a2)
+            target_step(kind, tc, track, tx, t + dt, dt, a0, a1, a2, px, py, pz)
         elif kind != 0:
-            target_step(kind, tc, track, tx, t + dt, dt, 0.0, 0.0, 0.0)
+            target_step(kind, tc, track, tx, t + dt, dt, 0.0, 0.0, 0.0, px, py, pz)
         # closest approach inside the step just taken, then hit/miss, divergence and ground
         r1x, r1y, r1z = tx[0] - px, tx[1] - py, tx[2] - pz
         dist, s, c0, c1, c2, r0d, r1d = closest_approach(r0x, r0y, r0z, r1x, r1y, r1z)

@@ -16,6 +16,8 @@ from onboard.geometry_reference import pixel_of, propagated_attitude, rotation_o
 
 from ..scenario.physics import AIR_DENSITY_KG_M3
 from . import physics as P  # noqa: N812
+from . import target_kernels as TK  # noqa: N812
+from .target_reference import target_state
 
 G_ENU = np.array([0.0, 0.0, -GRAVITY_M_S2])  # m/s^2
 E_UP = np.array([0.0, 0.0, 1.0])
@@ -129,115 +131,6 @@ def vehicle_command(
     """The commanded body rates clipped to +-max_rate per axis and the thrust clipped to
     [0, 1] times the maximum thrust (N)."""
     return np.clip(rates, -max_rate, max_rate), min(max(thrust, 0.0), 1.0) * max_thrust_n
-
-
-# ---------------------------------------------------------------- the targets
-def balloon_force(
-    v_rel: np.ndarray,
-    phase_rad: float,
-    drag_k: float,
-    net_lift_n: float,
-    c_l: float,
-    area_m2: float,
-) -> np.ndarray:
-    """The air's force (N) on a light target with the air moving at v_r (m/s) relative to it:
-
-        F = k |v_r| v_r + L e_z + C_L' (rho / 2) |v_r|^2 A sin(phase) s^
-
-    quadratic drag (k = 0.5 rho C_d A, kg/m), the net lift L (N), and the buffet of its shed
-    vortices: horizontal, across the relative wind, s^ = (v_r x e_z) / |v_r x e_z| ((1, 0, 0)
-    when the air moves vertically only), none without a wake (C_L' = 0 or |v_r| <= 1e-6 m/s)
-    (docs/air.md; Achenbach 1974, Howe, Lauchle & Wang 2001)."""
-    speed = float(np.linalg.norm(v_rel))
-    force = drag_k * speed * v_rel + net_lift_n * E_UP
-    if c_l > 0.0 and speed > 1e-6:
-        across = np.cross(v_rel, E_UP)
-        h = float(np.linalg.norm(across))
-        side = across / h if h > 1e-9 else np.array([1.0, 0.0, 0.0])
-        force = force + c_l * 0.5 * RHO * speed**2 * area_m2 * math.sin(phase_rad) * side
-    return force
-
-
-def target_state(
-    kind: str,
-    c: np.ndarray,
-    track: np.ndarray,
-    x: np.ndarray,
-    t: float,
-    dt: float,
-    air: np.ndarray,
-) -> np.ndarray:
-    """The target's state (position m, velocity m/s, buffet phase rad; the TX_* array) at
-    time t (s), a step of dt after ``x``, for each motion (targets.py), ``air`` the wind where
-    it is (m/s; a light target's):
-
-    - static: where it was put;
-    - cv: p = p0 + v0 t (velocity as given);  ca: p = p0 + v0 t + a t^2 / 2, v = v0 + a t;
-    - sinusoid: p = p0 + v0 t + A sin(w t), v = v0 + A w cos(w t);
-    - circle: p = c + r (cos w t, sin w t, 0) + v0 t, v = r w (-sin w t, cos w t, 0) + v0;
-    - takeoff: p = p0 + v0 max(t - t_start, 0), v = v0 after t_start, 0 before;
-    - escape: v <- v + a dt, scaled down to the top speed; p <- p + v dt;
-    - tethered, balloon: v <- v + F / m dt (:func:`balloon_force` with v_r = air - v, m with
-      the added air mass), p <- p + v dt; the buffet's phase advances by 2 pi St |v_r| / D dt
-      (mod 2 pi; Strouhal shedding); a tethered one is held by its rope: beyond the rope's
-      length from the anchor it is put back onto that sphere and its outward radial velocity
-      dropped;
-    - track: linear between the recorded samples, continued at the last velocity.
-
-    Then the ground: a moving target below z = 0 is put on it and its vertical velocity is
-    no longer downward (its horizontal motion goes on)."""
-    p0, v0, a0 = c[P.T_P0 : P.T_P0 + 3], c[P.T_V0 : P.T_V0 + 3], c[P.T_A0 : P.T_A0 + 3]
-    p, v, phase = x[0:3].copy(), x[3:6].copy(), float(x[6])
-    if kind == "static":
-        return x.copy()
-    if kind == "cv":
-        p = p0 + v0 * t
-    elif kind == "ca":
-        p, v = p0 + v0 * t + 0.5 * a0 * t * t, v0 + a0 * t
-    elif kind == "sinusoid":
-        amplitude, w = c[P.T_AMP : P.T_AMP + 3], c[P.T_SIN_W]
-        p, v = p0 + v0 * t + amplitude * math.sin(w * t), v0 + amplitude * w * math.cos(w * t)
-    elif kind == "circle":
-        centre, r, w = c[P.T_CENTER : P.T_CENTER + 3], c[P.T_RADIUS], c[P.T_CIRCLE_W]
-        ring = np.array([math.cos(w * t), math.sin(w * t), 0.0])
-        p = centre + r * ring + v0 * t
-        v = r * w * np.array([-ring[1], ring[0], 0.0]) + v0
-    elif kind == "takeoff":
-        start_s = c[P.T_START]
-        p = p0 + v0 * max(t - start_s, 0.0)
-        v = v0.copy() if t > start_s else np.zeros(3)
-    elif kind == "escape":
-        top_speed = c[P.T_MAX_SPEED]
-        v = v + a0 * dt
-        speed = float(np.linalg.norm(v))
-        if speed > top_speed:
-            v = v * (top_speed / speed)
-        p = p + v * dt
-    elif kind in ("tethered", "balloon"):
-        drag_k, net_lift_n, mass_kg = c[P.T_DRAG_K], c[P.T_LIFT], c[P.T_MASS]
-        c_l, strouhal, diameter_m, area_m2 = c[P.T_CL], c[P.T_STROUHAL], c[P.T_DIA], c[P.T_AREA]
-        v_rel = air - v
-        force = balloon_force(v_rel, phase, drag_k, net_lift_n, c_l, area_m2)
-        speed = float(np.linalg.norm(v_rel))
-        if c_l > 0.0 and speed > 1e-6:
-            shedding_hz = strouhal * speed / diameter_m
-            phase = math.fmod(phase + 2.0 * math.pi * shedding_hz * dt, 2.0 * math.pi)
-        v = v + force / mass_kg * dt
-        p = p + v * dt
-        anchor, rope_m = c[P.T_ANCHOR : P.T_ANCHOR + 3], c[P.T_ROPE]
-        d = p - anchor
-        if kind == "tethered" and np.linalg.norm(d) > rope_m:
-            u = d / np.linalg.norm(d)
-            p = anchor + rope_m * u
-            v = v - max(float(v @ u), 0.0) * u
-    elif kind == "track":
-        times, points = track[:, 0], track[:, 1:4]
-        i = min(max(int(np.searchsorted(times, t, side="right")) - 1, 0), len(track) - 2)
-        v = (points[i + 1] - points[i]) / (times[i + 1] - times[i])
-        p = points[i] + v * (t - times[i])
-    if p[2] < 0.0:
-        p[2], v[2] = 0.0, max(v[2], 0.0)
-    return np.concatenate([p, v, [phase]])
 
 
 # ---------------------------------------------------------------- the air
@@ -381,7 +274,8 @@ def physics_steps(
     2. the air at the start of the step: the wind where the vehicle is; for a light target
        (tethered, balloon) the wind where it is plus the vehicle's rotor wash there;
     3. the vehicle steps (:func:`vehicle_step`), the target moves to t + dt
-       (:func:`target_state`; a kinematic target in still air);
+       (:func:`.target_reference.target_state`; a kinematic target in still air, seeing the
+       vehicle where it is after its step);
     4. the closest approach inside the step (:func:`closest_approach`): before the pass the
        miss so far with its time, the vehicle's speed, the relative position and velocity;
        the pass is when, within 3 m, the range was closing at the step's start (or at the
@@ -394,11 +288,11 @@ def physics_steps(
     buf = buf.copy()
     vx = buf[P.S_VX : P.S_VX + P.X_SIZE]
     airframe = Airframe.of(buf[P.S_LAG : P.S_LAG + P.L_SIZE])
-    tc, tx = buf[P.S_TC : P.S_TC + P.T_SIZE], buf[P.S_TX : P.S_TX + P.TX_SIZE]
+    tc, tx = buf[P.S_TC : P.S_TC + TK.T_SIZE], buf[P.S_TX : P.S_TX + TK.TX_SIZE]
     wc = buf[P.S_WC : P.S_WC + P.W_SIZE]
     cs = buf[P.S_CS : P.S_CS + P.C_SIZE]
     cmd = buf[P.S_CMD : P.S_CMD + 7]  # due step, rates (3), thrust, rate limit, max thrust
-    dt, kind = buf[P.S_DT], P.MOTIONS[int(buf[P.S_KIND])]
+    dt, kind = buf[P.S_DT], TK.MOTIONS[int(buf[P.S_KIND])]
     light = kind in ("tethered", "balloon")
     for k in range(k0, k0 + n):
         t = k * dt
@@ -414,7 +308,7 @@ def physics_steps(
             air = wind_at(wind, modes, tx[0:3]) + rotor_wash_at(vx, airframe, w_vehicle, tx[0:3])
         vx[:] = vehicle_step(vx, airframe, dt, w_vehicle)
         p, v = vx[P.X_P : P.X_P + 3].copy(), vx[P.X_V : P.X_V + 3].copy()
-        tx[:] = target_state(kind, tc, track, tx, t + dt, dt, air)
+        tx[:] = target_state(kind, tc, track, tx, t + dt, dt, air, p)
         r0, r1 = cs[P.C_REL : P.C_REL + 3].copy(), tx[0:3] - p
         dist, s, closest, r0d, r1d = closest_approach(r0, r1)
         cs[P.C_REL : P.C_REL + 3] = r1

@@ -17,6 +17,22 @@ and ``advance(t_s, dt_s, wind)`` that moves it to time ``t_s``.
 - balloon: a free helium balloon, the same forces without the rope: it rises at the speed
   where drag balances its net lift and drifts with the air
 
+Targets that manoeuvre (docs/agility.md; drawn per sortie from the target's own stream):
+
+- turn: flies velocity_m_s and from start_s on turns horizontally with the lateral
+  acceleration lateral_accel_m_s2 (a coordinated turn, + to the left; the speed stays)
+- weave: p0 + v t + A (sin(2 pi t / T + phi) - sin phi) sideways (horizontal, left of
+  velocity_m_s; east for a target without one), A drawn in [amplitude_min_m,
+  amplitude_max_m], T in [period_s, period_max_s], phi in [0, 2 pi)
+- jink: flies velocity_m_s (0: hovers) until the interceptor comes within trigger_range_m,
+  then darts horizontally across the line of sight at jink_accel_m_s2 until it has gained
+  jink_speed_m_s, to the side ``side`` (+1 left, -1 right, 0 drawn)
+- evade: turns its horizontal velocity away from the interceptor's line of sight (toward the
+  side it already moves to across it, else ``side``) with lateral_accel_m_s2, from the moment
+  the interceptor is within trigger_range_m (0: from the start); up to max_speed_m_s from rest
+- surge: flies along velocity_m_s, its speed |v0| + S (sin(2 pi t / T + phi) - sin phi),
+  S = speed_change_m_s, T drawn in [period_s, period_max_s], phi in [0, 2 pi)
+
 A light target (tethered, balloon) feels the air where it is: the wind with its turbulence,
 the interceptor's rotor wash, and the side force of the vortices it sheds (buffet:
 C_L' 0.5 rho |v_a|^2 A sin(phase), across the relative wind, at St |v_a| / D, its starting
@@ -33,7 +49,7 @@ import numpy as np
 
 from ..scenario import TargetSpec
 from ..scenario.physics import AIR_DENSITY_KG_M3, balloon_lift_and_mass
-from .physics import (
+from .target_kernels import (
     KIND_TRACK,
     MOTIONS,
     T_A0,
@@ -44,22 +60,34 @@ from .physics import (
     T_CIRCLE_W,
     T_CL,
     T_DIA,
+    T_DIR,
     T_DRAG_K,
+    T_JINK_ACCEL,
+    T_JINK_SPEED,
+    T_LAT,
     T_LIFT,
+    T_MAN_AMP,
+    T_MAN_PHASE,
+    T_MAN_W,
     T_MASS,
     T_MAX_SPEED,
     T_P0,
     T_RADIUS,
     T_ROPE,
+    T_SIDE,
     T_SIN_W,
     T_SIZE,
     T_START,
     T_STROUHAL,
+    T_TRIGGER,
     T_TWO,
     T_V0,
     TX_SIZE,
     target_step,
 )
+
+MANOEUVRES = ("turn", "weave", "jink", "evade", "surge")
+_NOWHERE = (math.nan, math.nan, math.nan)  # no interceptor: nothing triggers
 
 
 def _slot(i: int) -> property:
@@ -76,14 +104,16 @@ def _slot(i: int) -> property:
 
 class Target:
     """A target: position ``p`` and velocity ``v`` (lists, m and m/s ENU) over the state
-    array :attr:`x`, moved by :func:`.physics.target_step` with :attr:`kind` and
+    array :attr:`x`, moved by :func:`.target_kernels.target_step` with :attr:`kind` and
     :attr:`params`."""
 
     p = _slot(0)
     v = _slot(3)
 
     def __init__(self, spec: TargetSpec, rng: np.random.Generator | None = None) -> None:
-        """``rng`` draws a light target's buffet phase (0 without it)."""
+        """``rng`` draws a light target's buffet phase (0 without it) and a manoeuvre's
+        period, amplitude, phase and side (the ranges' lower ends, phase 0 and left without
+        it)."""
         self.spec = spec
         s = spec
         self.kind = MOTIONS.index(s.motion)
@@ -114,6 +144,8 @@ class Target:
             self.v = [v + a * w for v, a in zip(s.velocity_m_s, s.amplitude_m, strict=True)]
             c[T_AMP : T_AMP + 3] = s.amplitude_m
             c[T_SIN_W] = w
+        if s.motion in MANOEUVRES:
+            self._manoeuvre(s, c, rng)
         self.light = s.motion in ("tethered", "balloon")  # moved by the air
         if self.light:
             self._anchor = (s.position_m[0], s.position_m[1], s.position_m[2] - s.tether_length_m)
@@ -127,6 +159,31 @@ class Target:
             c[T_DIA], c[T_AREA] = s.diameter_m, area
             self.x[6] = 0.0 if rng is None else float(rng.uniform(0.0, 2.0 * math.pi))
         self.params = c
+
+    def _manoeuvre(self, s: TargetSpec, c: np.ndarray, rng: np.random.Generator | None) -> None:
+        """A manoeuvre's constants in ``c`` (T_* layout), drawn with ``rng``."""
+
+        def draw(lo: float, hi: float) -> float:
+            return lo if rng is None or hi <= lo else float(rng.uniform(lo, hi))
+
+        period = draw(s.period_s, s.period_max_s)
+        c[T_MAN_W] = 2.0 * math.pi / period if period > 0.0 else 0.0
+        c[T_MAN_PHASE] = draw(0.0, 2.0 * math.pi)
+        side = s.side if s.side != 0.0 else (1.0 if rng is None or rng.uniform() < 0.5 else -1.0)
+        c[T_SIDE] = side
+        c[T_LAT] = s.lateral_accel_m_s2
+        c[T_TRIGGER] = s.trigger_range_m
+        c[T_JINK_SPEED], c[T_JINK_ACCEL] = s.jink_speed_m_s, s.jink_accel_m_s2
+        v0 = np.array(s.velocity_m_s)
+        if s.motion == "weave":
+            c[T_MAN_AMP] = draw(s.amplitude_min_m, s.amplitude_max_m)
+            h = math.hypot(v0[0], v0[1])
+            c[T_DIR : T_DIR + 3] = (-v0[1] / h, v0[0] / h, 0.0) if h > 1e-9 else (1.0, 0.0, 0.0)
+            w, ph = c[T_MAN_W], c[T_MAN_PHASE]
+            self.v = (v0 + c[T_MAN_AMP] * w * math.cos(ph) * c[T_DIR : T_DIR + 3]).tolist()
+        if s.motion == "surge":
+            c[T_MAN_AMP] = s.speed_change_m_s
+            c[T_DIR : T_DIR + 3] = v0 / np.linalg.norm(v0)
 
     def settle_in_wind(self, wind_at: Callable[[list[float]], Sequence[float]]) -> None:
         """Tethered: start leaning at rest in the mean wind (rope along lift + drag), as a
@@ -148,10 +205,21 @@ class Target:
         self.p = p
         self.v = [0.0, 0.0, 0.0]
 
-    def advance(self, t: float, dt: float, wind: Sequence[float]) -> None:
+    def advance(
+        self,
+        t: float,
+        dt: float,
+        wind: Sequence[float],
+        interceptor_m: Sequence[float] = _NOWHERE,
+    ) -> None:
         """Move to time ``t`` (s), ``dt`` after the last call, in ``wind`` (m/s ENU, where
-        the target is): :func:`.physics.target_step`."""
-        target_step(self.kind, self.params, self.track, self.x, t, dt, wind[0], wind[1], wind[2])
+        the target is), the interceptor at ``interceptor_m`` (m ENU; the jink and evasion
+        react to it, nothing triggers without it): :func:`.target_kernels.target_step`."""
+        i0, i1, i2 = interceptor_m
+        target_step(
+            self.kind, self.params, self.track, self.x, t, dt, wind[0], wind[1], wind[2],
+            float(i0), float(i1), float(i2),
+        )  # fmt: skip
 
 
 class TrackTarget(Target):

@@ -345,7 +345,7 @@ class SitlVehicle(SitlCommands, SitlTelemetry):
             self.battery.step(self.dt_s, self.armed, veh.thrust_n / hover_n)
         if self.sortie_start_s is not None:
             ts = t - self.sortie_start_s
-            self.target.advance(ts + self.dt_s, self.dt_s, wind.at(self.target.p))
+            self.target.advance(ts + self.dt_s, self.dt_s, wind.at(self.target.p), veh.p)
             self._track_closest(ts)
         if veh.p[2] <= 0.0 and not self.landed and veh.v[2] <= 0.0:
             self._touchdown(t)

@@ -1,0 +1,155 @@
+"""Targets that manoeuvre (groundstation/sim/targets.py, docs/agility.md): each motion against
+its kinematics, the per-sortie draws seeded, and bad parameters refused with a clear error."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.scenario import ScenarioError, TargetSpec, parse_scenario
+from groundstation.sim.targets import Target
+
+DT = 1.0 / 600.0
+
+
+def _fly(target: Target, seconds: float, interceptor=lambda t: (math.nan,) * 3) -> np.ndarray:
+    """Rows (t, x, y, z, vx, vy, vz) every step for ``seconds``."""
+    rows = []
+    for k in range(1, round(seconds / DT) + 1):
+        t = k * DT
+        target.advance(t, DT, (0.0, 0.0, 0.0), interceptor(t))
+        rows.append((t, *target.p, *target.v))
+    return np.array(rows)
+
+
+def test_turn_is_a_coordinated_turn_of_the_stated_lateral_acceleration():
+    spec = TargetSpec("turn", (0.0, 20.0, 5.0), velocity_m_s=(4.0, 0.0, 0.0))
+    spec = dataclasses.replace(spec, lateral_accel_m_s2=3.0, start_s=1.0)
+    rows = _fly(Target(spec), 6.0)
+    speed = np.hypot(rows[:, 4], rows[:, 5])
+    np.testing.assert_allclose(speed, 4.0, rtol=1e-9)
+    before = rows[rows[:, 0] <= 1.0]
+    np.testing.assert_allclose(before[:, 5], 0.0, atol=1e-12)  # straight until start_s
+    turning = rows[rows[:, 0] > 1.5]
+    # the centre of curvature: left of the velocity at v^2 / a = 5.33 m, the same all along
+    # (within 1 cm over 4.5 s: the step's position update lags the rotated velocity)
+    v = turning[:, 4:6]
+    left = np.column_stack([-v[:, 1], v[:, 0]]) / 4.0
+    centre = turning[:, 1:3] + left * (16.0 / 3.0)
+    np.testing.assert_allclose(centre, np.broadcast_to(centre[0], centre.shape), atol=0.01)
+    accel = np.gradient(turning[:, 4:6], DT, axis=0)[5:-5]
+    np.testing.assert_allclose(np.hypot(accel[:, 0], accel[:, 1]), 3.0, rtol=1e-3)
+
+
+def test_jink_darts_across_the_line_of_sight_when_the_interceptor_comes_near():
+    spec = TargetSpec("jink", (0.0, 20.0, 10.0))
+    spec = dataclasses.replace(spec, trigger_range_m=8.0, jink_speed_m_s=2.5, side=-1.0)
+
+    def approaching(t):  # from (0, 0, 10) at 4 m/s: within 8 m at t = 3 s
+        return (0.0, 4.0 * t, 10.0)
+
+    rows = _fly(Target(spec), 5.0, approaching)
+    still = rows[rows[:, 0] < 3.0 - 2 * DT]
+    np.testing.assert_allclose(
+        still[:, 1:7], np.broadcast_to([0, 20, 10, 0, 0, 0], (len(still), 6))
+    )
+    end = rows[-1]
+    # right of the LOS (+y): -x, at the dart's speed, nothing along the LOS or vertical
+    np.testing.assert_allclose(end[4:7], (2.5, 0.0, 0.0), atol=1e-9)  # right of +y is +x
+    # at 8 m/s^2 the 2.5 m/s are reached within 0.32 s of the trigger
+    reached = rows[np.argmax(rows[:, 4] >= 2.5 - 1e-9), 0]
+    assert 3.0 + 0.3 < reached < 3.0 + 0.34
+    # without an interceptor nothing triggers
+    alone = _fly(Target(spec), 2.0)
+    np.testing.assert_allclose(alone[-1, 1:7], (0, 20, 10, 0, 0, 0))
+
+
+def test_evasion_turns_away_from_the_line_of_sight_at_the_stated_acceleration():
+    spec = TargetSpec("evade", (0.0, 20.0, 10.0), velocity_m_s=(0.0, -3.0, 0.0))
+    spec = dataclasses.replace(spec, lateral_accel_m_s2=4.0, side=1.0)
+    rows = _fly(Target(spec), 3.0, lambda t: (0.0, 0.0, 10.0))
+    # head-on at first: the drawn side (+1, left of the LOS +y: -x); the speed stays 3 m/s
+    np.testing.assert_allclose(np.hypot(rows[:, 4], rows[:, 5]), 3.0, rtol=1e-9)
+    a0 = (rows[1, 4:6] - rows[0, 4:6]) / DT
+    np.testing.assert_allclose(a0, (-4.0, 0.0), atol=0.02)
+    # it ends flying across the LOS (to -x), no longer toward the interceptor
+    end_v = rows[-1, 4:6]
+    los = rows[-1, 1:3] / np.linalg.norm(rows[-1, 1:3])
+    assert end_v[0] < -2.5 and abs(float(end_v @ los)) < 1.0
+
+
+def test_weave_and_surge_are_drawn_per_sortie_within_their_ranges():
+    spec = TargetSpec("weave", (0.0, 20.0, 10.0), velocity_m_s=(0.0, -1.0, 0.0), period_s=3.0)
+    spec = dataclasses.replace(spec, period_max_s=6.0, amplitude_min_m=1.0, amplitude_max_m=2.5)
+
+    def sideways(seed):
+        rows = _fly(Target(spec, np.random.default_rng(seed)), 12.0)
+        return rows[:, 1]  # left of -y is +x
+
+    a, b, a_again = sideways(1), sideways(2), sideways(1)
+    np.testing.assert_array_equal(a, a_again)
+    assert not np.allclose(a, b)
+    for x in (a, b):
+        half = 0.5 * (x.max() - x.min())
+        assert 1.0 - 1e-6 <= half <= 2.5 + 1e-6
+        assert x[0] == pytest.approx(0.0, abs=0.01)  # starts where it was put
+    surge = TargetSpec("surge", (0.0, 20.0, 10.0), velocity_m_s=(2.0, 0.0, 0.0), period_s=4.0)
+    surge = dataclasses.replace(surge, speed_change_m_s=1.0)
+    rows = _fly(Target(surge, np.random.default_rng(3)), 8.0)
+    speed = rows[:, 4]
+    assert speed.min() >= 2.0 - 2.0 - 1e-9 and speed.max() <= 2.0 + 2.0 + 1e-9
+    assert speed.max() - speed.min() == pytest.approx(2.0, abs=0.01)  # a full period flown
+    np.testing.assert_allclose(rows[:, 5:7], 0.0)
+
+
+BASE = """
+name = "t"
+duration_s = 10
+[interceptor]
+position_m = [0, 0, 10]
+[target]
+position_m = [0, 20, 10]
+"""
+
+
+@pytest.mark.parametrize(
+    ("target", "key", "words"),
+    [
+        ('motion = "turn"\nlateral_accel_m_s2 = 3', "target.velocity_m_s", "horizontal velocity"),
+        (
+            'motion = "turn"\nvelocity_m_s = [4, 0, 0]\nlateral_accel_m_s2 = 80',
+            "target.lateral_accel_m_s2",
+            "within",
+        ),
+        ('motion = "weave"\namplitude_max_m = 2', "target.period_s", "positive period"),
+        (
+            'motion = "weave"\nperiod_s = 4\namplitude_min_m = 3\namplitude_max_m = 2',
+            "target.amplitude_max_m",
+            "amplitude_min_m <= amplitude_max_m",
+        ),
+        ('motion = "jink"', "target.trigger_range_m", "positive range"),
+        ('motion = "jink"\ntrigger_range_m = 8\nside = 0.5', "target.side", "1 (left)"),
+        ('motion = "evade"\nvelocity_m_s = [0, -3, 0]', "target.lateral_accel_m_s2", "(0, 50.0]"),
+        (
+            'motion = "surge"\nvelocity_m_s = [2, 0, 0]\nperiod_s = 4\nspeed_change_m_s = 1.5',
+            "target.speed_change_m_s",
+            "never flies backwards",
+        ),
+        ('motion = "jink"\ntrigger_range_m = "near"', "target.trigger_range_m", "a number"),
+    ],
+)
+def test_bad_manoeuvre_parameters_are_refused_by_name(target, key, words):
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(BASE + target + "\n")
+    text = str(exc.value)
+    assert key in text and words in text, text
+
+
+def test_shipped_manoeuvre_scenarios_load():
+    for name in ("agile-jink", "agile-turn"):
+        from groundstation.scenario import load_scenario
+
+        assert load_scenario(name).target.motion in ("jink", "turn")
