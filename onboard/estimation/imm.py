@@ -1,0 +1,228 @@
+"""The target's world motion as a multiple-model estimate (docs/agility.md): an interacting
+multiple-model (IMM) filter over three models of how the target moves, fed with the target's
+world position that the DKF and the vehicle's own state give at each fused detection.
+
+State x = (p, v, a): position (m), velocity (m/s) and acceleration (m/s^2), world ENU. The
+models (Bar-Shalom, Li & Kirubarajan 2001, ch. 6 and 11.7):
+
+- CV, constant velocity: p += v T, a = 0; white acceleration noise (sigma ``q_cv_m_s2``);
+- CA, constant acceleration (Wiener acceleration): p += v T + a T^2 / 2, v += a T; white jerk
+  noise (sigma ``q_ca_m_s3``);
+- CT, coordinated turn in the horizontal plane at the turn rate omega = (v x a)_z / |v_h|^2
+  of the CA model's estimate (clipped to ``max_turn_rad_s``; the combined one is shrunk toward
+  CV's a = 0, which would keep the turn rate from ever growing): v_h turns by omega T exactly,
+  p_h follows the arc, the vertical is CV, and a = omega e_z x v; white acceleration noise
+  (sigma ``q_ct_m_s2``). With omega taken from the estimate, the model is linear in the state
+  at each step (the turn rate is its linearisation point).
+
+The models mix through filterpy's :class:`~filterpy.kalman.IMMEstimator` with the Markov
+switching matrix of :class:`ImmConfig` (per update, about the camera's 30 Hz). The combined
+acceleration is the model-probability weighted one, so a target the filter believes to fly
+straight (CV) reports almost none: an unmanoeuvring target gives the guidance no term to
+follow. The measurement is the target's position z = p with the covariance from the DKF's
+image point and inverse depth (:func:`position_from_image`): good across the line of sight,
+poor along it. Pure maths: no clock, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from filterpy.kalman import IMMEstimator, KalmanFilter
+
+MODELS = ("cv", "ca", "ct")  # the models, in the order of every probability vector
+
+
+@dataclass(frozen=True)
+class ImmConfig:
+    """The IMM's noises, switching and limits (SI units)."""
+
+    q_cv_m_s2: float = 0.3  # CV: white acceleration, 1 sigma
+    q_ca_m_s3: float = 4.0  # CA: white jerk, 1 sigma
+    q_ct_m_s2: float = 0.5  # CT: white acceleration, 1 sigma
+    max_turn_rad_s: float = 3.0  # CT's turn rate is clipped to this
+    # Markov switching per update (row: from, column: to), CV / CA / CT
+    switching: tuple[tuple[float, float, float], ...] = (
+        (0.98, 0.01, 0.01),
+        (0.02, 0.96, 0.02),
+        (0.02, 0.02, 0.96),
+    )
+    initial_probabilities: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    initial_accel_sigma_m_s2: float = 3.0  # the acceleration's 1 sigma at the start
+    min_position_sigma_m: float = 0.02  # the measurement's floor per axis
+    max_gap_s: float = 1.0  # a gap longer than this between updates restarts the filter
+
+
+@dataclass(frozen=True)
+class MotionEstimate:
+    """The IMM's output after an update: the combined acceleration (m/s^2 ENU) and velocity
+    (m/s ENU), the trace of the acceleration's covariance (m^2/s^4) and the model
+    probabilities in :data:`MODELS` order."""
+
+    time_s: float
+    accel_enu_m_s2: tuple[float, float, float]
+    velocity_enu_m_s: tuple[float, float, float]
+    accel_var_m2_s4: float
+    probabilities: tuple[float, float, float] = field(default=(1.0, 0.0, 0.0))
+
+
+def position_from_image(
+    xn: float, yn: float, rho: float, P3: np.ndarray, R_WC: np.ndarray, camera_enu_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The target's world position (m ENU) and its covariance (m^2) from the DKF's normalised
+    image point (xn, yn), inverse depth rho (1/m) and their 3x3 covariance ``P3``, the camera's
+    attitude ``R_WC`` and position: p = c + R_WC (xn, yn, 1) / rho, the covariance through
+    the Jacobian J = R_WC [[1/rho, 0, -xn/rho^2], [0, 1/rho, -yn/rho^2], [0, 0, -1/rho^2]]."""
+    ray = np.array((xn, yn, 1.0))
+    p = camera_enu_m + R_WC @ (ray / rho)
+    J = R_WC @ np.array(
+        (
+            (1.0 / rho, 0.0, -xn / rho**2),
+            (0.0, 1.0 / rho, -yn / rho**2),
+            (0.0, 0.0, -1.0 / rho**2),
+        )
+    )
+    return p, J @ P3 @ J.T
+
+
+def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    F = np.eye(9)
+    F[0:3, 3:6] = dt * np.eye(3)
+    F[6:9, 6:9] = 0.0
+    Q = np.zeros((9, 9))
+    q2 = q * q
+    Q[0:3, 0:3] = q2 * dt**4 / 4.0 * np.eye(3)
+    Q[0:3, 3:6] = Q[3:6, 0:3] = q2 * dt**3 / 2.0 * np.eye(3)
+    Q[3:6, 3:6] = q2 * dt**2 * np.eye(3)
+    Q[6:9, 6:9] = 1e-6 * np.eye(3)  # a = 0 (kept invertible)
+    return F, Q
+
+
+def _ca_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    F = np.eye(9)
+    F[0:3, 3:6] = F[3:6, 6:9] = dt * np.eye(3)
+    F[0:3, 6:9] = 0.5 * dt * dt * np.eye(3)
+    g = np.array((dt**3 / 6.0, dt**2 / 2.0, dt))  # white jerk through (p, v, a)
+    Q = np.kron(np.outer(g, g) * q * q, np.eye(3))
+    return F, Q
+
+
+def _ct_matrices(dt: float, q: float, omega: float) -> tuple[np.ndarray, np.ndarray]:
+    """The coordinated turn at ``omega`` (rad/s) about +z; vertical CV; a = omega e_z x v."""
+    F = np.zeros((9, 9))
+    wt = omega * dt
+    s, c = math.sin(wt), math.cos(wt)
+    if abs(omega) > 1e-6:
+        a, b = s / omega, (1.0 - c) / omega
+    else:
+        a, b = dt, 0.0
+    F[0, 0] = F[1, 1] = F[2, 2] = 1.0
+    F[0, 3], F[0, 4], F[1, 3], F[1, 4] = a, -b, b, a
+    F[2, 5] = dt
+    F[3, 3], F[3, 4], F[4, 3], F[4, 4] = c, -s, s, c
+    F[5, 5] = 1.0
+    # a = omega e_z x v after the step: (-omega v_y, omega v_x, 0)
+    F[6, 3:6] = -omega * F[4, 3:6]
+    F[7, 3:6] = omega * F[3, 3:6]
+    Q = _cv_matrices(dt, q)[1]
+    return F, Q
+
+
+class TargetMotionImm:
+    """The IMM over CV, CA and CT (module docstring). Call :meth:`update` with each new
+    position measurement; read :attr:`estimate`."""
+
+    def __init__(self, config: ImmConfig | None = None) -> None:
+        self.config = config or ImmConfig()
+        self._imm: IMMEstimator | None = None
+        self._time_s = math.nan
+        self.estimate: MotionEstimate | None = None
+
+    def reset(self) -> None:
+        """Forget the track (a new one starts at the next update)."""
+        self._imm = None
+        self.estimate = None
+
+    def _start(self, t: float, p: np.ndarray, R: np.ndarray, v: np.ndarray) -> None:
+        cfg = self.config
+        filters = []
+        for _ in MODELS:
+            kf = KalmanFilter(dim_x=9, dim_z=3)
+            kf.x = np.concatenate([p, v, np.zeros(3)])
+            kf.P = np.zeros((9, 9))
+            kf.P[0:3, 0:3] = R
+            kf.P[3:6, 3:6] = 4.0 * np.eye(3)
+            kf.P[6:9, 6:9] = cfg.initial_accel_sigma_m_s2**2 * np.eye(3)
+            kf.H = np.hstack([np.eye(3), np.zeros((3, 6))])
+            filters.append(kf)
+        filters[0].x[6:9] = 0.0
+        self._imm = IMMEstimator(
+            filters, np.array(cfg.initial_probabilities), np.array(cfg.switching)
+        )
+        self._time_s = t
+        self._publish(t)
+
+    def _publish(self, t: float) -> None:
+        imm = self._imm
+        x, P = imm.x, imm.P
+        mu = tuple(float(m) for m in imm.mu)
+        self.estimate = MotionEstimate(
+            t,
+            (float(x[6]), float(x[7]), float(x[8])),
+            (float(x[3]), float(x[4]), float(x[5])),
+            float(P[6, 6] + P[7, 7] + P[8, 8]),
+            (mu[0], mu[1], mu[2]),
+        )
+
+    def update(
+        self,
+        t: float,
+        position_enu_m: np.ndarray,
+        cov_m2: np.ndarray,
+        velocity_guess_enu_m_s: np.ndarray | None = None,
+    ) -> MotionEstimate | None:
+        """Predict to ``t`` (s) and fuse the target's position (m ENU) with covariance
+        ``cov_m2`` (3x3, m^2); ``velocity_guess_enu_m_s`` starts a new track's velocity (zero
+        without it). A measurement that is not finite changes nothing; a time that does not
+        advance is ignored; a gap over ``max_gap_s`` restarts the track. Returns the estimate."""
+        p = np.asarray(position_enu_m, dtype=float)
+        R = np.asarray(cov_m2, dtype=float)
+        if (
+            p.shape != (3,)
+            or R.shape != (3, 3)
+            or not (np.isfinite(p).all() and np.isfinite(R).all())
+        ):
+            return self.estimate
+        floor = self.config.min_position_sigma_m**2
+        R = 0.5 * (R + R.T) + floor * np.eye(3)
+        v = np.zeros(3) if velocity_guess_enu_m_s is None else np.asarray(velocity_guess_enu_m_s)
+        if not np.isfinite(v).all():
+            v = np.zeros(3)
+        if self._imm is None or t - self._time_s > self.config.max_gap_s:
+            self._start(t, p, R, v)
+            return self.estimate
+        dt = t - self._time_s
+        if not dt > 0.0:
+            return self.estimate
+        self._predict(dt)
+        for kf in self._imm.filters:
+            kf.R = R
+        self._imm.update(p)
+        self._time_s = t
+        self._publish(t)
+        return self.estimate
+
+    def _predict(self, dt: float) -> None:
+        cfg = self.config
+        imm = self._imm
+        x = imm.filters[1].x  # CA's own estimate: its acceleration is not shrunk by CV's
+        vh2 = float(x[3] * x[3] + x[4] * x[4])
+        omega = float(x[3] * x[7] - x[4] * x[6]) / vh2 if vh2 > 0.25 else 0.0
+        omega = min(max(omega, -cfg.max_turn_rad_s), cfg.max_turn_rad_s)
+        cv, ca, ct = imm.filters
+        cv.F, cv.Q = _cv_matrices(dt, cfg.q_cv_m_s2)
+        ca.F, ca.Q = _ca_matrices(dt, cfg.q_ca_m_s3)
+        ct.F, ct.Q = _ct_matrices(dt, cfg.q_ct_m_s2, omega)
+        imm.predict()

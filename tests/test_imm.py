@@ -1,0 +1,93 @@
+"""The IMM over the target's world motion (onboard/estimation/imm.py): the models switch on a
+simulated turn, a straight flyer reports almost no acceleration, bad input changes nothing."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from onboard.estimation.imm import MODELS, TargetMotionImm, position_from_image
+
+DT = 1.0 / 30.0  # the camera's rate
+# the DKF's position error: 5 cm across the line of sight (+y), 40 cm along it
+R_MEAS = np.diag([0.05**2, 0.4**2, 0.05**2])
+
+
+def _fly(turn_at_s: float | None, lateral_m_s2: float, seed: int, seconds: float = 10.0):
+    """A target at 4 m/s along +x, 20 m ahead of an observer at the origin, turning left at
+    ``lateral_m_s2`` from ``turn_at_s``; rows (t, probabilities (3), a estimated (3), a true
+    (3))."""
+    rng = np.random.default_rng(seed)
+    imm = TargetMotionImm()
+    p, v = np.array([0.0, 20.0, 10.0]), np.array([4.0, 0.0, 0.0])
+    rows = []
+    for k in range(round(seconds / DT)):
+        t = k * DT
+        turning = turn_at_s is not None and t > turn_at_s
+        if turning:
+            w = lateral_m_s2 / 4.0 * DT
+            v = np.array(
+                [
+                    math.cos(w) * v[0] - math.sin(w) * v[1],
+                    math.sin(w) * v[0] + math.cos(w) * v[1],
+                    0.0,
+                ]
+            )
+        p = p + v * DT
+        e = imm.update(t, p + rng.multivariate_normal(np.zeros(3), R_MEAS), R_MEAS, v)
+        a_true = lateral_m_s2 / 4.0 * np.array([-v[1], v[0], 0.0]) if turning else np.zeros(3)
+        rows.append((t, *e.probabilities, *e.accel_enu_m_s2, *a_true))
+    return np.array(rows)
+
+
+def test_the_models_switch_on_a_turn():
+    for seed in (1, 2, 3):
+        rows = _fly(turn_at_s=4.0, lateral_m_s2=3.0, seed=seed)
+        straight = rows[(rows[:, 0] > 1.0) & (rows[:, 0] <= 4.0)]
+        turning = rows[rows[:, 0] > 5.0]
+        mu_straight, mu_turn = straight[:, 1:4].mean(axis=0), turning[:, 1:4].mean(axis=0)
+        assert mu_straight[MODELS.index("cv")] > 0.6, mu_straight
+        assert mu_turn[MODELS.index("cv")] < 0.25, mu_turn
+        assert mu_turn[MODELS.index("ct")] > 0.3, mu_turn
+        # the acceleration across the line of sight (x): within 0.9 m/s^2 RMS of the true 3
+        err = turning[:, 4] - turning[:, 7]
+        assert math.sqrt(float(np.mean(err**2))) < 0.9
+
+
+def test_a_straight_flyer_gives_almost_no_acceleration():
+    rows = _fly(turn_at_s=None, lateral_m_s2=0.0, seed=4)
+    settled = rows[rows[:, 0] > 1.0]
+    across = np.hypot(settled[:, 4], settled[:, 6])  # x and z: across the line of sight
+    assert math.sqrt(float(np.mean(across**2))) < 0.05
+    assert settled[:, 1].mean() > 0.6
+
+
+def test_bad_input_changes_nothing_and_a_gap_restarts():
+    imm = TargetMotionImm()
+    first = imm.update(0.0, np.array([0.0, 20.0, 10.0]), R_MEAS, np.array([4.0, 0.0, 0.0]))
+    assert first is not None and first.probabilities == (0.8, 0.1, 0.1)
+    for bad in (np.array([math.nan, 20.0, 10.0]), np.array([1.0, 2.0])):
+        assert imm.update(0.1, bad, R_MEAS) is first
+    assert imm.update(0.1, np.array([0.4, 20.0, 10.0]), np.full((3, 3), math.inf)) is first
+    assert imm.update(0.0, np.array([0.4, 20.0, 10.0]), R_MEAS) is first  # time not advancing
+    later = imm.update(5.0, np.array([9.0, 20.0, 10.0]), R_MEAS)  # a 5 s gap: a new track
+    assert later.probabilities == (0.8, 0.1, 0.1) and later.time_s == 5.0
+
+
+def test_position_from_image_and_its_covariance():
+    R_WC = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # looking along +y
+    cam = np.array([1.0, 2.0, 3.0])
+    xn, yn, rho = 0.1, -0.05, 1.0 / 20.0
+    P3 = np.diag([1e-6, 1e-6, (0.1 * rho) ** 2])
+    p, cov = position_from_image(xn, yn, rho, P3, R_WC, cam)
+    np.testing.assert_allclose(p, cam + R_WC @ (np.array([xn, yn, 1.0]) * 20.0), rtol=1e-12)
+    # 10 % inverse depth: about 2 m along the ray; 1e-3 in the image: 2 cm (20 m x 1e-3) across
+    ray = R_WC @ np.array([xn, yn, 1.0])
+    along = ray / np.linalg.norm(ray)
+    across = R_WC @ np.array([1.0, 0.0, -xn])
+    across /= np.linalg.norm(across)
+    assert abs(float(across @ along)) < 1e-12
+    sigma_along = math.sqrt(float(along @ cov @ along))
+    np.testing.assert_allclose(sigma_along, 2.0 * np.linalg.norm(ray), rtol=0.01)
+    np.testing.assert_allclose(math.sqrt(float(across @ cov @ across)), 0.02, rtol=0.01)
