@@ -11,7 +11,7 @@ from pathlib import Path
 
 # Only light modules here: `groundstation --help` and `scenarios` must not pay for numpy,
 # filterpy/scipy, OpenCV or viser; each command imports what it needs when it runs.
-from onboard.enums import GuidanceLaw, codes
+from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 from onboard.gains import GainError
 from onboard.link.address import add_host_port_option
 
@@ -210,7 +210,9 @@ def _build_parser() -> argparse.ArgumentParser:
         "--n", type=COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"
     )
     c.add_argument(
-        "--laws", default=",".join(codes(GuidanceLaw)), help="comma-separated guidance laws"
+        "--laws",
+        default=",".join(m.value for m in PAPER_LAWS),
+        help=f"comma-separated guidance laws of {', '.join(codes(GuidanceLaw))}",
     )
     c.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     c.add_argument("--seed", type=SEED, default=0)

@@ -94,3 +94,7 @@ class ControlTelemetry:
     dkf_time_since_detection_s: float
     dkf_lost: bool
     guard_tripped: bool
+    # the IMM of the target's motion (onboard/estimation/imm.py), None when it does not run:
+    # its acceleration (m/s^2 ENU) and the model probabilities (cv, ca, ct)
+    target_accel_enu_m_s2: tuple[float, float, float] | None = None
+    motion_model_probs: tuple[float, float, float] | None = None

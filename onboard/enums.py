@@ -14,6 +14,11 @@ class GuidanceLaw(str, enum.Enum):
     PNG = "png"  # IBVS fused with proportional navigation (the paper's law)
     PG = "pg"  # pursuit guidance
     IBVS = "ibvs"  # image-based visual servoing
+    APN = "apn"  # augmented PN: the proposed law plus the target's acceleration (docs/agility.md)
+
+
+# the paper's comparison: what a campaign flies unless told which laws
+PAPER_LAWS: tuple[GuidanceLaw, ...] = (GuidanceLaw.PNG, GuidanceLaw.PG, GuidanceLaw.IBVS)
 
 
 class LoopMode(enum.Enum):

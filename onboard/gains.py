@@ -294,6 +294,24 @@ class Gains:
         "limits",
     )
 
+    # the augmented law's command limit from the airframe (onboard/control/apn.py)
+    tilt_max: float = _gain(
+        45.0,
+        "deg",
+        10.0,
+        80.0,
+        "APN: the airframe's tilt limit (PX4 MPC_TILTMAX_AIR), caps its lateral accel",
+        "limits",
+    )
+    a_z_margin: float = _gain(
+        2.0,
+        "m/s^2",
+        0.0,
+        10.0,
+        "APN: vertical acceleration kept in reserve from the thrust",
+        "limits",
+    )
+
     def __post_init__(self) -> None:
         check_ranges(self, "gain")
 

@@ -10,6 +10,7 @@ from collections import deque
 import numpy as np
 
 from .camera_model import CameraModel
+from .control.apn import available_lateral_accel_m_s2
 from .control.attitude import command_floats
 from .control.disturbance import DisturbanceObserver, DisturbanceObserverConfig
 from .control.fov_hold import yaw_rate_command
@@ -43,6 +44,7 @@ from .datatypes import (
     VehicleState,
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
+from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
 from .gains import Gains
 from .geometry import (
     as_quat,
@@ -95,7 +97,11 @@ class InterceptionLoop:
         law: str = "png",
         control_rate_hz: float = 100.0,
         dkf_config: DkfConfig | None = None,
+        estimate_motion: bool = False,
     ) -> None:
+        """``estimate_motion``: run the IMM of the target's motion (onboard/estimation/imm.py)
+        for the telemetry even when the law does not use it (the augmented law always runs
+        it)."""
         if law not in GUIDANCE_LAWS:
             raise ValueError(f"unknown guidance law {law!r}; choose one of {sorted(GUIDANCE_LAWS)}")
         if not control_rate_hz > 0.0:
@@ -111,6 +117,7 @@ class InterceptionLoop:
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
         self.dkf.carry_max_s = self.gains.t_carry
+        self.motion = TargetMotionImm() if estimate_motion or law == "apn" else None
         self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
         self._gyro_n = 0
         self._detections: list[Detection] = []
@@ -191,6 +198,26 @@ class InterceptionLoop:
                 u = v = math.nan  # the DKF refuses it
             detection = Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
         self._detections.append(detection)
+
+    def _track_motion(
+        self, t: float, est: ImageEstimate | None, p_enu: np.ndarray, R_WB: np.ndarray, R_WC
+    ) -> MotionEstimate | None:
+        """Feed the IMM the target's world position after a fused detection: the DKF's image
+        point and inverse depth now, placed from the camera's believed pose; a lost estimate
+        ends its track."""
+        motion = self.motion
+        if est is None or est.lost:
+            motion.reset()
+            return None
+        fused = (FusionResult.ACCEPTED, FusionResult.INITIALISED)
+        dv = self.dkf.depth_velocity() if any(r in fused for r in self.last_fusion) else None
+        if dv is None:
+            return motion.estimate
+        camera_enu_m = np.asarray(p_enu, dtype=float) + R_WB @ np.asarray(self._offset_b_m)
+        p, cov = position_from_estimate(
+            est.e_px, self.camera.f_px, dv[0], dv[2], R_WC, camera_enu_m
+        )
+        return motion.update(t, p, cov, dv[1])
 
     # ------------------------------------------------------------------ track loss
     def _screening(self, t: float) -> bool:
@@ -412,6 +439,9 @@ class InterceptionLoop:
         d_hat = believed_drag_floats(v0, v1, v2, z0, z1, z2, *d_hat, gains.k_drag)
         # the estimate, the buffered one at the last tick and the range: one read
         est, est_prev_e, est_range = self.dkf.view(self._prev_time_s)
+        motion = None
+        if self.motion is not None:
+            motion = self._track_motion(t, est, state.position_enu_m, R_WB, R_WC)
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0
@@ -491,6 +521,10 @@ class InterceptionLoop:
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
                         disturbance_enu_m_s2=d_hat,
+                        target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
+                        accel_limit_m_s2=available_lateral_accel_m_s2(
+                            self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
+                        ),
                     ),
                     gains,
                 )
@@ -541,4 +575,6 @@ class InterceptionLoop:
             dkf_time_since_detection_s=(math.inf if est is None else est.time_since_detection_s),
             dkf_lost=est is None or est.lost,
             guard_tripped=guard,
+            target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
+            motion_model_probs=None if motion is None else motion.probabilities,
         )

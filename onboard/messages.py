@@ -93,6 +93,10 @@ DKF: tuple[MessageField, ...] = (
     _f("lost", "boolean", "-", "the estimate is lost", wire=("dkf_lost",)),
     _f("time_since_detection_s", "number", "s", "since the last fused detection",
        wire=("dkf_since_det_s",)),
+    _f("target_accel_m_s2", "numbers", "m/s^2",
+       "target acceleration, ENU (IMM of its motion; null when it does not run)", parts=_ENU),
+    _f("model_probs", "numbers", "-", "IMM model probabilities (CV, CA, coordinated turn)",
+       parts=("cv (constant velocity)", "ca (constant acceleration)", "ct (coordinated turn)")),
 )  # fmt: skip
 
 

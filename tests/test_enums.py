@@ -42,7 +42,7 @@ def test_codes_and_tables_derive_from_the_enums():
     assert SimOutcome is enums.Outcome
     assert prm.RuntimeParams(LAW=2).law == "ibvs"
     # the field help and the parameter help state the codes as the enums number them
-    assert tm.FIELDS[tm.INDEX["law"]][2].endswith("0 png, 1 pg, 2 ibvs")
+    assert tm.FIELDS[tm.INDEX["law"]][2].endswith("0 png, 1 pg, 2 ibvs, 3 apn")
     assert "3 brake" in tm.FIELDS[tm.INDEX["loop_mode"]][2]
     sortie = build_parser().parse_args(["sortie", "cv-top-to-bottom", "--law", "pg"])
     assert sortie.law == "pg"
@@ -59,7 +59,7 @@ def test_the_api_serves_the_option_lists(tmp_path):
     finally:
         gs.close()
     assert meta == {
-        "laws": ["png", "pg", "ibvs"],
+        "laws": ["png", "pg", "ibvs", "apn"],
         "loop_modes": ["waiting", "tracking", "lost", "brake", "coast", "reacquire", "search"],
         "runtime_states": list(tm.STATE_CODES),
         "outcomes": ["HIT", "MISS", "TIMEOUT", "TARGET_LOST", "CRASHED", "DIVERGED"],

@@ -28,7 +28,9 @@ def test_schemas_and_encoders_follow_the_one_definition():
             (2.5, -1.5), 0.96,
         )
     )  # fmt: skip
-    dkf = json.loads(enc.dkf(1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04))
+    dkf = json.loads(
+        enc.dkf(1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04, (0.5, -1, 0), (0.2, 0.3, 0.5))
+    )
     for msg, fields, schema in (
         (control, messages.CONTROL, "peregrine.Control"),
         (dkf, messages.DKF, "peregrine.Dkf"),

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from onboard.control.guidance import GUIDANCE_LAWS
-from onboard.enums import GuidanceLaw, codes
+from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 
 from ..scenario import load_scenario, with_changes
 from .aggregate import median_iqr, miss_stats, success_rate
@@ -22,6 +22,7 @@ from .runner import SortieJob, SortieOutcome
 
 LAWS = codes(GuidanceLaw)
 assert set(LAWS) <= set(GUIDANCE_LAWS)
+DEFAULT_LAWS = tuple(m.value for m in PAPER_LAWS)  # flown unless told
 
 
 # ------------------------------------------------------------------------- paper numbers
@@ -448,7 +449,7 @@ def get_campaign(name: str) -> Campaign:
 
 
 def build_jobs(
-    name: str, n: int | None = None, laws=LAWS, camera="projected", seed=0
+    name: str, n: int | None = None, laws=DEFAULT_LAWS, camera="projected", seed=0
 ) -> list[SortieJob]:
     campaign = get_campaign(name)
     n = campaign.default_n if n is None else n

@@ -17,7 +17,7 @@ from tqdm import tqdm
 
 from ..scenario.overrides import parse_overrides, with_overrides
 from ..sim.camera import CAMERA_MODES
-from .definitions import LAWS, CampaignError, build_jobs, get_campaign
+from .definitions import DEFAULT_LAWS, CampaignError, build_jobs, get_campaign
 from .report import tables_markdown, write_report
 from .runner import LocalPoolRunner, SortieRunner
 
@@ -38,7 +38,7 @@ def fresh_out_dir(name: str, root: Path = DEFAULT_OUT_ROOT) -> Path:
 def run_campaign(
     name: str,
     n: int | None = None,
-    laws: tuple[str, ...] = LAWS,
+    laws: tuple[str, ...] = DEFAULT_LAWS,
     camera: str = "projected",
     seed: int = 0,
     workers: int | None = None,

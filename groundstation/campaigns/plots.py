@@ -21,6 +21,7 @@ LAW_COLOURS = {
     GuidanceLaw.PNG.value: "tab:red",
     GuidanceLaw.PG.value: "tab:blue",
     GuidanceLaw.IBVS.value: "tab:green",
+    GuidanceLaw.APN.value: "tab:purple",
 }
 LAW_NAMES = {law.value: law.name for law in GuidanceLaw} | {GuidanceLaw.PNG.value: "PNG (proposed)"}
 assert set(LAW_COLOURS) == set(LAW_NAMES)

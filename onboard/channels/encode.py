@@ -26,7 +26,10 @@ _CONTROL = (
     '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%s,'
     '"range_m":%s,"vel_m_s":%s,"e_raw_px":%s,"raw_capture_t_s":%s}'
 )
-_DKF = '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s}'
+_DKF = (
+    '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s,'
+    '"target_accel_m_s2":%s,"model_probs":%s}'
+)
 
 
 def js(x: float | None) -> str:
@@ -77,8 +80,9 @@ def control(
     ).encode()  # fmt: skip
 
 
-def dkf(t_s, state, cov, acquired: bool, lost: bool, since) -> bytes:
-    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None)."""
+def dkf(t_s, state, cov, acquired: bool, lost: bool, since, accel=None, probs=None) -> bytes:
+    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None; ``accel`` and ``probs``
+    3-tuples or None)."""
     return (
         _DKF
         % (
@@ -88,6 +92,8 @@ def dkf(t_s, state, cov, acquired: bool, lost: bool, since) -> bytes:
             "true" if acquired else "false",
             "true" if lost else "false",
             js(since),
+            _js3(accel),
+            _js3(probs),
         )
     ).encode()
 

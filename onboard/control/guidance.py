@@ -4,7 +4,8 @@ turn them into a desired acceleration (paper eqs. 5-9, 14, 17; DESIGN.md §3 ste
 All vectors are world ENU. A law is a function ``(GuidanceInput, Gains) -> GuidanceOutput``.
 
 The law's pieces live in :mod:`.los` (eqs. 5-8), :mod:`.png` (eqs. 8-9, 14, 17 and the FOV
-terms) and :mod:`.baselines` (PG, IBVS); this module names the laws and re-exports the pieces.
+terms), :mod:`.apn` (augmented PN) and :mod:`.baselines` (PG, IBVS); this module names the
+laws and re-exports the pieces.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections.abc import Callable
 
 from ..enums import GuidanceLaw as Law
 from ..gains import Gains
+from .apn import apn_law
 from .baselines import ibvs_law, pursuit_law, track_velocity_direction
 from .guidance_io import GuidanceInput, GuidanceOutput, _hover_start
 from .los import (
@@ -107,5 +109,6 @@ GUIDANCE_LAWS: dict[str, GuidanceLaw] = {
     Law.PNG.value: png_law,
     Law.PG.value: pursuit_law,
     Law.IBVS.value: ibvs_law,
+    Law.APN.value: apn_law,
 }
 assert set(GUIDANCE_LAWS) == {m.value for m in Law}

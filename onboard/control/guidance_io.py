@@ -37,6 +37,11 @@ class GuidanceInput:
     # disturbance observer's d^ (png.believed_drag_floats): the speed ramp overcomes its
     # along-track part
     disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # the target's acceleration (m/s^2 ENU; the IMM's, onboard/estimation/imm.py; None:
+    # unknown) and the airframe's lateral-acceleration limit (m/s^2; nan: the gains' a_max):
+    # the augmented law's inputs (onboard/control/apn.py)
+    target_accel_enu_m_s2: tuple[float, float, float] | None = None
+    accel_limit_m_s2: float = math.nan
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer

@@ -87,6 +87,23 @@ def position_from_image(
     return p, J @ P3 @ J.T
 
 
+def position_from_estimate(
+    e_px: tuple[float, float],
+    f_px: float,
+    range_m: float,
+    P6: np.ndarray,
+    R_WC: np.ndarray,
+    camera_enu_m: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`position_from_image` from the DKF's reads: its image error (px, over the focal
+    length ``f_px``: the normalised point), its range along the line of sight (m, to the
+    inverse depth rho = sqrt(1 + xn^2 + yn^2) / range) and its 6x6 covariance (the first three
+    rows: xn, yn, rho)."""
+    xn, yn = e_px[0] / f_px, e_px[1] / f_px
+    rho = math.sqrt(1.0 + xn * xn + yn * yn) / range_m
+    return position_from_image(xn, yn, rho, P6[:3, :3], R_WC, camera_enu_m)
+
+
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     F = np.eye(9)
     F[0:3, 3:6] = dt * np.eye(3)

@@ -1,0 +1,89 @@
+"""Augmented proportional navigation (APN): the proposed law (:func:`.png.png_floats`) plus
+N/2 times the target's acceleration normal to the line of sight, with a command limit from
+the airframe the vehicle believes in place of the fixed ``a_max`` (docs/agility.md).
+
+PN with navigation constant N nulls the LOS rate of a target that does not accelerate; a
+target accelerating at a_T normal to the LOS leaves PN a miss that grows with a_T t_go^2, and
+PN's own command rises to N/(N-2) a_T near the end. APN adds N/2 a_T,perp, the term that makes
+the commanded acceleration the zero-effort-miss solution for a constant-acceleration target
+(Zarchan, Tactical and Strategic Missile Guidance, ch. 8): a_APN = N V_c q' + N/2 a_T,perp.
+Here N is the mean of the velocity-angle gains K_y and K_z (eq. 8), and a_T comes from the
+IMM of the target's motion (onboard/estimation/imm.py).
+
+The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
+TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
+kept for the vertical, capped by the tilt limit, g tan(tilt_max). The FOV guard
+(:func:`.png.fov_guard_floats`) then limits the pitch-down as for PNG.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..datatypes import GRAVITY_M_S2
+from ..gains import GainIndex, Gains
+from .guidance_io import GuidanceInput, GuidanceOutput
+from .los import _f3, saturate3
+from .png import fov_guard_floats, png_floats
+
+
+def available_lateral_accel_m_s2(
+    hover_thrust: float, tilt_max_deg: float, a_z_margin: float
+) -> float:
+    """The lateral acceleration (m/s^2) an airframe hovering at ``hover_thrust`` (normalised,
+    = 1 / thrust-to-weight) can hold while keeping ``a_z_margin`` (m/s^2) of vertical
+    acceleration, and no more than its tilt limit allows level: min(sqrt((TW g)^2 - (g +
+    a_z)^2), g tan(tilt_max)); 0 when the thrust cannot even hold the margin."""
+    if not 0.0 < hover_thrust <= 1.0:
+        raise ValueError(f"hover thrust {hover_thrust} is not in (0, 1]")
+    thrust = GRAVITY_M_S2 / hover_thrust
+    vertical = GRAVITY_M_S2 + a_z_margin
+    by_thrust = math.sqrt(max(thrust * thrust - vertical * vertical, 0.0))
+    return min(by_thrust, GRAVITY_M_S2 * math.tan(math.radians(tilt_max_deg)))
+
+
+def apn_term(
+    target_accel_enu_m_s2: tuple[float, float, float],
+    los_enu: tuple[float, float, float],
+    navigation_constant: float,
+) -> tuple[float, float, float]:
+    """N/2 a_T,perp (m/s^2 ENU): the target's acceleration without its part along the unit
+    LOS n, times N/2."""
+    a0, a1, a2 = target_accel_enu_m_s2
+    n0, n1, n2 = los_enu
+    along = a0 * n0 + a1 * n1 + a2 * n2
+    k = 0.5 * navigation_constant
+    return k * (a0 - along * n0), k * (a1 - along * n1), k * (a2 - along * n2)
+
+
+def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
+    """APN (module docstring): PNG with the airframe's limit ``inp.accel_limit_m_s2`` (the
+    gains' a_max when it is not given), plus N/2 a_T,perp when the target's acceleration is
+    known, saturated to that limit, then the FOV guard."""
+    import numpy as np
+
+    lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
+    G = gains.packed.copy()
+    G[GainIndex.a_max] = lim
+    vt = inp.target_vel_enu_m_s
+    t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
+    R = inp.R_WC
+    top, bottom = inp.fov_edges_rad
+    los = _f3(inp.los_enu)
+    e0, e1, e2 = inp.disturbance_enu_m_s2
+    a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
+        inp.dt_s, *los, inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
+        *_f3(inp.velocity_enu_m_s), float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom,
+        inp.range_m, vt is not None, t0, t1, t2, inp.target_vel_var_m2_s2, e0, e1, e2, G,
+    )  # fmt: skip
+    if hovering != 0.0:
+        return GuidanceOutput(np.array((a0, a1, a2)), math.nan, math.nan, True)
+    if inp.target_accel_enu_m_s2 is not None:
+        k = 0.5 * (gains.K_y + gains.K_z)
+        b0, b1, b2 = apn_term(inp.target_accel_enu_m_s2, los, k)
+        a0, a1, a2 = saturate3(a0 + b0, a1 + b1, a2 + b2, lim)
+        fov_margin = math.radians(gains.fov_margin)
+        _, a0, a1, a2 = fov_guard_floats(
+            a0, a1, a2, top, float(R[0, 2]), float(R[1, 2]), inp.los_elev_rad, fov_margin, lim
+        )
+    return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, False)

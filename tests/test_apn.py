@@ -1,0 +1,91 @@
+"""The augmented law (onboard/control/apn.py): its command limit from the airframe, its term,
+and a pure kinematic intercept of a target accelerating at a constant rate, where linear
+theory says APN needs at most N/2 a_T and PN up to N/(N - 2) a_T (Zarchan, ch. 8)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from onboard.constants import GRAVITY_M_S2
+from onboard.control.apn import apn_law, apn_term, available_lateral_accel_m_s2
+from onboard.control.guidance import GuidanceInput, direction_angles
+from onboard.gains import Gains
+from onboard.geometry import wrap_pi
+
+G = GRAVITY_M_S2
+
+
+def test_the_limit_comes_from_thrust_to_weight_and_tilt():
+    # TW 3, 2 m/s^2 kept for the vertical: sqrt(29.43^2 - 11.81^2) = 26.96; tilt 45: g
+    assert available_lateral_accel_m_s2(1 / 3, 80.0, 2.0) == pytest.approx(26.957, abs=1e-3)
+    assert available_lateral_accel_m_s2(1 / 3, 45.0, 2.0) == pytest.approx(G, rel=1e-12)
+    # TW 1.5 with nothing kept: g sqrt(1.5^2 - 1) = 1.118 g
+    assert available_lateral_accel_m_s2(1 / 1.5, 80.0, 0.0) == pytest.approx(1.118 * G, rel=1e-3)
+    assert available_lateral_accel_m_s2(0.95, 45.0, 2.0) == 0.0  # cannot even hold the margin
+    with pytest.raises(ValueError, match="hover thrust"):
+        available_lateral_accel_m_s2(0.0, 45.0, 2.0)
+
+
+def test_the_term_is_half_n_times_the_acceleration_across_the_line_of_sight():
+    los = (0.0, 1.0, 0.0)
+    np.testing.assert_allclose(apn_term((3.0, 5.0, -1.0), los, 3.0), (4.5, 0.0, -1.5))
+
+
+def _intercept(law_target_accel: bool, a_t: float, limit: float):
+    """A point-mass interceptor flying its command exactly (no lag, perfect LOS) at 10 m/s
+    toward a target 40 m ahead that accelerates at ``a_t`` m/s^2 east from rest; returns (miss
+    m, the command's lateral (east) part over time, m/s^2)."""
+    gains = Gains()
+    dt = 0.01
+    p, v = np.zeros(3), np.array([0.0, 10.0, 0.0])
+    p_t0, a_vec = np.array([0.0, 20.0, 0.0]), np.array([a_t, 0.0, 0.0])
+    prev = None
+    miss, lateral = math.inf, []
+    for k in range(600):
+        t = k * dt
+        p_t = p_t0 + 0.5 * a_vec * t * t
+        r = p_t - p
+        dist = float(np.linalg.norm(r))
+        miss = min(miss, dist)
+        if r @ (a_vec * t - v) > 0.0 and dist < 3.0:  # opening: passed
+            break
+        n = r / dist
+        q_y, q_z = direction_angles(n)
+        dq = (0.0, 0.0) if prev is None else (q_y - prev[0], wrap_pi(q_z - prev[1]))
+        prev = (q_y, q_z)
+        inp = GuidanceInput(
+            dt, n, q_y, q_z, dq[0], dq[1], v.copy(), (0.0, 0.0), np.eye(3),
+            target_accel_enu_m_s2=tuple(a_vec) if law_target_accel else None,
+            accel_limit_m_s2=limit,
+        )  # fmt: skip
+        a = apn_law(inp, gains).accel_desired_enu_m_s2
+        lateral.append(float(a[0]))
+        v = v + a * dt
+        p = p + v * dt
+    return miss, np.array(lateral)
+
+
+def test_apn_intercepts_a_constant_acceleration_target_as_linear_theory_says():
+    limit = available_lateral_accel_m_s2(1 / 3, 45.0, 2.0)  # g
+    a_t = 4.0
+    miss_apn, cmd_apn = _intercept(True, a_t, limit)
+    miss_pn, cmd_pn = _intercept(False, a_t, limit)
+    assert miss_apn < 0.05 and miss_pn < 0.05
+    # APN (N = 3): N/2 a_T (1 - t/t_f)^(N - 2), within 10 % of its start up to the last 0.1 s;
+    # PN's command grows toward the end (to N / (N - 2) a_T in the linear limit) past APN's
+    t = np.arange(len(cmd_apn)) * 0.01
+    theory = 1.5 * a_t * (1.0 - t / (len(cmd_apn) * 0.01))
+    early = t < t[-1] - 0.1
+    np.testing.assert_allclose(cmd_apn[early], theory[early], atol=0.1 * 1.5 * a_t)
+    assert cmd_apn.max() <= 1.5 * a_t * 1.001
+    assert abs(cmd_apn[-20:].mean()) < 0.25 * a_t
+    assert cmd_pn.max() > 1.2 * cmd_apn.max()
+    assert cmd_pn[:10].max() < 0.5 * a_t
+    # a harder target: PN misses by metres, APN still within 0.1 m
+    miss_apn, cmd_apn = _intercept(True, 6.0, limit)
+    miss_pn, _ = _intercept(False, 6.0, limit)
+    assert miss_apn < 0.1 and miss_pn > 1.0
+    assert cmd_apn.max() <= limit
