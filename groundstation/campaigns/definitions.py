@@ -16,6 +16,7 @@ from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 
 from ..scenario import load_scenario, with_changes
+from . import agility
 from .aggregate import median_iqr, miss_stats, success_rate
 from .errors import CampaignError
 from .runner import SortieJob, SortieOutcome
@@ -427,6 +428,9 @@ CAMPAIGNS: dict[str, Campaign] = {
         "envelope", 20, "tries per elevation x azimuth cell", _build_envelope, _summarize_envelope
     ),
     "range": Campaign("range", 20, "tries per range", _build_range, _summarize_range),
+    "agility": Campaign(
+        "agility", 20, "tries per acceleration / jink range", agility.build, agility.summarize
+    ),
 }
 
 

@@ -13,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
+from . import agility
 from .plots import (
     LAW_COLOURS,
     LAW_NAMES,
@@ -216,6 +217,8 @@ def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOut
         return _md_envelope(summary)
     if name == "range":
         return _md_range(summary)
+    if name == "agility":
+        return agility.markdown(summary)
     return _md_outdoor(summary)
 
 
@@ -260,6 +263,7 @@ def write_report(
         "outdoor": lambda: _outdoor_plots(outcomes, out),
         "envelope": lambda: _envelope_plots(summary, out),
         "range": lambda: _range_plots(outcomes, summary, out),
+        "agility": lambda: agility.plots(summary, out),
     }[name]()
     md = [
         f"# Campaign `{name}`",

@@ -184,7 +184,8 @@ class Simulation:
             law=cfg.law,
             control_rate_hz=cfg.control_rate_hz,
             dkf_config=cfg.dkf,
-            estimate_motion=keep_records,  # the IMM's estimate in every recorded frame
+            # the IMM's estimate in frames that show the filter (campaigns' traces do not)
+            estimate_motion=records_dkf and (keep_records or bool(observers)),
         )
         self.hit_radius_m = 0.5 * (scenario.target.diameter_m + scenario.interceptor.size_m)
         self.step_index = 0
