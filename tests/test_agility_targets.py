@@ -81,6 +81,17 @@ def test_evasion_turns_away_from_the_line_of_sight_at_the_stated_acceleration():
     assert end_v[0] < -2.5 and abs(float(end_v @ los)) < 1.0
 
 
+def test_evasion_from_rest_speeds_up_across_the_line_of_sight_to_its_top_speed():
+    spec = TargetSpec("evade", (0.0, 20.0, 10.0))
+    spec = dataclasses.replace(spec, lateral_accel_m_s2=4.0, side=-1.0, max_speed_m_s=3.0)
+    rows = _fly(Target(spec), 2.0, lambda t: (0.0, 0.0, 10.0))
+    # right of the LOS (+y) is +x: 4 m/s^2 for 0.75 s, then 3 m/s (the LOS turns a little)
+    at = rows[np.argmin(abs(rows[:, 0] - 0.5))]
+    np.testing.assert_allclose(at[4:7], (2.0, 0.0, 0.0), atol=0.02)
+    assert np.hypot(rows[-1, 4], rows[-1, 5]) == pytest.approx(3.0, rel=1e-9)
+    assert rows[-1, 4] > 2.9
+
+
 def test_weave_and_surge_are_drawn_per_sortie_within_their_ranges():
     spec = TargetSpec("weave", (0.0, 20.0, 10.0), velocity_m_s=(0.0, -1.0, 0.0), period_s=3.0)
     spec = dataclasses.replace(spec, period_max_s=6.0, amplitude_min_m=1.0, amplitude_max_m=2.5)

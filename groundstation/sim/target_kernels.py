@@ -62,7 +62,8 @@ T_JINK_SPEED, T_JINK_ACCEL, T_SIDE, T_DIR = 37, 38, 39, 40
 T_SIZE = 43
 # the target's state Target.x: position, velocity (m, m/s ENU), the buffet's phase (rad),
 # then a manoeuvre's: 1.0 once triggered (jink, evade), its horizontal direction (jink: the
-# dart's unit vector; evade: the side, +1 or -1, in the first slot) and the jink's sideways
+# dart's unit vector; evade: the side, +1 or -1, then 1.0 when it started from rest) and the
+# jink's sideways
 # speed gained so far (m/s)
 TX_PHASE, TX_TRIGGERED, TX_DIR, TX_GAINED = 6, 7, 8, 10
 TX_SIZE = 11
@@ -227,11 +228,9 @@ def target_step(
                 x[8], x[9] = c[39] * p0, c[39] * p1
             else:  # evade: the side the target already moves to, else the drawn one
                 across = v0 * p0 + v1 * p1
-                x[8] = (
-                    c[39]
-                    if abs(across) <= 0.05 * math.sqrt(v0 * v0 + v1 * v1)
-                    else (1.0 if across > 0.0 else -1.0)
-                )
+                h = math.sqrt(v0 * v0 + v1 * v1)
+                x[8] = c[39] if abs(across) <= 0.05 * h else (1.0 if across > 0.0 else -1.0)
+                x[9] = 1.0 if h <= 0.1 else 0.0  # from rest: it speeds up along e
         if x[7] != 0.0 and kind == 12:
             dv = c[38] * dt
             if dv > c[37] - x[10]:  # min(a dt, what is left of the dart's speed)
@@ -242,15 +241,18 @@ def target_step(
         elif x[7] != 0.0 and lh > 1e-6:  # evade: turn toward e, across the LOS, at lat
             e0, e1 = -x[8] * l1 / lh, x[8] * l0 / lh
             h = math.sqrt(v0 * v0 + v1 * v1)
-            if h > 0.1:
+            if x[9] != 0.0:  # from rest: accelerate along e up to the top speed
+                v0, v1 = v0 + c[32] * e0 * dt, v1 + c[32] * e1 * dt
+                h1 = math.sqrt(v0 * v0 + v1 * v1)
+                if h1 > c[19]:
+                    v0, v1 = v0 * c[19] / h1, v1 * c[19] / h1
+            elif h > 0.1:
                 u0, u1 = v0 / h, v1 / h
                 eu = e0 * u0 + e1 * u1
                 a0, a1 = c[32] * (e0 - eu * u0), c[32] * (e1 - eu * u1)
                 v0, v1 = v0 + a0 * dt, v1 + a1 * dt
                 k = h / math.sqrt(v0 * v0 + v1 * v1)  # a turn: the speed stays
                 v0, v1 = v0 * k, v1 * k
-            else:  # from rest: accelerate along e
-                v0, v1 = v0 + c[32] * e0 * dt, v1 + c[32] * e1 * dt
         x[3], x[4] = v0, v1
         x[0], x[1], x[2] = x[0] + v0 * dt, x[1] + v1 * dt, x[2] + v2 * dt
     elif kind == 14:  # surge: the speed s0 + S (sin(w t + phi) - sin phi) along u

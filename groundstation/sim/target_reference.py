@@ -64,8 +64,8 @@ def manoeuvre_state(
     - evade: from the trigger range on (from the start if R_j <= 0) it turns its horizontal
       velocity toward e, the horizontal unit across the LOS on the side it already moves to (the
       drawn side when it moves within 3 degrees of the LOS), with a = a_lat (e - (e . u) u),
-      u = v_h / |v_h| (a turn: the speed kept); from rest (|v_h| <= 0.1 m/s) it accelerates
-      along e at a_lat;
+      u = v_h / |v_h| (a turn: the speed kept); a target at rest when it starts (|v_h| <= 0.1
+      m/s) accelerates along e at a_lat up to the top speed instead;
     - surge: along u = v0 / |v0| at the speed s(t) = |v0| + S (sin(w t + phi) - sin phi),
       p = p0 + u integral of s."""
     p, v = x[0:3].copy(), x[3:6].copy()
@@ -94,11 +94,12 @@ def manoeuvre_state(
                 if kind == "jink":
                     out[TK.TX_DIR : TK.TX_DIR + 2] = c[TK.T_SIDE] * left[0:2]
                 else:
-                    across = float(v @ left)
-                    if abs(across) <= 0.05 * math.hypot(v[0], v[1]):
+                    across, speed = float(v @ left), math.hypot(v[0], v[1])
+                    if abs(across) <= 0.05 * speed:
                         out[TK.TX_DIR] = c[TK.T_SIDE]
                     else:
                         out[TK.TX_DIR] = math.copysign(1.0, across)
+                    out[TK.TX_DIR + 1] = 1.0 if speed <= 0.1 else 0.0
         if out[TK.TX_TRIGGERED] and kind == "jink":
             dv = min(c[TK.T_JINK_ACCEL] * dt, c[TK.T_JINK_SPEED] - out[TK.TX_GAINED])
             if dv > 0.0:
@@ -107,12 +108,15 @@ def manoeuvre_state(
         elif out[TK.TX_TRIGGERED] and los_h > 1e-6:
             e = out[TK.TX_DIR] * _left_of(los)
             h = math.hypot(v[0], v[1])
-            if h > 0.1:
+            if out[TK.TX_DIR + 1]:
+                v[0:2] = v[0:2] + a_lat * e[0:2] * dt
+                h1 = math.hypot(v[0], v[1])
+                if h1 > c[TK.T_MAX_SPEED]:
+                    v[0:2] = v[0:2] * (c[TK.T_MAX_SPEED] / h1)
+            elif h > 0.1:
                 u = np.array([v[0], v[1], 0.0]) / h
                 turned = v[0:2] + a_lat * (e - float(e @ u) * u)[0:2] * dt
                 v[0:2] = turned * (h / float(np.linalg.norm(turned)))
-            else:
-                v[0:2] = v[0:2] + a_lat * e[0:2] * dt
         p = p + v * dt
     elif kind == "surge":
         s0 = float(np.linalg.norm(v0))
