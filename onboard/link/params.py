@@ -62,7 +62,9 @@ class RuntimeParams:
     def __post_init__(self) -> None:
         check_ranges(self, "parameter")
         if int(self.LAW) != self.LAW:
-            raise GainError(f"parameter LAW = {self.LAW} must be 0, 1 or 2")
+            raise GainError(
+                f"parameter LAW = {self.LAW} must be a whole code: {describe_codes(GuidanceLaw)}"
+            )
 
     @property
     def law(self) -> str:
