@@ -197,7 +197,9 @@ def plots(summary: dict[str, Any], out: Path) -> list[str]:
             for ax in (axes[0][col], axes[1][col]):
                 ax.axvline(avail, color="k", ls="--", lw=0.8)
                 ax.axvline(avail / 2, color="k", ls=":", lw=0.8)
-            axes[1][col].set_xlabel("target lateral acceleration (m/s²); dashed: available")
+            axes[1][col].set_xlabel(
+                "target lateral acceleration (m/s²); dashed: available, dotted: half"
+            )
         else:
             axes[1][col].set_xlabel("range when the target jinks (m)")
         axes[0][col].set_ylabel("HIT (%)")
