@@ -32,4 +32,4 @@ def test_openapi_shows_what_comes_back(client):
     assert returns("/api/live/start", "post").endswith("/LiveAck")
     assert returns("/api/scenarios", "get").endswith("/ScenarioSummary")
     law = client.get("/openapi.json").json()["components"]["schemas"]["StartRequest"]
-    assert law["properties"]["law"]["enum"] == ["png", "pg", "ibvs"]
+    assert law["properties"]["law"]["enum"] == ["png", "pg", "ibvs", "apn"]
