@@ -43,6 +43,7 @@ from .datatypes import (
     VehicleParams,
     VehicleState,
 )
+from .enums import GuidanceLaw
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
 from .gains import Gains
@@ -117,7 +118,8 @@ class InterceptionLoop:
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
         self.dkf.carry_max_s = self.gains.t_carry
-        self.motion = TargetMotionImm() if estimate_motion or law == "apn" else None
+        uses_motion = estimate_motion or law == GuidanceLaw.APN.value
+        self.motion = TargetMotionImm() if uses_motion else None
         self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
         self._gyro_n = 0
         self._detections: list[Detection] = []
@@ -200,7 +202,12 @@ class InterceptionLoop:
         self._detections.append(detection)
 
     def _track_motion(
-        self, t: float, est: ImageEstimate | None, p_enu: np.ndarray, R_WB: np.ndarray, R_WC
+        self,
+        t: float,
+        est: ImageEstimate | None,
+        p_enu: np.ndarray,
+        R_WB: np.ndarray,
+        R_WC: np.ndarray,
     ) -> MotionEstimate | None:
         """Feed the IMM the target's world position after a fused detection: the DKF's image
         point and inverse depth now, placed from the camera's believed pose; a lost estimate
