@@ -54,9 +54,7 @@ def test_a_wrong_believed_size_is_corrected_by_the_approach(seed):
 
 @pytest.mark.parametrize("closing_m_s", [0.0, 1.5])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_without_a_speed_change_the_error_stays_within_what_the_estimate_reports(
-    closing_m_s, seed
-):
+def test_without_a_speed_change_the_error_stays_within_what_the_estimate_reports(closing_m_s, seed):
     """At a constant speed the target's own closing speed and its range cannot be told
     apart: only the prior on the closing speed (1.5 m/s) separates them, and the estimate's
     1 sigma says how little that is worth."""
@@ -100,9 +98,9 @@ def _gyro_sortie(offset_s: float, seed: int, seconds: float = 8.0) -> SelfCalibr
         R.append(R[-1] @ rodrigues(wm / a, a * fine) if a > 0 else R[-1])
     n_w = np.array((0.05, 0.1, 1.0)) / np.linalg.norm((0.05, 0.1, 1.0))
     cal = SelfCalibration(F_PX, np.eye(3), 0.3)
-    frames = [i for i in range(0, n, int(round(1 / 30 / fine)))][1:]
+    frames = [i for i in range(0, n, round(1 / 30 / fine))][1:]
     pending = []
-    tick = int(round(0.01 / fine))
+    tick = round(0.01 / fine)
     for k in range(0, n + 1, tick):
         if k:
             cal.on_tick(ts[k], w[k - tick : k + 1].mean(axis=0), np.zeros(3), None)
