@@ -61,8 +61,7 @@ _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's L
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 # an attitude that moved this much more (rad) than the gyro turned it since an on-time last tick
-# was a stale one replaced: in flight the simulator's differences (noise, bias) stay < 1.7 mrad
-# (docs/core.md)
+# was a stale one replaced (counted for the diagnostics; docs/core.md)
 ATTITUDE_JUMP_RAD = 0.005
 # beyond this many periods since the last tick (a stall) the gyro's turn is no better a guess
 ATTITUDE_JUMP_MAX_PERIODS = 2.0
@@ -124,7 +123,7 @@ class InterceptionLoop:
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
         self._prev_R_WB: np.ndarray | None = None
-        self.attitude_jumps = 0  # ticks whose attitude jumped (their LOS change re-based)
+        self.attitude_jumps = 0  # ticks whose attitude jumped beyond the gyro's turn
         self.stale_attitude_ticks = 0  # ticks with an attitude not carried to them (likewise)
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
@@ -332,15 +331,19 @@ class InterceptionLoop:
         if abs(d / c.target_diameter_m - 1.0) > 0.02:
             self.dkf.config = dataclasses.replace(c, target_diameter_m=d)
 
-    def _rebase_los(
+    def _turn_through_gyro(
         self, state: VehicleState, R_WB: np.ndarray, gyro: np.ndarray, dt: float
     ) -> bool:
         """Take the previous LOS through this tick's attitude turned back by the gyro (rad/s
-        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's? Yes
-        when the attitude is stale (not carried to the tick: frozen while the body turns) or
-        jumped (moved more than ATTITUDE_JUMP_RAD beyond the gyro's turn: a stale one replaced
-        by a fresh one). Not after a late tick (a stall) or with non-finite rates: then the
-        two attitudes stand."""
+        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's
+        attitude estimate? Yes, except after a late tick (a stall: two fresh attitudes are
+        then a better guess than the mean rate times the interval) or with non-finite rates.
+
+        The difference of two attitude estimates carries the estimator's corrections between
+        them (a heading fused from the magnetometer wanders by tenths of a degree within a
+        second), which PNG would turn K times; the gyro measures the turn itself. Stale
+        attitudes (not carried to the tick) and jumps (more than ATTITUDE_JUMP_RAD beyond the
+        gyro's turn: a stale one replaced by a fresh one) are counted for the diagnostics."""
         R0 = self._prev_R_WB
         if R0 is None or dt > ATTITUDE_JUMP_MAX_PERIODS * self.nominal_dt_s:
             return False
@@ -350,11 +353,9 @@ class InterceptionLoop:
         q_at = state.attitude_time_s
         if q_at is not None and state.time_s - q_at > ATTITUDE_STALE_S:
             self.stale_attitude_ticks += 1
-            return True
-        if attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
+        elif attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
             self.attitude_jumps += 1
-            return True
-        return False
+        return True
 
     # ------------------------------------------------------------------ the tick
     def tick(
@@ -496,11 +497,10 @@ class InterceptionLoop:
             has_prev = prev is not None and R_prev is not None
             if not has_prev:
                 prev, R_prev = (0.0, 0.0), R_WC
-            elif self._rebase_los(state, R_WB, gyro, dt):
-                # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
-                # differ by the body's turn missed or by the correction, which PNG would turn
-                # K times within one command; the previous LOS through this attitude turned
-                # back by the gyro instead
+            elif self._turn_through_gyro(state, R_WB, gyro, dt):
+                # the body's turn since the last tick is the gyro's, not the difference of
+                # two attitude estimates (their corrections, a stale attitude replaced), which
+                # PNG would turn K times within one command
                 R_prev = mat3_mul(propagate_rotation(R_WB, gyro, -dt), self._R_BC)
             fy, fz = self._dq_filt
             ly, lz, lh = self._dq_flown
