@@ -469,6 +469,7 @@ class InterceptionLoop:
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
             self._dq_flown = _NO_FLOWN
+            self._los_prev = None  # no line of sight for the size estimate's displacement
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px

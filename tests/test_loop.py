@@ -307,9 +307,7 @@ def test_a_wandering_heading_estimate_does_not_steer_the_command(monkeypatch):
     # heading with a 2 s correlation time and 2.5 deg of error does at 100 Hz: PNG on the
     # difference of two attitude estimates would turn K times 0.4 rad/s of false LOS rate
     *fresh, _ = _yawing_pass(range(0), 0.005, monkeypatch, rate=0.3)
-    *walked, _ = _yawing_pass(
-        range(0), math.inf, monkeypatch, rate=0.3, heading_walk_rad=0.004
-    )
+    *walked, _ = _yawing_pass(range(0), math.inf, monkeypatch, rate=0.3, heading_walk_rad=0.004)
     dev = _deviation(walked, fresh)
     print(f"max |a_d - fresh| with a wandering heading: {dev:.3f} m/s^2")
     assert dev < 0.3  # the heading's error itself (tens of mrad) through the speed ramp

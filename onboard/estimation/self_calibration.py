@@ -3,14 +3,18 @@
 
 **Target size from the vehicle's own motion.** A sphere of radius R at range Z shows an
 apparent radius r ~ f R / Z, so 1/r is linear in the range. Over the approach the range falls
-by the vehicle's own displacement along the line of sight, S(t) = int v_c . n dt, and by the
-target's unknown closing speed w, held constant: Z(t) = Z_0 - S(t) + w t, hence
+by the vehicle's own displacement along the line of sight, S(t) = int v_c . n dt, and changes
+with the target's own unknown motion along it, w t + a_t t^2 / 2: Z(t) = Z_0 - S(t) + w t +
+a_t t^2 / 2, hence
 
-    1 / r = a + b S + c t,   b = -1 / (f R),
+    1 / r = a + b S + c t + d t^2,   b = -1 / (f R),
 
 a weighted least-squares fit (weights r^4 / sigma_r^2, the variance of 1/r) whose slope gives
-R without the assumed size. The fit needs the closing speed to change (the speed ramp), else
-S and t are collinear and the slope's variance, which the fit reports, stays large. The
+R without the assumed size. S is only known while the loop has a line of sight: each stretch
+of it (a segment) gets its own intercept a. The target's w and a_t have zero-mean priors
+(``closing_prior_m_s``, ``closing_accel_prior_m_s2``, turned into priors on c and d with the
+believed size). The fit needs the closing speed to change (the speed ramp), else S and t are
+collinear and the slope's variance, which the fit reports, stays large. The
 estimate is combined with the operator's belief (log-normal, ``prior_rel_std``) so that a poor
 fit leaves the belief in charge.
 
@@ -51,6 +55,7 @@ class SelfCalConfig:
     min_size_samples: int = 20  # whole blobs before the fit is used
     min_radius_px: float = 3.0  # smaller blobs are left out (1/r skewed, the detector's cut)
     closing_prior_m_s: float = 1.5  # the target's own closing speed before evidence, 1 sigma
+    closing_accel_prior_m_s2: float = 1.0  # and its acceleration along the line of sight
     max_size_rel_std: float = 0.5  # a fit vaguer than this is ignored
     offset_prior_std_s: float = 0.02  # camera-IMU offset before any evidence, 1 sigma
     offset_max_s: float = 0.08  # the applied offset never exceeds this
@@ -81,23 +86,23 @@ class TargetSizeEstimator:
         self.f_px = float(f_px)
         self.config = config
         self.believed_diameter_m = float(believed_diameter_m)
-        self._rows: list[tuple[float, float, float]] = []  # (t, S, r)
+        self._rows: list[tuple[float, float, float, int]] = []  # (t, S, r, segment)
         self._t0: float | None = None
 
     @property
     def n(self) -> int:
         return len(self._rows)
 
-    def add(self, t_s: float, r_px: float, closing_m: float) -> None:
+    def add(self, t_s: float, r_px: float, closing_m: float, segment: int = 0) -> None:
         """One whole blob of apparent radius ``r_px`` captured at ``t_s`` when the vehicle had
-        moved ``closing_m`` along the line of sight since the start."""
+        moved ``closing_m`` along the line of sight since the start of ``segment``."""
         if not (r_px >= self.config.min_radius_px and math.isfinite(r_px)):
             return
         if not (math.isfinite(closing_m) and math.isfinite(t_s)):
             return
         if self._t0 is None:
             self._t0 = t_s
-        self._rows.append((t_s - self._t0, closing_m, r_px))
+        self._rows.append((t_s - self._t0, closing_m, r_px, segment))
 
     def fit(self) -> tuple[float, float] | None:
         """The fitted diameter (m) and its relative 1 sigma, or None (too few samples, a
@@ -107,16 +112,26 @@ class TargetSizeEstimator:
             return None
         c = self.config
         rows = np.array(self._rows)
-        A = np.column_stack((np.ones(n), rows[:, 1], rows[:, 0]))
+        segments = np.unique(rows[:, 3])
+        if n < len(segments) + 4:
+            return None
+        tt = rows[:, 0]
+        A = np.column_stack((*(rows[:, 3] == k for k in segments), rows[:, 1], tt, tt * tt))
+        A = A.astype(float)
         r = rows[:, 2]
+        ib, ic, i_d = len(segments), len(segments) + 1, len(segments) + 2  # b, c, d
         y = 1.0 / r
         r_w = r
-        # the closing speed's prior as an observation of c = w / (f R), R the believed radius
-        c_info = (self.f_px * 0.5 * self.believed_diameter_m / c.closing_prior_m_s) ** 2
+        # the target's closing speed and acceleration priors as observations of c = w / (f R)
+        # and d = a_t / (2 f R), R the believed radius
+        fR = self.f_px * 0.5 * self.believed_diameter_m
+        c_info = (fR / c.closing_prior_m_s) ** 2
+        d_info = (2.0 * fR / c.closing_accel_prior_m_s2) ** 2
         for _ in range(3):
             w = r_w**4 / (c.size_noise_px**2 + (c.size_noise_rel * r_w) ** 2)
             N = A.T @ (w[:, None] * A)
-            N[2, 2] += c_info
+            N[ic, ic] += c_info
+            N[i_d, i_d] += d_info
             try:
                 cov = np.linalg.inv(N)
             except np.linalg.LinAlgError:
@@ -127,10 +142,10 @@ class TargetSizeEstimator:
                 break  # keep the last weights
             r_w = 1.0 / fitted
         resid = y - A @ theta
-        chi2 = float(w @ (resid * resid)) + c_info * float(theta[2]) ** 2
-        scale = max(1.0, chi2 / (n - 3))  # the residuals, when worse than the noise model
-        b = float(theta[1])
-        var_b = float(cov[1, 1]) * scale
+        chi2 = float(w @ (resid * resid)) + c_info * theta[ic] ** 2 + d_info * theta[i_d] ** 2
+        scale = max(1.0, chi2 / (n - i_d - 1))  # the residuals, when worse than the noise model
+        b = float(theta[ib])
+        var_b = float(cov[ib, ib]) * scale
         if not (b < 0.0 and var_b > 0.0 and math.isfinite(var_b)):
             return None
         rel = math.sqrt(var_b) / -b
@@ -212,8 +227,10 @@ class SelfCalibration:
         self.offset = CameraOffsetEstimator(f_px, self.config)
         self._R_g = np.eye(3)  # body attitude carried by the gyro (any start)
         self._hist: deque[tuple[float, np.ndarray]] = deque()  # (t, camera attitude R_g R_BC)
-        self._closing: deque[tuple[float, float]] = deque()  # (t, S)
+        self._closing: deque[tuple[float, float, int]] = deque()  # (t, S, segment)
         self._S = 0.0
+        self._segment = 0  # a new one each time the line of sight comes back
+        self._no_los = True
         self._t_prev: float | None = None
         self._queue: deque[tuple[float, np.ndarray]] = deque()  # (stamp, unit ray) to place
         self._frames: deque[tuple[float, np.ndarray]] = deque(maxlen=3)  # (stamp, rays)
@@ -241,13 +258,17 @@ class SelfCalibration:
             n = math.sqrt(float(w @ w))
             if n > 0.0 and math.isfinite(n):
                 self._R_g = self._R_g @ rodrigues(w / n, n * dt)
-            if los_enu is not None:
-                step = float(np.dot(vel_cam_enu_m_s, los_enu)) * dt
-                if math.isfinite(step):
-                    self._S += step
+            step = math.nan if los_enu is None else float(np.dot(vel_cam_enu_m_s, los_enu)) * dt
+            if math.isfinite(step):
+                if self._no_los:  # S is unknown across the gap: a new segment
+                    self._segment += 1
+                    self._no_los = False
+                self._S += step
+            else:
+                self._no_los = True
         self._t_prev = t_s
         self._hist.append((t_s, self._R_g @ self._R_BC))
-        self._closing.append((t_s, self._S))
+        self._closing.append((t_s, math.nan if self._no_los else self._S, self._segment))
         horizon = t_s - self.config.history_s
         while len(self._hist) > 2 and self._hist[1][0] <= horizon:
             self._hist.popleft()
@@ -269,9 +290,9 @@ class SelfCalibration:
         image point (x_n, y_n) and its apparent radius when the blob is whole."""
         if r_px is not None:
             t = stamp_s - self.applied_offset_s()
-            S = self._closing_at(t)
-            if S is not None:
-                self.size.add(t, r_px, S)
+            at = self._closing_at(t)
+            if at is not None:
+                self.size.add(t, r_px, *at)
         if self._queue and stamp_s <= self._queue[-1][0] + _MIN_DT_S:
             return  # out of order or repeated: the differences need increasing stamps
         s = np.array((e_norm[0], e_norm[1], 1.0))
@@ -319,13 +340,16 @@ class SelfCalibration:
         na, nb = Rs[k] @ ray, Rs[k + 1] @ ray
         return na + a[:, None] * (nb - na)
 
-    def _closing_at(self, t: float) -> float | None:
-        """The own displacement along the line of sight at ``t`` (linear between ticks)."""
+    def _closing_at(self, t: float) -> tuple[float, int] | None:
+        """The own displacement along the line of sight at ``t`` (linear between ticks of the
+        same segment) and its segment, or None (outside the history, no line of sight)."""
         c = self._closing
         if len(c) < 2 or t < c[0][0] or t > c[-1][0]:
             return None
         for k in range(len(c) - 2, -1, -1):
             if c[k][0] <= t:
-                (t0, s0), (t1, s1) = c[k], c[k + 1]
-                return s0 + (t - t0) / max(t1 - t0, _MIN_DT_S) * (s1 - s0)
+                (t0, s0, g0), (t1, s1, g1) = c[k], c[k + 1]
+                if g0 != g1 or not (math.isfinite(s0) and math.isfinite(s1)):
+                    return None
+                return s0 + (t - t0) / max(t1 - t0, _MIN_DT_S) * (s1 - s0), g0
         return None
