@@ -314,6 +314,7 @@ class ChannelBuilder:
                         frame.acquired,
                         tel.dkf_lost,
                         tel.dkf_time_since_detection_s,
+                        tel.self_cal,
                         tel.target_accel_enu_m_s2,
                         tel.motion_model_probs,
                     ),

@@ -28,7 +28,8 @@ _CONTROL = (
 )
 _DKF = (
     '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s,'
-    '"target_accel_m_s2":%s,"model_probs":%s}'
+    '"target_diameter_m":%s,"target_diameter_std_m":%s,"camera_offset_s":%s,'
+    '"camera_offset_std_s":%s,"target_accel_m_s2":%s,"model_probs":%s}'
 )
 
 
@@ -80,9 +81,13 @@ def control(
     ).encode()  # fmt: skip
 
 
-def dkf(t_s, state, cov, acquired: bool, lost: bool, since, accel=None, probs=None) -> bytes:
-    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None; ``accel`` and ``probs``
-    3-tuples or None)."""
+def dkf(
+    t_s, state, cov, acquired: bool, lost: bool, since, self_cal=None, accel=None, probs=None
+) -> bytes:
+    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None, ``self_cal`` a
+    :class:`~onboard.estimation.self_calibration.SelfCalEstimate` or None, ``accel`` and
+    ``probs`` the IMM's 3-tuples or None)."""
+    c = self_cal
     return (
         _DKF
         % (
@@ -92,6 +97,10 @@ def dkf(t_s, state, cov, acquired: bool, lost: bool, since, accel=None, probs=No
             "true" if acquired else "false",
             "true" if lost else "false",
             js(since),
+            js(None if c is None else c.target_diameter_m),
+            js(None if c is None else c.target_diameter_std_m),
+            js(None if c is None else c.camera_offset_s),
+            js(None if c is None else c.camera_offset_std_s),
             _js3(accel),
             _js3(probs),
         )
