@@ -71,6 +71,8 @@ def test_bad_input_changes_nothing_and_a_gap_restarts():
         assert imm.update(0.1, bad, R_MEAS) is first
     assert imm.update(0.1, np.array([0.4, 20.0, 10.0]), np.full((3, 3), math.inf)) is first
     assert imm.update(0.0, np.array([0.4, 20.0, 10.0]), R_MEAS) is first  # time not advancing
+    no_depth = np.diag([0.01, 1e6, 0.01])  # a target at an unknown range: 1 km along the LOS
+    assert imm.update(0.1, np.array([0.4, 20.0, 10.0]), no_depth) is first
     later = imm.update(5.0, np.array([9.0, 20.0, 10.0]), R_MEAS)  # a 5 s gap: a new track
     assert later.probabilities == (0.8, 0.1, 0.1) and later.time_s == 5.0
 

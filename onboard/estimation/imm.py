@@ -52,6 +52,7 @@ class ImmConfig:
     initial_probabilities: tuple[float, float, float] = (0.8, 0.1, 0.1)
     initial_accel_sigma_m_s2: float = 3.0  # the acceleration's 1 sigma at the start
     min_position_sigma_m: float = 0.02  # the measurement's floor per axis
+    max_position_sigma_m: float = 50.0  # a measurement poorer than this (RMS per axis) is unused
     max_gap_s: float = 1.0  # a gap longer than this between updates restarts the filter
 
 
@@ -202,8 +203,10 @@ class TargetMotionImm:
     ) -> MotionEstimate | None:
         """Predict to ``t`` (s) and fuse the target's position (m ENU) with covariance
         ``cov_m2`` (3x3, m^2); ``velocity_guess_enu_m_s`` starts a new track's velocity (zero
-        without it). A measurement that is not finite changes nothing; a time that does not
-        advance is ignored; a gap over ``max_gap_s`` restarts the track. Returns the estimate."""
+        without it). A measurement that is not finite, or poorer than ``max_position_sigma_m``,
+        changes nothing; a time that does not advance is ignored; a gap over ``max_gap_s``, a
+        covariance gone singular or a state gone non-finite restarts the track. Returns the
+        estimate."""
         p = np.asarray(position_enu_m, dtype=float)
         R = np.asarray(cov_m2, dtype=float)
         if (
@@ -214,6 +217,8 @@ class TargetMotionImm:
             return self.estimate
         floor = self.config.min_position_sigma_m**2
         R = 0.5 * (R + R.T) + floor * np.eye(3)
+        if np.trace(R) > 3.0 * self.config.max_position_sigma_m**2:
+            return self.estimate  # no depth to speak of: nothing to learn of the motion
         v = np.zeros(3) if velocity_guess_enu_m_s is None else np.asarray(velocity_guess_enu_m_s)
         if not np.isfinite(v).all():
             v = np.zeros(3)
@@ -223,10 +228,17 @@ class TargetMotionImm:
         dt = t - self._time_s
         if not dt > 0.0:
             return self.estimate
-        self._predict(dt)
-        for kf in self._imm.filters:
-            kf.R = R
-        self._imm.update(p)
+        try:
+            self._predict(dt)
+            for kf in self._imm.filters:
+                kf.R = R
+            self._imm.update(p)
+        except np.linalg.LinAlgError:  # a covariance gone singular: start again from here
+            self._start(t, p, R, v)
+            return self.estimate
+        if not (np.isfinite(self._imm.x).all() and np.isfinite(self._imm.P).all()):
+            self._start(t, p, R, v)
+            return self.estimate
         self._time_s = t
         self._publish(t)
         return self.estimate
