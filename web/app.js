@@ -2,7 +2,6 @@
 // REST API <- simulator controls and gains. Same origin; the access cookie rides along.
 "use strict";
 
-const $ = (id) => document.getElementById(id);
 // counters the benchmark reads (groundstation bench --dashboard): telemetry messages received,
 // applied (appended to the plots' series, the readouts' state updated) and painted (animation
 // frames that showed new data; updates is the same count)
@@ -31,29 +30,6 @@ if (W.softwareGl) {
     if (type === "2d") options = Object.assign({ willReadFrequently: true }, options || {});
     return getContext.call(this, type, options);
   };
-}
-
-async function api(method, path, body) {
-  const opts = { method, headers: {} };
-  if (body !== undefined) {
-    opts.headers["Content-Type"] = "application/json";
-    opts.body = JSON.stringify(body);
-  }
-  const r = await fetch(path, opts);
-  let data = null;
-  try { data = await r.json(); } catch (e) { data = null; }
-  if (!r.ok) {
-    const detail = data && data.detail !== undefined ? data.detail : r.statusText;
-    const err = new Error(typeof detail === "string" ? detail : JSON.stringify(detail));
-    err.data = data; // e.g. {refused: {name: why}} of a gains edit
-    throw err;
-  }
-  return data;
-}
-
-function msg(el, text, ok) {
-  el.textContent = text;
-  el.className = "msg " + (ok ? "ok" : "err");
 }
 
 // ------------------------------------------------------------------ plots (uPlot)
@@ -267,7 +243,6 @@ function drawTimeline() {
   if (tl.style.height !== h) tl.style.height = h;
   if (html !== tl.dataset.drawn) { tl.innerHTML = html; tl.dataset.drawn = html; }
 }
-const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
 $("timeline").onclick = (ev) => {
   const m = ev.target.closest(".mark"); if (!m || !W.snap || !W.snap.status.replay) return;
   replay("seek", { t_s: parseFloat(m.dataset.t) });
@@ -349,7 +324,7 @@ $("btn-add-plot").onclick = () => {
   buildPlots();
 };
 // ------------------------------------------------------------------ image plane
-const img = { canvas: $("image"), frame: null, asked: 0, seq: 0 };
+const img = { canvas: $("image"), frame: null, asked: 0, seq: 0, decoding: 0 };
 img.ctx = img.canvas.getContext("2d");
 
 function drawImagePlane(s) {
@@ -357,6 +332,7 @@ function drawImagePlane(s) {
   const im = s.image || { w: 640, h: 480, f: 320, vfov_deg: 73.7 };
   if (canvas.width !== im.w || canvas.height !== im.h) { canvas.width = im.w; canvas.height = im.h; }
   const cu = im.w / 2, cv = im.h / 2;
+  W.imageShown = [s.t, img.frame ? img.frame.frameT : null]; // the time shown and its camera frame's
   if (img.frame) ctx.drawImage(img.frame, 0, 0, im.w, im.h);
   else {
     ctx.fillStyle = "#c9dcec"; ctx.fillRect(0, 0, im.w, im.h);
@@ -631,11 +607,23 @@ function takeSnapshot(s) {
   if (s.t !== undefined) {
     W.lastT = s.t;
     // a replayed frame comes with its recorded time: the last decoded for the newest
-    // snapshot is shown (an older one decoded late is dropped), none where none was recorded
+    // snapshot is shown (an older one decoded late is dropped), none where none was recorded.
+    // While a replayed frame decodes the page is not redrawn: the image plane then never
+    // shows a newer time over the frame before (the frame follows the cursor as it plays)
     if (s.frame_t_s === null) { img.frame = null; img.seq = ++img.asked; W.frameT = null; W.frameFor = s.t; }
     if (s.frame_jpeg_b64) {
       const im = new Image(), seq = ++img.asked, ft = s.frame_t_s, at = s.t;
-      im.onload = () => { if (seq < img.seq) return; img.seq = seq; img.frame = im; W.frameT = ft === undefined ? null : ft; W.frameFor = at; pending = pending || W.snap; if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); } };
+      im.frameT = ft === undefined ? null : ft;
+      if (ft !== undefined) img.decoding = seq;
+      const done = () => {
+        if (img.decoding === seq) img.decoding = 0;
+        if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); }
+      };
+      im.onload = () => {
+        if (seq >= img.seq) { img.seq = seq; img.frame = im; W.frameT = im.frameT; W.frameFor = at; pending = pending || W.snap; }
+        done();
+      };
+      im.onerror = done;
       im.src = "data:image/jpeg;base64," + s.frame_jpeg_b64;
     }
     if (appendLive(s)) W.applied += 1;
@@ -647,6 +635,7 @@ function takeSnapshot(s) {
 
 function redraw() {
   frameRequested = false;
+  if (img.decoding) return; // drawn once the replayed frame has decoded (takeSnapshot)
   const s = pending; if (!s) return;
   pending = null;
   W.updates += 1; W.shownT = s.t;

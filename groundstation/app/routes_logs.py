@@ -13,7 +13,7 @@ from fastapi.responses import FileResponse
 
 from onboard.gains import GainError, Gains
 
-from ..recording.reader import LogError, LogIndex, scenario_attachment
+from ..recording.reader import LogError, LogIndex
 from ..scenario import ScenarioError, parse_scenario
 from ..sim.camera import CAMERA_MODES
 from .api_models import Deleted, ReflyRequest, Status
@@ -143,7 +143,7 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
         """Fly the recorded target track again (another law, seed or gains), recorded, with
         the old sortie overlaid."""
         rp = await asyncio.to_thread(player, name)
-        text = scenario_attachment(rp.path)
+        text = rp.scenario_text
         if not text:
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:

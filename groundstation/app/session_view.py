@@ -38,6 +38,7 @@ class SessionView:
     """Status, snapshots, plot history and scene updates of a :class:`~.session.SimSession`."""
 
     _jpeg: tuple[int, Future] | None = None  # (epoch, the camera frame being encoded)
+    _frame_sent_t: float | None = None  # the recorded camera frame last sent in replay
 
     def _encode_frame(self, frame: Any) -> None:
         """Encode a copy of the camera frame to JPEG on a worker thread: OpenCV releases the
@@ -223,13 +224,15 @@ class SessionView:
             snap.update(
                 frame_snapshot(rp.frame(self.replay_t), rp.camera, rp.diameter_m, t_s=self.replay_t)
             )
+            # the recorded camera frame at the cursor (the last one at or before it, with its
+            # time; None: no frame there, the page shows none), sent after a seek and, while
+            # playing, each time the cursor reaches another frame: the image follows the cursor
             if self._force_frame or (
-                self.replay_playing and self._publish_count % FRAME_EVERY == 0
+                self.replay_playing and rp.frame_time_at(self.replay_t) != self._frame_sent_t
             ):
                 self._force_frame = False
-                # the recorded camera frame at the cursor: the last one at or before it, with
-                # its time (None: no frame there, the page shows none)
                 frame_t, frame = rp.frame_at(self.replay_t)
+                self._frame_sent_t = frame_t
                 snap["frame_t_s"] = frame_t
                 if frame:
                     snap["frame_jpeg_b64"] = frame
