@@ -141,3 +141,30 @@ def test_replay_frame_follows_the_cursor_while_it_plays(station, page):
     assert exact / len(seen) >= 0.95, (exact, len(seen))
     # a new frame at each of the recorded ones, not a few frames a second
     assert len(shown_frames) >= 0.8 * len(frames), (len(shown_frames), len(frames))
+
+
+CUT = """(sel) => [...document.querySelectorAll(sel)]
+  .filter(e => e.offsetParent !== null && e.scrollWidth > e.clientWidth + 1)
+  .map(e => [e.tagName, e.id, (e.value || e.textContent).trim().slice(0, 40)])"""
+
+
+def test_controls_show_their_whole_text_at_1280_by_800(station, browser):
+    pg = browser.new_page(viewport={"width": 1280, "height": 800})
+    try:
+        pg.goto(station.url())
+        pg.wait_for_function("document.querySelectorAll('#gains input').length > 5")
+        pg.frame_locator("#viser").get_by_label("View", exact=True).wait_for(timeout=60000)
+        # the page's controls, headers and cells: none has text wider than its box
+        assert pg.evaluate(CUT, "select, input, button, label, .badge, h2, th, td") == []
+        # the file picker is a button ("Upload…"), not the browser's cut "No file chosen"
+        assert pg.locator("label.file").inner_text().strip() == "Upload…"
+        # the 3D view's View control shows "fit engagement" whole
+        frame = next(f for f in pg.frames if "/viser" in f.url)
+        assert frame.evaluate(CUT, ".mantine-Select-input, label") == []
+        value = frame.evaluate(
+            "() => [...document.querySelectorAll('input')].find(e => e.value.startsWith('fit'))"
+            ".value"
+        )
+        assert value == "fit engagement"
+    finally:
+        pg.close()

@@ -111,6 +111,8 @@ function markerHook(u) {
   ctx.restore();
 }
 
+// room on the right for the last tick's label (uPlot centres it on the plot's edge)
+const PLOT_PADDING = [null, 16, null, null];
 function makePlot(def, parent) {
   const series = [{ label: "t (s)", value: (u, v) => fmtVal(v) }];
   def.series.forEach((s) => series.push({ label: PV.cmp ? `${s.label} · A` : s.label, stroke: s.color, width: 1.5, spanGaps: true, value: legendVal }));
@@ -118,7 +120,7 @@ function makePlot(def, parent) {
   const box = document.createElement("div"); box.className = "plot"; parent.appendChild(box);
   const width = Math.max(parent.clientWidth / 2 - 10, 300);
   const u = new uPlot({
-    title: `${def.title} (${def.unit})`, width, height: 190, series,
+    title: `${def.title} (${def.unit})`, width, height: 190, series, padding: PLOT_PADDING,
     scales: { x: { time: false, auto: false, range: () => currentRange() } },
     axes: [{ label: "time (s)", labelSize: 16, size: 34 }, { label: def.unit, labelSize: 16, size: 52 }],
     cursor: { sync: { key: "peregrine", setSeries: false }, drag: { x: true, y: false, setScale: false } },
@@ -150,7 +152,7 @@ function makeXY(parent) {
   const series = [{}, { label: PV.cmp ? "image error · A" : "image error", stroke: "#19a35b", width: 1.5, paths: uPlot.paths.linear(), points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] }];
   if (PV.cmp) series.push({ label: "image error · B", stroke: B_COLORS[0], dash: [6, 4], width: 1.5, paths: uPlot.paths.linear(), points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] });
   const u = new uPlot({
-    mode: 2, title: "image error: e_x against e_y (px)", width: Math.max(parent.clientWidth / 2 - 10, 300), height: 190, series,
+    mode: 2, title: "image error: e_x against e_y (px)", width: Math.max(parent.clientWidth / 2 - 10, 300), height: 190, series, padding: PLOT_PADDING,
     scales: { x: { time: false, range: padRange }, y: { dir: -1, range: padRange } }, legend: { live: false },
     axes: [{ label: "e_x (px)", labelSize: 16, size: 34 }, { label: "e_y (px, down)", labelSize: 16, size: 52 }],
     hooks: { draw: [(u) => { // the point at the cursor time

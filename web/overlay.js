@@ -52,7 +52,7 @@ function buildPlots() {
     const series = [{ label: $("ov-align").value === "intercept" ? "t − t_intercept (s)" : "t (s)", value: (u, v) => fmt(v) }]
       .concat(O.sorties.map((s, i) => ({ label: `#${i + 1}`, stroke: COLORS[i], width: 1.3, spanGaps: true, value: (u, v) => fmt(v) })));
     const u = new uPlot({
-      title: p.title, width: Math.max(grid.clientWidth / 2 - 10, 300), height: 200, series,
+      title: p.title, width: Math.max(grid.clientWidth / 2 - 10, 300), height: 200, series, padding: [null, 16, null, null],
       scales: { x: { time: false, auto: false, range: () => [lo, hi] } },
       axes: [{ label: series[0].label, labelSize: 16, size: 34 }, { size: 52, values: (u, vals) => vals.map(fmt) }],
       // the scrub moves uPlot's own cursor line (an element): no plot is redrawn for it
@@ -104,6 +104,7 @@ document.querySelector("#ov-table tbody").onclick = async (ev) => {
   const names = (new URLSearchParams(location.search).get("names") || "").split(",").filter(Boolean);
   try {
     O.sorties = await api("GET", "/api/overlay?names=" + encodeURIComponent(names.join(",")));
+    O.fetchMs = performance.now() - t0; // the request: the server reads the sorties
     $("ov-count").textContent = `${O.sorties.length} sorties`;
     table(); buildPlots();
     rel.setTracks(O.sorties.map((s, i) => ({ color: COLORS[i], points: s.rel_m })));

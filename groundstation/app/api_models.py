@@ -12,7 +12,7 @@ from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import ESTIMATE_PROFILES
 from ..sim.camera import CAMERA_MODES
-from .session import SPEEDS
+from .session_config import SPEEDS
 
 LawName = Literal[codes(GuidanceLaw)]  # type: ignore[valid-type]
 CameraMode = Literal[CAMERA_MODES]  # type: ignore[valid-type]

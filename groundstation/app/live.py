@@ -36,11 +36,11 @@ from onboard.link.px4 import (
     mavlink,
 )
 
+from .errors import SessionError
 from .live_frames import live_frame, pose_from_values
 from .live_link import LINK_TIMEOUT_S, LinkState
 from .live_recording import LiveRecording
 from .scene import SceneState
-from .session import SessionError
 from .snapshot import frame_snapshot
 
 _WAITING = tm.LOOP_MODE_CODES.index(LoopMode.WAITING.value)
@@ -83,6 +83,7 @@ class LiveSession(LinkState):
     the vehicle reports (:class:`~.live_link.LinkState`), what the operator sends, the
     recording and the page's view."""
 
+    simulated = False  # the routers' Session protocol (protocol.py)
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
     video = None  # a VideoReceiver of the vehicle's camera (serve --video)
 
@@ -132,6 +133,13 @@ class LiveSession(LinkState):
     start = pause = resume = step = reset = set_speed = _not_live
     open_replay = compare_with = replay_command = _not_live
 
+    def series(self) -> dict[str, Any]:
+        """Live, the page's plots grow from the telemetry it receives: no series kept here."""
+        return {"t_s": [], "columns": {}, "events": []}
+
+    def request_frame(self) -> None:
+        """The vehicle's video frames go out as they are received: nothing to ask for."""
+
     def default_gains(self) -> Gains:
         """What "reset gains" restores: the gains the sortie started from. Live, that is the
         vehicle's own gain parameters as first read in full (its parameter file)."""
@@ -141,8 +149,13 @@ class LiveSession(LinkState):
             return self.initial_gains
 
     # ------------------------------------------------------------------ operator commands
-    def set_gains(self, gains: Gains) -> Gains:
-        """Send a PARAM_SET for every gain that differs from the vehicle's value."""
+    def reset_edits(self) -> Gains:
+        """Back to the vehicle's own gain parameters as first read (:meth:`default_gains`)."""
+        return self.set_gains(self.default_gains())
+
+    def set_gains(self, gains: Gains, source: str | None = None) -> Gains:
+        """Send a PARAM_SET for every gain that differs from the vehicle's value (a gain set
+        loaded by name, ``source``, goes out the same way: the vehicle keeps no sets)."""
         with self._lock:
             if not self.link_up():
                 raise SessionError("no link to the onboard computer: gains not sent")
@@ -220,6 +233,14 @@ class LiveSession(LinkState):
             if command == CMD_START and self.rec is None:
                 self._start_recording()
             return self.last_ack
+
+    def live_command(self, action: str) -> dict[str, Any]:
+        """``start`` or ``abort`` sent to the onboard computer; its COMMAND_ACK."""
+        if action == "start":
+            return self.live_start()
+        if action == "abort":
+            return self.live_abort()
+        raise SessionError(f"unknown live command {action!r}")
 
     def live_start(self) -> dict[str, Any]:
         return self._command(CMD_START, "start")

@@ -17,13 +17,15 @@ from ..recording.reader import LogError, LogIndex
 from ..scenario import ScenarioError, parse_scenario
 from ..sim.camera import CAMERA_MODES
 from .api_models import Deleted, ReflyRequest, Status
+from .errors import SessionError
+from .protocol import Session
 from .replay import OVERLAY_MAX, ReplayPlayer, overlay_entry
 from .routes_gains import check_each
 from .routes_sortie import command
-from .session import SessionError, SortieConfig
+from .session_config import SortieConfig
 
 
-def router(session: Any, logs: LogIndex) -> APIRouter:
+def router(session: Session, logs: LogIndex) -> APIRouter:
     r = APIRouter()
 
     def log_path(name: str) -> Path:

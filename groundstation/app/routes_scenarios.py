@@ -11,7 +11,7 @@ from onboard import enums
 from ..scenario import load_scenario, parse_scenario, scenario_toml, shipped_scenarios
 from ..sim.camera import CAMERA_MODES
 from .api_models import Meta, ScenarioCheck, ScenarioSummary, ScenarioText
-from .session import SPEEDS
+from .session_config import SPEEDS
 
 
 def router() -> APIRouter:

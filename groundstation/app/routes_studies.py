@@ -18,8 +18,9 @@ from onboard.gains import GainError, Gains
 
 from ..scenario import ScenarioError
 from .api_models import Speed, Status
+from .protocol import Session
 from .routes_sortie import command
-from .session import SortieConfig
+from .session_config import SortieConfig
 
 
 class FlyTrialRequest(BaseModel):
@@ -135,7 +136,7 @@ def _fly_recorded(job, log_dir: Path) -> Path:
     return rec.path
 
 
-def router(session: Any, storage_url: str, log_dir: Path | None) -> APIRouter:
+def router(session: Session, storage_url: str, log_dir: Path | None) -> APIRouter:
     r = APIRouter()
     db_path = (
         Path(storage_url[len("sqlite:///") :]) if storage_url.startswith("sqlite:///") else None
@@ -157,7 +158,7 @@ def router(session: Any, storage_url: str, log_dir: Path | None) -> APIRouter:
         the scenario's gains flies first, recorded; then the trial's gains fly it on screen
         at ``speed`` with the defaults' sortie overlaid."""
         req = req or FlyTrialRequest()
-        if log_dir is None or not hasattr(session, "compare_with") or session.state == "live":
+        if log_dir is None or not session.simulated:
             raise HTTPException(409, "flying a trial needs the simulator with a log folder")
         detail = await asyncio.to_thread(study_detail, storage_url, name)
         trial = next((t for t in detail["trials"] if t["number"] == number), None)

@@ -37,6 +37,7 @@ from ..scenario import ScenarioError
 from . import routes_gains, routes_logs, routes_scenarios, routes_sortie, routes_studies
 from .auth import TokenAuthMiddleware, is_loopback, new_token
 from .gainsets import GainSetStore, default_data_dir
+from .protocol import Session
 from .scene import SceneView
 from .session import SimSession
 
@@ -97,7 +98,7 @@ class TelemetryHub:
 
 
 def create_app(
-    session: SimSession,
+    session: Session,
     hub: TelemetryHub,
     token: str | None,
     viser_port: int,
@@ -215,9 +216,7 @@ def create_app(
     @app.websocket("/ws/telemetry")
     async def telemetry(ws: WebSocket) -> None:
         await ws.accept()
-        request_frame = getattr(session, "request_frame", None)
-        if request_frame is not None:
-            request_frame()  # a page that (re)loads shows the camera frame at once
+        session.request_frame()  # a page that (re)loads shows the camera frame at once
         q: asyncio.Queue = asyncio.Queue(maxsize=4)
         hub.queues[q] = True
         key = id(q)
@@ -254,8 +253,7 @@ def create_app(
     app.include_router(routes_sortie.router(session))
     app.include_router(routes_logs.router(session, logs))
     if studies_url is not None:
-        log_dir = getattr(session, "log_dir", None)
-        app.include_router(routes_studies.router(session, studies_url, log_dir))
+        app.include_router(routes_studies.router(session, studies_url, session.log_dir))
 
     _declare_errors(app)
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]

@@ -21,22 +21,21 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from onboard.gains import Gains
 
 from ..recording.writer import SortieRecorder
-from ..scenario import Scenario, load_scenario, with_changes
+from ..scenario import load_scenario
 from ..sim.simulation import Simulation
 from .errors import SessionError
 from .numbers import fmt_num
 from .replay import ReplayPlayer
+from .session_config import SPEEDS, SortieConfig, with_wind
 from .session_replay import SessionReplay
 from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_history
 
-SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
 TRAIL_EVERY_S = 0.1
 BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved (below)
 # how far (wall seconds) the simulator may trail the clock and still publish every point of its
@@ -51,15 +50,6 @@ STEP_SLICE_S = 0.05  # most wall time one paced stepping call runs before comman
 MAX_EVENTS = 200
 
 
-@dataclass(frozen=True)
-class SortieConfig:
-    scenario: Scenario
-    law: str = "png"
-    seed: int = 0
-    camera: str = "projected"
-    speed: str = "1"
-
-
 __all__ = ["SPEEDS", "SessionError", "SimSession", "SortieConfig", "with_wind"]
 
 
@@ -67,6 +57,7 @@ class SimSession(SessionView, SessionReplay):
     """The operator's simulator: commands and the paced thread here; what the page sees in
     :class:`~.session_view.SessionView`, replay in :class:`~.session_replay.SessionReplay`."""
 
+    simulated = True  # the routers' Session protocol (protocol.py)
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
 
     def __init__(
@@ -346,6 +337,9 @@ class SimSession(SessionView, SessionReplay):
             cached = self._gains_edited = (base_gains, gains, edited)
         return {k: list(v) for k, v in cached[2].items()}
 
+    def live_command(self, action: str) -> dict[str, Any]:
+        raise SessionError("simulator mode: there is no live vehicle")
+
     def request_frame(self) -> None:
         """Send a camera frame with the next snapshot (a page has just (re)connected)."""
         self._force_frame = True
@@ -521,16 +515,3 @@ class SimSession(SessionView, SessionReplay):
             else:
                 nap_s = 0.002 if was_running else 0.01
             self._stop.wait(nap_s)
-
-
-def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):
-    """The scenario with its wind's mean and gust replaced (validated); the model (uniform or
-    a fan jet with its source) and the gust time constant are kept."""
-    return with_changes(
-        scenario,
-        wind=dataclasses.replace(
-            scenario.wind,
-            mean_m_s=tuple(float(c) for c in mean_m_s),
-            gust_m_s=float(gust_m_s),
-        ),
-    )
