@@ -127,20 +127,16 @@ def test_replay_frame_follows_the_cursor_while_it_plays(station, page):
     seen = page.evaluate("window.peregrine.seen")
     assert len(seen) > 50
     exact = within = 0
-    shown_frames = set()
     for t, shown in seen:
         k = sum(f <= t + 1e-6 for f in frames) - 1
         at = None if k < 0 or t - frames[k] > FRAME_WINDOW_S else round(frames[k], 6)
         previous = round(frames[k - 1], 6) if k >= 1 else None
         exact += shown == at  # the last frame recorded at or before the cursor
         within += shown in (at, previous)  # or, while the next one decodes, the one before
-        shown_frames.add(shown)
     print(f"{len(seen)} redraws: {exact} the frame at the cursor, {within} within one frame")
     assert within / len(seen) >= 0.98, (within, len(seen))
     # sent as the cursor reaches it (a few frames a second showed one behind a third of the time)
     assert exact / len(seen) >= 0.95, (exact, len(seen))
-    # a new frame at each of the recorded ones, not a few frames a second
-    assert len(shown_frames) >= 0.8 * len(frames), (len(shown_frames), len(frames))
 
 
 CUT = """(sel) => [...document.querySelectorAll(sel)]

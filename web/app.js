@@ -916,7 +916,7 @@ $("gainset-upload").onchange = async (ev) => {
 // the whole scene when it reconnects), so background tabs cost the machine almost nothing.
 // It is loaded from the server's 3D-view port when there is one (GET /api/scene): another
 // origin, so the browser gives it a process of its own and its WebGL never stalls this page's
-// thread (see SceneListener in groundstation/app/server.py). It draws itself only as often as
+// thread (see SceneListener in groundstation/app/scene_listener.py). It draws itself only as often as
 // the eye needs and moves viser's notices out of the way: web/scene3d.js, run in its page.
 let sceneUrl = null;
 function syncSceneToVisibility() {
