@@ -10,8 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from onboard.enums import GuidanceLaw, codes
 
-from ..scenario import ESTIMATE_PROFILES
-from ..sim.camera import CAMERA_MODES
+from ..scenario import CAMERA_MODES, ESTIMATE_PROFILES
 from .session_config import SPEEDS
 
 LawName = Literal[codes(GuidanceLaw)]  # type: ignore[valid-type]

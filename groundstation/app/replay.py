@@ -24,7 +24,6 @@ from onboard.gains import GainError, Gains
 
 from ..recording.reader import SCENARIO_ATTACHMENT, iter_messages, read_log
 from ..scenario import ScenarioError, parse_scenario
-from ..sim.beliefs import true_camera
 from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
@@ -91,6 +90,8 @@ class ReplayPlayer:
         self.diameter_m = 0.3
         text = self.scenario_text = log.attachment_text(SCENARIO_ATTACHMENT)
         if text:
+            from ..sim.beliefs import true_camera  # the simulator: imported at the first replay
+
             try:
                 sc = parse_scenario(text, source=self.path.name)
                 self.camera = true_camera(sc)  # the camera the sortie's frames came from

@@ -14,8 +14,7 @@ from fastapi.responses import FileResponse
 from onboard.gains import GainError, Gains
 
 from ..recording.reader import LogError, LogIndex
-from ..scenario import ScenarioError, parse_scenario
-from ..sim.camera import CAMERA_MODES
+from ..scenario import CAMERA_MODES, ScenarioError, parse_scenario
 from .api_models import Deleted, ReflyRequest, Status
 from .errors import SessionError
 from .protocol import Session

@@ -10,8 +10,6 @@ import base64
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
-import cv2
-
 from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
@@ -33,6 +31,8 @@ _jpeg_pool: ThreadPoolExecutor | None = None
 
 def _jpeg_b64(frame: Any) -> str | None:
     """A camera frame (BGR) as base64 JPEG, None if OpenCV cannot encode it."""
+    import cv2  # only a rendered camera has frames: not imported when the server starts
+
     ok, jpg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
     return base64.b64encode(jpg.tobytes()).decode("ascii") if ok else None
 
