@@ -5,7 +5,6 @@ controls whole at a laptop's 1280 x 800."""
 import json
 import math
 import time
-import urllib.request
 
 import pytest
 
@@ -15,6 +14,7 @@ from groundstation.recording.reader import iter_messages
 from groundstation.scenario import load_scenario
 
 from .browser_support import needs_chromium
+from .test_dashboard import api
 
 pytestmark = needs_chromium
 
@@ -28,16 +28,6 @@ def page(station, browser):
     yield pg
     pg.close()
     assert not errors, errors
-
-
-def call(station, method, path, body=None):
-    req = urllib.request.Request(station.url().split("?")[0] + path.lstrip("/"), method=method)
-    req.add_header("Cookie", f"peregrine_token={station.token}")
-    data = None if body is None else json.dumps(body).encode()
-    if data is not None:
-        req.add_header("Content-Type", "application/json")
-    with urllib.request.urlopen(req, data, timeout=30) as r:
-        return json.loads(r.read())
 
 
 def fly(station, law="png", camera="projected", seed=0) -> str:
@@ -54,7 +44,7 @@ def fly(station, law="png", camera="projected", seed=0) -> str:
 
 def test_overlay_draws_each_trajectory_relative_to_its_target_in_3d(station, page):
     names = [fly(station, law) for law in ("png", "pg")]
-    entries = call(station, "GET", "/api/overlay?names=" + ",".join(names))
+    entries = api(station, "GET", "/api/overlay?names=" + ",".join(names))
     page.goto(station.url())
     page.goto(station.url().split("?")[0] + "overlay?names=" + ",".join(names))
     page.wait_for_function("window.peregrine.openedMs !== null", timeout=60000)
@@ -107,7 +97,7 @@ def test_replay_frame_follows_the_cursor_while_it_plays(station, page):
     name = fly(station, camera="rendered")
     frames = [t for _, t, _ in iter_messages(station.log_dir / name, ["/camera/image"])]
     assert len(frames) > 10
-    call(station, "POST", "/api/replay/open", {"name": name})
+    api(station, "POST", "/api/replay/open", {"name": name})
     page.goto(station.url())
     page.wait_for_selector("#replay-panel:not([hidden])", timeout=15000)
     # every animation frame while it plays: the time the image plane shows and its camera frame
@@ -118,7 +108,7 @@ def test_replay_frame_follows_the_cursor_while_it_plays(station, page):
           requestAnimationFrame(look); }"""
     )
     station.session.set_speed("1")
-    call(station, "POST", "/api/replay/play")
+    api(station, "POST", "/api/replay/play")
     page.wait_for_function(
         "window.peregrine.snap && !window.peregrine.snap.status.replay.playing"
         " && window.peregrine.seen.length > 0",

@@ -12,16 +12,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
-
-def _cpu_s(pid: int) -> float | None:
-    """User plus system CPU seconds of process ``pid`` so far (Linux), None elsewhere."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+from .sitl import _proc_cpu_s  # user plus system CPU seconds of a process (Linux)
 
 
 def _one_start(timeout_s: float = 120.0) -> tuple[float, float | None]:
@@ -38,7 +30,7 @@ def _one_start(timeout_s: float = 120.0) -> tuple[float, float | None]:
         try:
             for line in proc.stdout:
                 if "open http" in line:
-                    return time.perf_counter() - t0, _cpu_s(proc.pid)
+                    return time.perf_counter() - t0, _proc_cpu_s(proc.pid)
                 if time.perf_counter() - t0 > timeout_s:
                     break
             raise RuntimeError("groundstation serve printed no URL")
