@@ -11,8 +11,8 @@ import pytest
 
 from onboard.geometry import attitude_from_yaw_pitch_roll
 
-# the browser tests' ground station and chromium, one of each per module
-from .browser_support import browser, station  # noqa: F401
+# the browser tests' ground station and chromium, one of each per module, and their pages
+from .browser_support import browser, page, station  # noqa: F401
 
 _FUZZ: dict[str, tuple[int, int]] = {}  # suite -> (cases tried, failures)
 
@@ -25,6 +25,36 @@ def fuzz_summary():
         _FUZZ[suite] = (cases, failures)
 
     return record
+
+
+def pytest_sessionfinish(session) -> None:
+    """Under pytest-xdist a worker hands its fuzz totals to the controller, which prints them."""
+    out = getattr(session.config, "workeroutput", None)
+    if out is not None:
+        out["fuzz"] = {suite: list(totals) for suite, totals in _FUZZ.items()}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error) -> None:
+    for suite, (cases, failures) in getattr(node, "workeroutput", {}).get("fuzz", {}).items():
+        _FUZZ[suite] = (cases, failures)
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Tests that share a module-scoped fixture (a ground station, a browser, a flown log) run
+    on one pytest-xdist worker, in their file's order: the fixture is made once, and a test
+    that expects the state the previous ones left (the browser modules) finds it."""
+    for item in items:
+        info = getattr(item, "_fixtureinfo", None)
+        if info is None:
+            continue
+        shared = any(
+            d.scope in ("module", "class", "package")
+            for name in info.names_closure
+            for d in info.name2fixturedefs.get(name, ())
+        )
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
 
 
 def pytest_terminal_summary(terminalreporter) -> None:
