@@ -40,11 +40,30 @@ def pytest_testnodedown(node, error) -> None:
         _FUZZ[suite] = (cases, failures)
 
 
+def _flies_the_rig(item) -> bool:
+    """Does the test fly the SITL rig (the simulator standing in for PX4 and the onboard
+    runtime, each a real-time process)? Its module or the test itself uses ``Rig``."""
+    from .sitl_rig import Rig
+
+    code = getattr(getattr(item, "function", None), "__code__", None)
+    return getattr(item.module, "Rig", None) is Rig or (
+        code is not None and "Rig" in code.co_varnames + code.co_names
+    )
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items) -> None:
-    """Tests that share a module-scoped fixture (a ground station, a browser, a flown log) run
-    on one pytest-xdist worker, in their file's order: the fixture is made once, and a test
-    that expects the state the previous ones left (the browser modules) finds it."""
+    """Groups for pytest-xdist (``--dist loadgroup``: a group runs on one worker, in file
+    order). The tests that fly the SITL rig form one group, so two real-time rigs never share
+    the two cores. Tests that share a module-scoped fixture (a ground station, a browser, a
+    flown log) form one group per module: the fixture is made once, and a test that expects
+    the state the previous ones left (the browser modules) finds it."""
     for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        if _flies_the_rig(item):
+            item.add_marker(pytest.mark.xdist_group("sitl-rig"))
+            continue
         info = getattr(item, "_fixtureinfo", None)
         if info is None:
             continue
