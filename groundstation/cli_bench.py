@@ -40,7 +40,8 @@ def add_bench_parser(sub) -> None:
         type=COUNT,
         default=1,
         help="--sitl: fly this many times; each run's figures, then each target's per-run "
-        "values and in how many runs it was met",
+        "values and in how many runs it was met. --serve-start: start the server this many "
+        "times",
     )
     b.add_argument(
         "--realtime",
@@ -89,6 +90,12 @@ def add_bench_parser(sub) -> None:
         help="the Sorties overlay page with 20 recorded sorties: open time, scrub frames/s "
         "(needs chromium)",
     )
+    b.add_argument(
+        "--serve-start",
+        action="store_true",
+        help="`groundstation serve` started --runs times: seconds until it prints its URL, "
+        "wall and CPU (their medians)",
+    )
 
 
 def run_bench_command(args: argparse.Namespace) -> int:
@@ -98,6 +105,7 @@ def run_bench_command(args: argparse.Namespace) -> int:
         run_dashboard_bench,
         run_overlay_bench,
         run_recording_bench,
+        run_serve_start_bench,
         run_sitl_bench,
     )
 
@@ -118,6 +126,8 @@ def run_bench_command(args: argparse.Namespace) -> int:
         return run_dashboard_bench(as_json=args.json)
     if args.overlay:
         return run_overlay_bench(as_json=args.json)
+    if args.serve_start:
+        return run_serve_start_bench(runs=args.runs, as_json=args.json)
     if args.campaigns:
         return run_campaign_bench(as_json=args.json)
     return run_bench(args.repeat, pin_one_core=not args.all_cores, as_json=args.json)

@@ -7,11 +7,15 @@ one clock: simulated time in the simulator, vehicle time in flight.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .constants import GRAVITY_M_S2  # declared there, imported from here too
 from .enums import LoopMode  # declared there, imported from here too
+
+if TYPE_CHECKING:
+    from .estimation.self_calibration import SelfCalEstimate
 
 GRAVITY_ENU_M_S2 = np.array([0.0, 0.0, -GRAVITY_M_S2])
 
@@ -94,3 +98,5 @@ class ControlTelemetry:
     dkf_time_since_detection_s: float
     dkf_lost: bool
     guard_tripped: bool
+    # the in-flight target size and camera-offset estimates (onboard/estimation/self_calibration.py)
+    self_cal: SelfCalEstimate | None = None

@@ -108,6 +108,14 @@ class Gains:
         "braking: vertical velocity gain (a descent is stopped first)",
         "track loss",
     )
+    k_selfcal: float = _gain(
+        1.0,
+        "-",
+        0.0,
+        1.0,
+        "1: estimate the target's size and the camera-IMU time offset in flight and use them",
+        "disturbance and latency",
+    )
     k_v: float = _gain(
         1.8,
         "1/s",

@@ -4,6 +4,7 @@ no clock, socket or camera, only the time stamps it is handed."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 
@@ -43,6 +44,8 @@ from .datatypes import (
     VehicleState,
 )
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
+from .estimation.dkf_values import measurement
+from .estimation.self_calibration import SelfCalEstimate, SelfCalibration
 from .gains import Gains
 from .geometry import (
     as_quat,
@@ -58,8 +61,7 @@ _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's L
 _ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 # an attitude that moved this much more (rad) than the gyro turned it since an on-time last tick
-# was a stale one replaced: in flight the simulator's differences (noise, bias) stay < 1.7 mrad
-# (docs/core.md)
+# was a stale one replaced (counted for the diagnostics; docs/core.md)
 ATTITUDE_JUMP_RAD = 0.005
 # beyond this many periods since the last tick (a stall) the gyro's turn is no better a guess
 ATTITUDE_JUMP_MAX_PERIODS = 2.0
@@ -111,13 +113,17 @@ class InterceptionLoop:
         self.nominal_dt_s = 1.0 / control_rate_hz
         self.dkf = DelayedKalmanFilter(camera, dkf_config)
         self.dkf.carry_max_s = self.gains.t_carry
+        self._dkf_belief = self.dkf.config  # the operator's settings (self-calibration's prior)
+        self.self_cal = SelfCalibration(camera.f_px, camera.R_BC, self.dkf.config.target_diameter_m)
+        self._self_cal_est: SelfCalEstimate = self.self_cal.estimate()
+        self._los_prev: np.ndarray | None = None  # the last tick's estimated LOS (ENU, unit)
         self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
         self._gyro_n = 0
         self._detections: list[Detection] = []
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
         self._prev_R_WB: np.ndarray | None = None
-        self.attitude_jumps = 0  # ticks whose attitude jumped (their LOS change re-based)
+        self.attitude_jumps = 0  # ticks whose attitude jumped beyond the gyro's turn
         self.stale_attitude_ticks = 0  # ticks with an attitude not carried to them (likewise)
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
@@ -168,8 +174,13 @@ class InterceptionLoop:
 
     def set_dkf_config(self, config: DkfConfig) -> None:
         """Use the filter settings ``config`` (target diameter, noises, gate) from the next
-        prediction or fusion on; the track is kept."""
+        prediction or fusion on; the track is kept. Its target diameter is the operator's
+        belief that the in-flight size estimate starts from."""
+        self._dkf_belief = config
+        self.self_cal.set_believed_diameter(config.target_diameter_m)
+        self._self_cal_est = self.self_cal.estimate()
         self.dkf.config = config
+        self._use_size(self.gains)
 
     def on_gyro(self, sample: GyroSample) -> None:
         s0, s1, s2 = self._gyro_sum
@@ -284,19 +295,55 @@ class InterceptionLoop:
         self._detections.clear()
         if dets and self._R_hist and self._screening(self._prev_time_s):
             dets = self._screened(dets, self._R_hist[-1][1])
-        out = [self.dkf.fuse(det) for det in dets]
+        out = [self._fuse(det) for det in dets]
         self._fused_early.extend(out)
         return out
 
-    def _rebase_los(
+    def _fuse(self, det: Detection) -> FusionResult:
+        """Fuse one detection, its stamp moved to the gyro's timeline by the in-flight
+        camera-offset estimate (gain k_selfcal), and feed the in-flight estimates with it."""
+        cal = self.self_cal
+        use = self.gains.k_selfcal >= 0.5
+        t_c = det.capture_time_s
+        if use and isinstance(t_c, int | float) and math.isfinite(t_c):
+            t_new = cal.restamp(t_c)
+            if t_new != t_c:
+                det = Detection(t_new, det.center_px, det.bbox_px, det.area_px, det.score)
+        result = self.dkf.fuse(det)
+        if result is FusionResult.ACCEPTED:
+            m = measurement(det, self.camera)
+            if m is not None:
+                cal.on_fused(float(t_c), (float(m.z[0]), float(m.z[1])), m.r_px)
+                self._self_cal_est = cal.estimate()
+                if use:
+                    self._use_size(self.gains)
+        return result
+
+    def _use_size(self, gains: Gains) -> None:
+        """Give the DKF the in-flight target diameter (gain k_selfcal; else the operator's)
+        when it differs from the one in use by more than 2 %."""
+        d = (
+            self._self_cal_est.target_diameter_m
+            if gains.k_selfcal >= 0.5
+            else self._dkf_belief.target_diameter_m
+        )
+        c = self.dkf.config
+        if abs(d / c.target_diameter_m - 1.0) > 0.02:
+            self.dkf.config = dataclasses.replace(c, target_diameter_m=d)
+
+    def _turn_through_gyro(
         self, state: VehicleState, R_WB: np.ndarray, gyro: np.ndarray, dt: float
     ) -> bool:
         """Take the previous LOS through this tick's attitude turned back by the gyro (rad/s
-        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's? Yes
-        when the attitude is stale (not carried to the tick: frozen while the body turns) or
-        jumped (moved more than ATTITUDE_JUMP_RAD beyond the gyro's turn: a stale one replaced
-        by a fresh one). Not after a late tick (a stall) or with non-finite rates: then the
-        two attitudes stand."""
+        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's
+        attitude estimate? Yes, except after a late tick (a stall: two fresh attitudes are
+        then a better guess than the mean rate times the interval) or with non-finite rates.
+
+        The difference of two attitude estimates carries the estimator's corrections between
+        them (a heading fused from the magnetometer wanders by tenths of a degree within a
+        second), which PNG would turn K times; the gyro measures the turn itself. Stale
+        attitudes (not carried to the tick) and jumps (more than ATTITUDE_JUMP_RAD beyond the
+        gyro's turn: a stale one replaced by a fresh one) are counted for the diagnostics."""
         R0 = self._prev_R_WB
         if R0 is None or dt > ATTITUDE_JUMP_MAX_PERIODS * self.nominal_dt_s:
             return False
@@ -306,11 +353,9 @@ class InterceptionLoop:
         q_at = state.attitude_time_s
         if q_at is not None and state.time_s - q_at > ATTITUDE_STALE_S:
             self.stale_attitude_ticks += 1
-            return True
-        if attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
+        elif attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
             self.attitude_jumps += 1
-            return True
-        return False
+        return True
 
     # ------------------------------------------------------------------ the tick
     def tick(
@@ -336,6 +381,7 @@ class InterceptionLoop:
             g = self.gains
             self.disturbance.set_bandwidth(g.k_dob, g.a_max, g.k_drag)
             self.dkf.carry_max_s = g.t_carry
+            self._use_size(g)
         gains = self.gains
         dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
         if not dt > 0.0:
@@ -387,6 +433,7 @@ class InterceptionLoop:
         else:
             v_cam = v
         self.dkf.predict(t, gyro, v_cam, R_WC)
+        self.self_cal.on_tick(t, gyro, v_cam, self._los_prev)
         hist = self._R_hist
         hist.append((t, R_WC))
         while len(hist) > 2 and hist[1][0] <= t - _ATTITUDE_HISTORY_S:
@@ -398,7 +445,7 @@ class InterceptionLoop:
             if self._screening(t):
                 dets = self._screened(dets, R_WC)
             for det in dets:
-                self.last_fusion.append(self.dkf.fuse(det))
+                self.last_fusion.append(self._fuse(det))
 
         dob = self.disturbance
         finite = math.isfinite  # the observer's input check (DisturbanceObserver.update)
@@ -422,6 +469,7 @@ class InterceptionLoop:
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
             self._dq_flown = _NO_FLOWN
+            self._los_prev = None  # no line of sight for the size estimate's displacement
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -450,11 +498,10 @@ class InterceptionLoop:
             has_prev = prev is not None and R_prev is not None
             if not has_prev:
                 prev, R_prev = (0.0, 0.0), R_WC
-            elif self._rebase_los(state, R_WB, gyro, dt):
-                # a stale attitude, or one replaced by a fresh one: the two ticks' attitudes
-                # differ by the body's turn missed or by the correction, which PNG would turn
-                # K times within one command; the previous LOS through this attitude turned
-                # back by the gyro instead
+            elif self._turn_through_gyro(state, R_WB, gyro, dt):
+                # the body's turn since the last tick is the gyro's, not the difference of
+                # two attitude estimates (their corrections, a stale attitude replaced), which
+                # PNG would turn K times within one command
                 R_prev = mat3_mul(propagate_rotation(R_WB, gyro, -dt), self._R_BC)
             fy, fz = self._dq_filt
             ly, lz, lh = self._dq_flown
@@ -463,6 +510,7 @@ class InterceptionLoop:
                 hold_s is not None, gains.tau_los, fy, fz, ly, lz, lh, MAX_LATE_CARRY,
             )  # fmt: skip
             self._dq_filt, self._dq_flown = (fy, fz), (ly, lz, lh)
+            self._los_prev = np.array((n0, n1, n2))
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
             mean_range = est_range if gains.tau_zem > 0.0 else None
@@ -541,4 +589,5 @@ class InterceptionLoop:
             dkf_time_since_detection_s=(math.inf if est is None else est.time_since_detection_s),
             dkf_lost=est is None or est.lost,
             guard_tripped=guard,
+            self_cal=self._self_cal_est,
         )

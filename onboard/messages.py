@@ -93,6 +93,14 @@ DKF: tuple[MessageField, ...] = (
     _f("lost", "boolean", "-", "the estimate is lost", wire=("dkf_lost",)),
     _f("time_since_detection_s", "number", "s", "since the last fused detection",
        wire=("dkf_since_det_s",)),
+    # the in-flight estimates (onboard/estimation/self_calibration.py)
+    _f("target_diameter_m", "number", "m", "in-flight estimate of the target's diameter",
+       wire=("selfcal_diam_m",)),
+    _f("target_diameter_std_m", "number", "m", "its 1 sigma"),
+    _f("camera_offset_s", "number", "s",
+       "in-flight estimate of the camera-IMU time offset (stamp minus capture)",
+       wire=("selfcal_offset_s",)),
+    _f("camera_offset_std_s", "number", "s", "its 1 sigma"),
 )  # fmt: skip
 
 
@@ -139,7 +147,8 @@ TELEMETRY: tuple[MessageField, ...] = (
     _L["loop_jitter_p99_ms"], _L["overruns"], _L["latency_ms"], _C["law"],
     _L["params_version"], _L["pos_m"], _C["vel_m_s"], _L["q_wxyz"], _L["image_w_px"],
     _L["image_h_px"], _L["f_px"], _L["detections"], _L["frames"], _L["commands_sent"],
-    _L["target_size_frac"], _D["state"], _D["cov_diag"],
+    _L["target_size_frac"], _D["state"], _D["cov_diag"], _D["target_diameter_m"],
+    _D["camera_offset_s"],
 )  # fmt: skip
 """The fields the MAVLink telemetry carries, in order (their ``wire`` floats; an element
 already carried by an earlier field is not sent twice)."""

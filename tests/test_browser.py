@@ -128,12 +128,15 @@ def test_open_a_recorded_sortie_and_scrub(station, browser):
         assert f"t = {target:.2f} s" in page.text_content("#st-time")
     e_y = page.evaluate("window.peregrine.snap.e_est_px[1]")
     assert e_y is not None
-    page.click("#rp-closest")
+    page.click("#rp-closest")  # the cursor goes to the recorded closest approach
     page.wait_for_function(
-        f"document.querySelector('#st-outcome').textContent.includes('{flown}')"
-        " || window.peregrine.snap.status.replay.t_s > 5.5",
+        "(r => r && Math.abs(r.t_s - r.closest_time_s) < 0.05)"
+        "(window.peregrine.snap.status.replay)",
         timeout=10000,
     )
+    t_ca = page.evaluate("window.peregrine.snap.status.replay.closest_time_s")
+    assert 1.0 < t_ca < page.evaluate("window.peregrine.snap.status.replay.duration_s")
+    assert f"t = {t_ca:.2f} s" in page.text_content("#st-time")
     page.close()
 
 

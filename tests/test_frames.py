@@ -127,22 +127,23 @@ def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
                 **tm.pose_values(f.vehicle_p_enu_m, f.vehicle_v_enu_m_s, f.vehicle_q_wxyz),
             }
             data = np.asarray(tm.pack(vals), dtype=np.float32)  # what DEBUG_FLOAT_ARRAY holds
-            with live._lock:
-                live.gains = f.gains  # the vehicle's gain parameters
-                live.target_p = [float(c) for c in np.float32(f.target_p_enu_m)]
-                live.target_rx_s = float(k)  # reported with this tick
-                live.onboard_rx_s = time.monotonic()  # the onboard component is heard
-                live._telemetry(tm.unpack(data), float(k))
+            vehicle = live.vehicle  # what the link reports
+            with vehicle.lock:
+                vehicle.gains = f.gains  # the vehicle's gain parameters
+                vehicle.target_p = [float(c) for c in np.float32(f.target_p_enu_m)]
+                vehicle.target_rx_s = float(k)  # reported with this tick
+                vehicle.onboard_rx_s = time.monotonic()  # the onboard component is heard
+                vehicle._telemetry(tm.unpack(data), float(k))
                 got = live.frame()
                 if k == 0:  # the operator's start, accepted: recording from here
-                    live.params["LAW"] = float(tm.LAW_CODES.index(tel.law))
+                    vehicle.params["LAW"] = float(tm.LAW_CODES.index(tel.law))
                     live._start_recording()
             assert_same_frame(f, got, tol)
             if got.normal_accel_m_s2 is not None and k > 0:
                 # live differentiates the velocity between ticks: not the instantaneous value
                 n_accel += 1
                 errors += abs(got.normal_accel_m_s2 - f.normal_accel_m_s2) > 1.0
-        with live._lock:
+        with live.vehicle.lock:
             live._finish_recording("the test ended")
     finally:
         live.close()

@@ -357,9 +357,9 @@ def test_dashboard_live_link_survives_hostile_traffic(fuzz_summary):
         assert live["link"] == "up" and live["onboard_state"] is not None
         assert st["time_s"] == pytest.approx(time.perf_counter() - t0, abs=0.5)  # fresh data
         assert math.isfinite(st["loop_rate_hz"]) and st["loop_rate_hz"] == 200.0
-        rates = session.link.rates_hz()
+        rates = session.vehicle.link.rates_hz()
         assert rates.get("DEBUG_FLOAT_ARRAY", 0) >= ALIVE * 50  # the real 50 Hz gets through
-        _assert_counted(session.link, hostile)
+        _assert_counted(session.vehicle.link, hostile)
         assert all(_finite(m) for m in onboard.poll(5000))  # what the session sent
     finally:
         session.close()

@@ -51,8 +51,8 @@ def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
         _telemetry(onboard, 1.0)
         fc.send(fc.mav.local_position_ned_encode(0, 1.0, 0.0, -10.0, 2.0, 0.0, 0.0))
         assert _wait(lambda: session.status()["live"]["link"] == "up")
-        assert _wait(lambda: session.vehicle_p is not None)
-        assert np.allclose(session.vehicle_p, [0.0, 1.0, 10.0])  # NED -> ENU
+        assert _wait(lambda: session.vehicle.vehicle_p is not None)
+        assert np.allclose(session.vehicle.vehicle_p, [0.0, 1.0, 10.0])  # NED -> ENU
         junk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         rng = np.random.default_rng(5)
         for _ in range(100):
@@ -69,8 +69,8 @@ def test_live_session_reads_telemetry_and_survives_garbage_and_nonsense():
         snap = session.snapshot()
         assert st["live"]["bad_frames"] >= 100 and st["live"]["errors"] == 0
         assert snap["mode"] == "waiting" and snap["image"]["w"] == 640
-        assert session.gains.k_a == 2.0 and "evil" not in session.params
-        assert np.allclose(session.vehicle_p, [0.0, 1.0, 10.0])  # the NaN position ignored
+        assert session.gains.k_a == 2.0 and "evil" not in session.vehicle.params
+        assert np.allclose(session.vehicle.vehicle_p, [0.0, 1.0, 10.0])  # the NaN position ignored
         _telemetry(onboard, 1.2)
         assert _wait(lambda: session.snapshot().get("t") == 1.2)
         with pytest.raises(SessionError, match="live mode"):
@@ -89,13 +89,13 @@ def test_gain_edits_wait_for_the_vehicles_param_value():
         with pytest.raises(SessionError, match="no link"):
             session.set_gains(session.gains.replace(k_a=3.0))
         onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
-        assert _wait(lambda: session.link_up())
+        assert _wait(lambda: session.vehicle.link_up())
         with pytest.raises(SessionError, match="not read yet"):
             session.set_gains(session.gains.replace(k_a=3.0))
         for i, (name, value) in enumerate(Gains().to_dict().items()):
             pid = PARAM_IDS[name].encode()
             onboard.send(onboard.mav.param_value_encode(pid, value, 9, 22, i))
-        assert _wait(lambda: len(session.params) == len(GAIN_NAMES))
+        assert _wait(lambda: len(session.vehicle.params) == len(GAIN_NAMES))
         session.set_gains(session.gains.replace(k_a=3.0))
         sets = []
 
@@ -157,7 +157,7 @@ def test_a_signing_key_mismatch_is_named_when_a_command_goes_unanswered():
     )  # fmt: skip
     try:
         onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
-        assert _wait(lambda: session.link_up())
+        assert _wait(lambda: session.vehicle.link_up())
         with pytest.raises(SessionError, match="signing key"):
             session.live_abort()
         assert _wait(lambda: onboard.poll() == [] and onboard.bad_frames >= 1)
@@ -179,7 +179,7 @@ def test_an_unanswered_gain_edit_is_sent_again_then_reported(monkeypatch):
         onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
         for i, (name, value) in enumerate(Gains().to_dict().items()):
             onboard.send(onboard.mav.param_value_encode(PARAM_IDS[name].encode(), value, 9, 22, i))
-        assert _wait(lambda: len(session.params) == len(GAIN_NAMES))
+        assert _wait(lambda: len(session.vehicle.params) == len(GAIN_NAMES))
         sets = []
 
         def param_sets(n):

@@ -16,6 +16,7 @@ from onboard.camera_model import CameraModel
 from onboard.channels import encode as enc
 from onboard.channels.schemas import SCHEMAS
 from onboard.datatypes import ControlTelemetry, LoopMode, RateThrustCommand
+from onboard.estimation.self_calibration import SelfCalEstimate
 from onboard.gains import Gains
 from onboard.link import telemetry as tm
 
@@ -28,7 +29,9 @@ def test_schemas_and_encoders_follow_the_one_definition():
             (2.5, -1.5), 0.96,
         )
     )  # fmt: skip
-    dkf = json.loads(enc.dkf(1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04))
+    cal = SelfCalEstimate(0.25, 0.02, -0.03, 0.002, 40, 60)
+    dkf = json.loads(enc.dkf(1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04, cal))
+    assert dkf["target_diameter_m"] == 0.25 and dkf["camera_offset_s"] == -0.03
     for msg, fields, schema in (
         (control, messages.CONTROL, "peregrine.Control"),
         (dkf, messages.DKF, "peregrine.Dkf"),

@@ -1,14 +1,11 @@
 // Several recorded sorties on one page (?names=a,b,...; up to 20): the dashboard's plots with
 // one colour per sortie, aligned on the intercept or on the start, their trajectories relative
-// to the target, and a table of outcome, miss, intercept time and only the gains that differ.
+// to the target in 3D, and a table of outcome, miss, intercept time and only the gains that differ.
 // A scrub moves one cursor through every plot and trajectory. Clicking a sortie opens it in
 // the dashboard; Re-fly opens the Sorties page's re-fly form prefilled with its gains.
 "use strict";
-const $ = (id) => document.getElementById(id);
-const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
 const fmt = window.fmtNum;
-const COLORS = ["#2f6fe0", "#d7263d", "#19a35b", "#f08a24", "#8e44ad", "#00a8a8", "#b8860b", "#e0529c", "#6b8e23", "#1d2329",
-  "#7f8c8d", "#c0392b", "#16a085", "#d35400", "#2c3e50", "#9b59b6", "#27ae60", "#e67e22", "#34495e", "#a0522d"];
+const COLORS = SORTIE_COLORS; // web/common.js
 const PLOTS = [
   { title: "normal acceleration (m/s²)", key: "normal_accel_m_s2" },
   { title: "speed (m/s)", key: "speed_m_s" },
@@ -16,16 +13,6 @@ const PLOTS = [
   { title: "range to target (m)", key: "range_m" },
 ];
 const O = (window.peregrine = { sorties: [], plots: [], openedMs: null, drawn: 0, cursor: 0 });
-
-async function api(method, path, body) {
-  const opts = { method, headers: {} };
-  if (body !== undefined) { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
-  const r = await fetch(path, opts);
-  let data = null; try { data = await r.json(); } catch (e) { data = null; }
-  if (!r.ok) throw new Error(data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : r.statusText);
-  return data;
-}
-function say(text, ok) { $("msg").textContent = text; $("msg").className = "msg " + (ok ? "ok" : "err"); }
 
 const shift = (s) => ($("ov-align").value === "intercept" ? s.intercept_time_s : 0);
 function span() {
@@ -65,7 +52,7 @@ function buildPlots() {
     const series = [{ label: $("ov-align").value === "intercept" ? "t − t_intercept (s)" : "t (s)", value: (u, v) => fmt(v) }]
       .concat(O.sorties.map((s, i) => ({ label: `#${i + 1}`, stroke: COLORS[i], width: 1.3, spanGaps: true, value: (u, v) => fmt(v) })));
     const u = new uPlot({
-      title: p.title, width: Math.max(grid.clientWidth / 2 - 10, 300), height: 200, series,
+      title: p.title, width: Math.max(grid.clientWidth / 2 - 10, 300), height: 200, series, padding: [null, 16, null, null],
       scales: { x: { time: false, auto: false, range: () => [lo, hi] } },
       axes: [{ label: series[0].label, labelSize: 16, size: 34 }, { size: 52, values: (u, vals) => vals.map(fmt) }],
       // the scrub moves uPlot's own cursor line (an element): no plot is redrawn for it
@@ -76,44 +63,17 @@ function buildPlots() {
   const sc = $("ov-scrub"); sc.min = lo; sc.max = hi; sc.step = (hi - lo) / 1000; sc.value = O.cursor = Math.min(Math.max(O.cursor, lo), hi);
 }
 
-// plan (east, north) and side (north, up) views of each vehicle relative to its target: the
-// tracks drawn once (relBase), each scrub frame copies them and adds the dots at the cursor
-let relBase = null;
+// each vehicle's trajectory relative to its target, in 3D (web/relview.js)
+const rel = (O.rel = new RelView($("ov-rel"), () => scrubTo(O.cursor)));
 function drawRel() {
-  const cv = $("ov-rel"), ctx = cv.getContext("2d");
-  if (!relBase) {
-    relBase = document.createElement("canvas"); relBase.width = cv.width; relBase.height = cv.height;
-    drawRelOn(relBase.getContext("2d"), cv.width, cv.height, false);
-  }
-  ctx.clearRect(0, 0, cv.width, cv.height);
-  ctx.drawImage(relBase, 0, 0);
-  drawRelOn(ctx, cv.width, cv.height, true);
+  rel.draw(O.sorties.map((s, i) => {
+    const t = O.cursor + shift(s);
+    let j = s.t_s.findIndex((x) => x >= t);
+    if (j < 0) j = s.t_s.length - 1;
+    return s.rel_m[j] ? [COLORS[i], s.rel_m[j]] : null;
+  }));
 }
-function drawRelOn(ctx, width, H, dots) {
-  const W = width / 2;
-  let m = 1;
-  for (const s of O.sorties) for (const r of s.rel_m) m = Math.max(m, Math.abs(r[0]), Math.abs(r[1]), Math.abs(r[2]));
-  const views = [[0, 1, "plan: east → , north ↑"], [1, 2, "side: north → , up ↑"]];
-  views.forEach(([a, b, name], k) => {
-    const ox = k * W + W / 2, oy = H / 2, sc = (Math.min(W, H) / 2 - 16) / m;
-    if (dots) {
-      O.sorties.forEach((s, i) => {
-        const t = O.cursor + shift(s); let j = s.t_s.findIndex((x) => x >= t); if (j < 0) j = s.t_s.length - 1;
-        const r = s.rel_m[j]; if (!r) return;
-        ctx.fillStyle = COLORS[i]; ctx.beginPath(); ctx.arc(ox + r[a] * sc, oy - r[b] * sc, 4, 0, 2 * Math.PI); ctx.fill();
-      });
-      return;
-    }
-    ctx.strokeStyle = "#dde3e8"; ctx.beginPath(); ctx.moveTo(k * W + 8, oy); ctx.lineTo(k * W + W - 8, oy); ctx.moveTo(ox, 8); ctx.lineTo(ox, H - 8); ctx.stroke();
-    ctx.fillStyle = "#47525d"; ctx.font = "12px sans-serif"; ctx.fillText(`${name} · ${fmt(m)} m to the edge`, k * W + 8, 14);
-    ctx.fillStyle = "#d7263d"; ctx.beginPath(); ctx.arc(ox, oy, 4, 0, 2 * Math.PI); ctx.fill(); // the target
-    O.sorties.forEach((s, i) => {
-      ctx.strokeStyle = COLORS[i]; ctx.lineWidth = 1.3; ctx.beginPath();
-      s.rel_m.forEach((r, j) => (j ? ctx.lineTo(ox + r[a] * sc, oy - r[b] * sc) : ctx.moveTo(ox + r[a] * sc, oy - r[b] * sc)));
-      ctx.stroke();
-    });
-  });
-}
+document.querySelectorAll("[data-relview]").forEach((b) => { b.onclick = () => rel.setView(b.dataset.relview); });
 
 let frame = null;
 function scrubTo(t) {
@@ -144,8 +104,11 @@ document.querySelector("#ov-table tbody").onclick = async (ev) => {
   const names = (new URLSearchParams(location.search).get("names") || "").split(",").filter(Boolean);
   try {
     O.sorties = await api("GET", "/api/overlay?names=" + encodeURIComponent(names.join(",")));
+    O.fetchMs = performance.now() - t0; // the request: the server reads the sorties
     $("ov-count").textContent = `${O.sorties.length} sorties`;
-    table(); buildPlots(); scrubTo(0);
+    table(); buildPlots();
+    rel.setTracks(O.sorties.map((s, i) => ({ color: COLORS[i], points: s.rel_m })));
+    scrubTo(0);
     await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
     O.openedMs = performance.now() - t0;
   } catch (e) { say(e.message, false); }

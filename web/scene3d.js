@@ -53,7 +53,10 @@
     ".mantine-Notifications-root{top:6px!important;bottom:auto!important;left:6px!important;right:auto!important;width:230px!important;transform:scale(.7);transform-origin:top left;animation:peregrine-fade .8s 6s forwards}",
     "@keyframes peregrine-fade{to{opacity:0;visibility:hidden}}",
     '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"]{top:4px!important;bottom:auto!important;right:4px!important;max-height:96px!important;min-height:0!important;opacity:.92}',
-    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"] [style*="width: 20em"]{width:12.5em!important}',
+    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"] [style*="width: 20em"]{width:14em!important}',
+    // the View control's label in a narrow column, its value ("fit engagement") whole
+    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"] .mantine-Flex-root > :first-child{width:3.2em!important;min-width:0!important;flex:none!important}',
+    '.mantine-Paper-root[style*="position: fixed"][style*="bottom: 0px"] .mantine-Select-input{min-width:8.6em}',
   ].join("\n");
   document.head.appendChild(notices);
   const raf = window.requestAnimationFrame.bind(window);

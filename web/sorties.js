@@ -1,23 +1,12 @@
 // Recorded sorties: list (sortable, filterable), open in the dashboard, compare two,
 // download, delete (confirmed), re-fly with another law.
 "use strict";
-const $ = (id) => document.getElementById(id);
 let rows = [];
 let sortKey = "name", sortDir = -1;
 const OVERLAY_MAX = 20; // as the server's
 const selected = new Set(); // sorties picked for the overlay
 
-async function api(method, path, body) {
-  const opts = { method, headers: {} };
-  if (body !== undefined) { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
-  const r = await fetch(path, opts);
-  let data = null; try { data = await r.json(); } catch (e) { data = null; }
-  if (!r.ok) throw new Error(data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : r.statusText);
-  return data;
-}
-function say(text, ok) { $("msg").textContent = text; $("msg").className = "msg " + (ok ? "ok" : "err"); }
-const fmt = (v) => (typeof v === "number" ? window.fmtNum(v) : v === null || v === undefined ? "—" : v); // web/format.js
-const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+const fmt = fmtCell; // web/common.js
 
 const W = (window.peregrine = { shown: [] });
 function showSelected() {

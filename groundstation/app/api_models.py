@@ -10,9 +10,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from onboard.enums import GuidanceLaw, codes
 
-from ..scenario import ESTIMATE_PROFILES
-from ..sim.camera import CAMERA_MODES
-from .session import SPEEDS
+from ..scenario import CAMERA_MODES, ESTIMATE_PROFILES
+from .session_config import SPEEDS
 
 LawName = Literal[codes(GuidanceLaw)]  # type: ignore[valid-type]
 CameraMode = Literal[CAMERA_MODES]  # type: ignore[valid-type]

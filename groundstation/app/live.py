@@ -36,11 +36,11 @@ from onboard.link.px4 import (
     mavlink,
 )
 
+from .errors import SessionError
 from .live_frames import live_frame, pose_from_values
 from .live_link import LINK_TIMEOUT_S, LinkState
 from .live_recording import LiveRecording
 from .scene import SceneState
-from .session import SessionError
 from .snapshot import frame_snapshot
 
 _WAITING = tm.LOOP_MODE_CODES.index(LoopMode.WAITING.value)
@@ -78,11 +78,12 @@ ACK_NAMES = {
 
 
 # ---------------------------------------------------------------------- the session
-class LiveSession(LinkState):
+class LiveSession:
     """Plays the part of :class:`~groundstation.app.session.SimSession` for a live link: what
-    the vehicle reports (:class:`~.live_link.LinkState`), what the operator sends, the
-    recording and the page's view."""
+    the vehicle reports is its ``vehicle`` (:class:`~.live_link.LinkState`); here what the
+    operator sends, the recording and the page's view."""
 
+    simulated = False  # the routers' Session protocol (protocol.py)
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
     video = None  # a VideoReceiver of the vehicle's camera (serve --video)
 
@@ -95,7 +96,7 @@ class LiveSession(LinkState):
         log_dir: Path | None = None,
         publish_hz: float = PUBLISH_HZ,
     ) -> None:
-        super().__init__(url, signing_key)
+        self.vehicle = LinkState(url, signing_key, self._on_telemetry, self._on_event)
         self.log_dir = log_dir
         self._on_snapshot = on_snapshot
         self.scene = scene
@@ -117,6 +118,11 @@ class LiveSession(LinkState):
         self._thread = threading.Thread(target=self._run, name="live-link", daemon=True)
         self._thread.start()
 
+    @property
+    def gains(self) -> Gains:
+        """The gains as the vehicle last reported them (its PARAM_VALUEs)."""
+        return self.vehicle.gains
+
     def _on_telemetry(self, t: dict[str, float | None], now: float) -> None:
         if self.rec is not None:
             self._record(t, now)
@@ -132,21 +138,33 @@ class LiveSession(LinkState):
     start = pause = resume = step = reset = set_speed = _not_live
     open_replay = compare_with = replay_command = _not_live
 
+    def series(self) -> dict[str, Any]:
+        """Live, the page's plots grow from the telemetry it receives: no series kept here."""
+        return {"t_s": [], "columns": {}, "events": []}
+
+    def request_frame(self) -> None:
+        """The vehicle's video frames go out as they are received: nothing to ask for."""
+
     def default_gains(self) -> Gains:
         """What "reset gains" restores: the gains the sortie started from. Live, that is the
         vehicle's own gain parameters as first read in full (its parameter file)."""
-        with self._lock:
-            if self.initial_gains is None:
+        with self.vehicle.lock:
+            if self.vehicle.initial_gains is None:
                 raise SessionError("the vehicle's parameters are not read yet: nothing to reset to")
-            return self.initial_gains
+            return self.vehicle.initial_gains
 
     # ------------------------------------------------------------------ operator commands
-    def set_gains(self, gains: Gains) -> Gains:
-        """Send a PARAM_SET for every gain that differs from the vehicle's value."""
-        with self._lock:
-            if not self.link_up():
+    def reset_edits(self) -> Gains:
+        """Back to the vehicle's own gain parameters as first read (:meth:`default_gains`)."""
+        return self.set_gains(self.default_gains())
+
+    def set_gains(self, gains: Gains, source: str | None = None) -> Gains:
+        """Send a PARAM_SET for every gain that differs from the vehicle's value (a gain set
+        loaded by name, ``source``, goes out the same way: the vehicle keeps no sets)."""
+        with self.vehicle.lock:
+            if not self.vehicle.link_up():
                 raise SessionError("no link to the onboard computer: gains not sent")
-            missing = [n for n in GAIN_NAMES if n not in self.params]
+            missing = [n for n in GAIN_NAMES if n not in self.vehicle.params]
             if missing:
                 raise SessionError(
                     "the vehicle's parameters are not read yet (missing "
@@ -155,9 +173,9 @@ class LiveSession(LinkState):
                 )
             for name in GAIN_NAMES:
                 new = float(getattr(gains, name))
-                if not math.isclose(new, self.params[name], rel_tol=1e-6, abs_tol=1e-7):
-                    self.pending[name] = new
-                    self.refused.pop(name, None)
+                if not math.isclose(new, self.vehicle.params[name], rel_tol=1e-6, abs_tol=1e-7):
+                    self.vehicle.pending[name] = new
+                    self.vehicle.refused.pop(name, None)
                     self._param_sends[name] = 0
                     self._send_param_set(name, time.monotonic())
         return gains
@@ -166,12 +184,12 @@ class LiveSession(LinkState):
         """PARAM_SET of the pending value of gain ``name`` (under the lock)."""
         self._param_sends[name] += 1
         self._param_sent_s[name] = now
-        self.link.send(
-            self.link.mav.param_set_encode(
+        self.vehicle.link.send(
+            self.vehicle.link.mav.param_set_encode(
                 VEHICLE_SYSTEM_ID,
                 ONBOARD_COMPONENT_ID,
                 PARAM_IDS[name].encode("ascii"),
-                self.pending[name],
+                self.vehicle.pending[name],
                 mavlink.MAV_PARAM_TYPE_REAL32,
             )
         )
@@ -179,47 +197,54 @@ class LiveSession(LinkState):
     def _resend_unanswered(self, now: float) -> None:
         """Each pending edit unanswered for PARAM_SET_TIMEOUT_S is sent again, or after
         PARAM_SET_SENDS sends reported as unanswered (under the lock)."""
-        for name in [n for n in self.pending if now - self._param_sent_s[n] >= PARAM_SET_TIMEOUT_S]:
+        pending = self.vehicle.pending
+        for name in [n for n in pending if now - self._param_sent_s[n] >= PARAM_SET_TIMEOUT_S]:
             if self._param_sends[name] < PARAM_SET_SENDS:
                 self.param_set_resends += 1
                 self._send_param_set(name, now)
             else:
-                del self.pending[name]
-                self.refused[name] = (
-                    f"{name}: no PARAM_VALUE from the vehicle after {PARAM_SET_SENDS} sends"
-                )
+                del pending[name]
+                why = f"{name}: no PARAM_VALUE from the vehicle after {PARAM_SET_SENDS} sends"
+                self.vehicle.refused[name] = why
 
     def _command(self, command: int, label: str) -> dict[str, Any]:
-        with self._lock:
-            if not self.link_up():
+        v = self.vehicle
+        with v.lock:
+            if not v.link_up():
                 raise SessionError(f"{label}: no link to the onboard computer")
             sent_at = time.monotonic()
-            self.link.send(
-                self.link.mav.command_long_encode(
+            v.link.send(
+                v.link.mav.command_long_encode(
                     VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, command, 0, 0, 0, 0, 0, 0, 0, 0
                 )
             )
             while True:
-                ack = self.acks.get(command)
+                ack = v.acks.get(command)
                 if ack is not None and ack[0] >= sent_at:
                     break
                 left = sent_at + ACK_TIMEOUT_S - time.monotonic()
                 if left <= 0:
-                    hint = " (is the signing key the same on both ends?)" if self.signed else ""
+                    hint = " (is the signing key the same on both ends?)" if v.signed else ""
                     raise SessionError(
                         f"{label}: no acknowledgement from the onboard computer{hint}"
                     )
-                self._acked.wait(left)
+                v.acked.wait(left)
             result = ack[1]
-            self.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
+            v.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
             if result != mavlink.MAV_RESULT_ACCEPTED:
-                why = next((e["text"] for e in reversed(self.events) if label in e["text"]), "")
-                raise SessionError(
-                    f"{label} {self.last_ack['result']}" + (f": {why}" if why else "")
-                )
+                why = next((e["text"] for e in reversed(v.events) if label in e["text"]), "")
+                raise SessionError(f"{label} {v.last_ack['result']}" + (f": {why}" if why else ""))
             if command == CMD_START and self.rec is None:
                 self._start_recording()
-            return self.last_ack
+            return v.last_ack
+
+    def live_command(self, action: str) -> dict[str, Any]:
+        """``start`` or ``abort`` sent to the onboard computer; its COMMAND_ACK."""
+        if action == "start":
+            return self.live_start()
+        if action == "abort":
+            return self.live_abort()
+        raise SessionError(f"unknown live command {action!r}")
 
     def live_start(self) -> dict[str, Any]:
         return self._command(CMD_START, "start")
@@ -239,24 +264,25 @@ class LiveSession(LinkState):
             self._stop.wait(0.005)
 
     def _iterate(self, next_publish: float) -> float:
-        msgs = self.link.poll()
+        v = self.vehicle
+        msgs = v.link.poll()
         now = time.monotonic()
-        with self._lock:
+        with v.lock:
             for m in msgs:
                 try:
-                    self._take(m, now)
+                    v.take(m, now)
                 except (AttributeError, ValueError, TypeError, IndexError):
-                    self.link.bad_frames += 1  # well-formed MAVLink with nonsense inside
+                    v.link.bad_frames += 1  # well-formed MAVLink with nonsense inside
             if (
-                self.link_up()
-                and len(self.params) < len(PARAM_SPECS)
+                v.link_up()
+                and len(v.params) < len(PARAM_SPECS)
                 and (now - self._params_requested > 3.0)
             ):
                 self._params_requested = now
-                self.link.send(
-                    self.link.mav.param_request_list_encode(VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
+                v.link.send(
+                    v.link.mav.param_request_list_encode(VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID)
                 )
-            if self.pending:
+            if v.pending:
                 self._resend_unanswered(now)
             self._maybe_finish(now)
         if now >= next_publish:
@@ -269,22 +295,22 @@ class LiveSession(LinkState):
         if self.log_dir is None:
             return
         self.miss_m = None
-        self._trail_vehicle, self._trail_target = [], []
+        self.vehicle.trail_vehicle, self.vehicle.trail_target = [], []
         self.rec = LiveRecording(
             Path(self.log_dir),
             foxglove=self.foxglove,
             start=SortieStart(
                 scenario="live",
-                law=tm.LAW_CODES[int(self.params.get("LAW", 0))],
+                law=tm.LAW_CODES[int(self.vehicle.params.get("LAW", 0))],
                 seed=0,
                 camera="live",
-                camera_model=self.camera_model(),
+                camera_model=self.vehicle.camera_model(),
                 target_diameter_m=TARGET_DIAMETER_M,
                 control_rate_hz=50.0,
-                gains=self.gains,
+                gains=self.vehicle.gains,
                 scenario_source="live MAVLink",
                 scenario_toml="",  # a live sortie has no scenario to keep
-                t0_s=self.tel.get("t_s") or 0.0,
+                t0_s=self.vehicle.tel.get("t_s") or 0.0,
             ),
         )
         self._scene_reset = True
@@ -292,19 +318,20 @@ class LiveSession(LinkState):
     def frame(self, t: dict[str, float | None] | None = None) -> Frame | None:
         """The sortie as the link reports it now (``t``: a telemetry message, the latest by
         default); None before the first telemetry and pose."""
-        t = self.tel if t is None else t
-        if not t or self.vehicle_p is None:
+        v = self.vehicle
+        t = v.tel if t is None else t
+        if not t or v.vehicle_p is None:
             return None
         return live_frame(
             t,
             law=self.rec.law if self.rec is not None else tm.LAW_CODES[int(t.get("law") or 0)],
-            camera=self.camera_model(),
-            gains=self.gains,
-            vehicle_p=self.vehicle_p,
-            vehicle_v=self.vehicle_v,
-            vehicle_q=self.vehicle_q,
-            target_p=self.target_p,
-            normal_accel_m_s2=self.normal_accel_m_s2,
+            camera=v.camera_model(),
+            gains=v.gains,
+            vehicle_p=v.vehicle_p,
+            vehicle_v=v.vehicle_v,
+            vehicle_q=v.vehicle_q,
+            target_p=v.target_p,
+            normal_accel_m_s2=v.normal_accel_m_s2,
             acquired=self.rec is not None and self.rec.acquired,
         )
 
@@ -312,6 +339,7 @@ class LiveSession(LinkState):
         """One telemetry message of the sortie being recorded: its frame, the closest approach
         (the vehicle's position the tick used against the target's last report moved on by
         its reported velocity), and the end when the onboard says so."""
+        v = self.vehicle
         rec = self.rec
         if t.get("t_s") is None:
             return
@@ -320,45 +348,46 @@ class LiveSession(LinkState):
             frame = live_frame(
                 t,
                 law=rec.law,
-                camera=self.camera_model(),
-                gains=self.gains,
+                camera=v.camera_model(),
+                gains=v.gains,
                 vehicle_p=(0.0, 0.0, 0.0),
-                vehicle_v=self.vehicle_v,
-                vehicle_q=self.vehicle_q,
-                target_p=self.target_p,
-                normal_accel_m_s2=self.normal_accel_m_s2,
+                vehicle_v=v.vehicle_v,
+                vehicle_q=v.vehicle_q,
+                target_p=v.target_p,
+                normal_accel_m_s2=v.normal_accel_m_s2,
                 acquired=rec.acquired,
             )
         p = pose_from_values(t)[0]
         rel = None
-        if self.target_p is not None and p is not None:
-            dt = now - self.target_rx_s
-            rel = [self.target_p[i] + self.target_v[i] * dt - p[i] for i in range(3)]
+        if v.target_p is not None and p is not None:
+            dt = now - v.target_rx_s
+            rel = [v.target_p[i] + v.target_v[i] * dt - p[i] for i in range(3)]
         rec.track_miss(rel)
         self.miss_m = rec.miss_m
         rec.record(frame)
 
     def _maybe_finish(self, now: float) -> None:
+        v = self.vehicle
         if self.rec is None:
             return
         if (
-            self.onboard_state in FINISHED_STATES
-            or not self.link_up()
+            v.onboard_state in FINISHED_STATES
+            or not v.link_up()
             or (
-                self.onboard_state in (RuntimeState.READY.value, RuntimeState.WAITING_TARGET.value)
+                v.onboard_state in (RuntimeState.READY.value, RuntimeState.WAITING_TARGET.value)
                 and self.rec.elapsed_s > 1.0
             )
         ):
-            self._finish_recording(None if self.link_up() else "link to the onboard lost")
+            self._finish_recording(None if v.link_up() else "link to the onboard lost")
 
     def _finish_recording(self, reason: str | None) -> None:
         if self.rec is None:
             return
         why = reason or next(
-            (e["text"] for e in reversed(self.events) if e["text"].startswith("finished")),
-            self.onboard_state,
+            (e["text"] for e in reversed(self.vehicle.events) if e["text"].startswith("finished")),
+            self.vehicle.onboard_state,
         )
-        self.rec.finish("LIVE_" + self.onboard_state.upper(), why)
+        self.rec.finish("LIVE_" + self.vehicle.onboard_state.upper(), why)
         self.rec = None
 
     @property
@@ -367,13 +396,14 @@ class LiveSession(LinkState):
 
     # ------------------------------------------------------------------ observations
     def status(self) -> dict[str, Any]:
-        with self._lock:
-            t = self.tel
+        v = self.vehicle
+        with v.lock:
+            t = v.tel
             now = time.monotonic()
             return {
                 "state": "live",
                 "scenario": "live",
-                "law": tm.LAW_CODES[int(self.params.get("LAW", 0))],
+                "law": tm.LAW_CODES[int(v.params.get("LAW", 0))],
                 "seed": "—",
                 "camera": "onboard",
                 "speed": "1",
@@ -381,8 +411,8 @@ class LiveSession(LinkState):
                 "outcome": None,
                 "miss_m": None,
                 "loop_rate_hz": round(t.get("loop_rate_hz") or 0.0, 1),
-                "gains_applied_time_s": self.gains_applied_time_s,
-                "gains_pending": bool(self.pending),
+                "gains_applied_time_s": v.gains_applied_time_s,
+                "gains_pending": bool(v.pending),
                 "real_time_ratio": 1.0,
                 "scene_errors": self.scene_errors,
                 "recording": self.recording,
@@ -395,30 +425,30 @@ class LiveSession(LinkState):
                     "time_since_detection_s": t.get("dkf_since_det_s"),
                 },
                 "live": {
-                    "url": self.url,
-                    "signed": self.signed,
+                    "url": v.url,
+                    "signed": v.signed,
                     "link": "up"
-                    if self.link_up()
-                    else ("never heard" if self.onboard_rx_s is None else "lost"),
-                    "onboard_state": self.onboard_state,
-                    "fc_mode": self.fc_mode,
-                    "fc_armed": self.fc_armed,
-                    "fc_link": self.fc_rx_s is not None and now - self.fc_rx_s < LINK_TIMEOUT_S,
-                    "target_reported": self.target_rx_s is not None
-                    and now - self.target_rx_s < LINK_TIMEOUT_S,
-                    "rates_hz": self.link.rates_hz(),
-                    "bad_frames": self.link.bad_frames,
+                    if v.link_up()
+                    else ("never heard" if v.onboard_rx_s is None else "lost"),
+                    "onboard_state": v.onboard_state,
+                    "fc_mode": v.fc_mode,
+                    "fc_armed": v.fc_armed,
+                    "fc_link": v.fc_rx_s is not None and now - v.fc_rx_s < LINK_TIMEOUT_S,
+                    "target_reported": v.target_rx_s is not None
+                    and now - v.target_rx_s < LINK_TIMEOUT_S,
+                    "rates_hz": v.link.rates_hz(),
+                    "bad_frames": v.link.bad_frames,
                     "errors": self.errors,
                     "loop_jitter_p99_ms": t.get("loop_jitter_p99_ms"),
                     "latency_ms": t.get("latency_ms"),
                     "overruns": t.get("overruns"),
-                    "params_received": len(self.params),
+                    "params_received": len(v.params),
                     "params_total": len(PARAM_SPECS),
-                    "params_pending": dict(self.pending),
-                    "params_sends": {n: self._param_sends[n] for n in self.pending},
-                    "params_refused": dict(self.refused),
-                    "last_ack": self.last_ack,
-                    "events": list(self.events)[-8:],
+                    "params_pending": dict(v.pending),
+                    "params_sends": {n: self._param_sends[n] for n in v.pending},
+                    "params_refused": dict(v.refused),
+                    "last_ack": v.last_ack,
+                    "events": list(v.events)[-8:],
                     "miss_m": self.miss_m,
                 },
             }
@@ -426,36 +456,37 @@ class LiveSession(LinkState):
     def snapshot(self) -> dict[str, Any]:
         self._publish_count += 1
         snap: dict[str, Any] = {"type": "telemetry", "status": self.status()}
-        with self._lock:
+        with self.vehicle.lock:
             frame = self.frame()
             if frame is not None:
-                snap.update(frame_snapshot(frame, self.camera_model(), TARGET_DIAMETER_M))
+                snap.update(frame_snapshot(frame, self.vehicle.camera_model(), TARGET_DIAMETER_M))
         jpeg = None if self.video is None else self.video.take_jpeg_b64()
         if jpeg is not None:  # the image panel shows the vehicle's video (overlay drawn onboard)
             snap["frame_jpeg_b64"] = jpeg
         return snap
 
     def _publish(self) -> None:
+        v = self.vehicle
         snap = self.snapshot()
         if (
             self.scene is not None
-            and self.vehicle_p is not None
+            and v.vehicle_p is not None
             and (self._publish_count % SCENE_EVERY == 0)
         ):
             try:
-                tp = self.target_p or self.vehicle_p  # no target report: nothing to draw apart
+                tp = v.target_p or v.vehicle_p  # no target report: nothing to draw apart
                 state = SceneState(
-                    self.tel.get("t_s") or 0.0,
-                    tuple(self.vehicle_p),
-                    tuple(self.vehicle_q),
+                    v.tel.get("t_s") or 0.0,
+                    tuple(v.vehicle_p),
+                    tuple(v.vehicle_q),
                     tuple(tp),
                     None,
                     "",
                 )
                 if self._scene_reset:
-                    self.scene.reset(self.camera_model(), TARGET_DIAMETER_M, state)
+                    self.scene.reset(v.camera_model(), TARGET_DIAMETER_M, state)
                     self._scene_reset = False
-                self.scene.update(state, self._trail_vehicle[-600:], self._trail_target[-600:])
+                self.scene.update(state, v.trail_vehicle[-600:], v.trail_target[-600:])
             except Exception:  # a viewer problem must never stop the link
                 self.scene_errors += 1
         if self._on_snapshot is not None:
@@ -464,6 +495,6 @@ class LiveSession(LinkState):
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)
-        with self._lock:
+        with self.vehicle.lock:
             self._finish_recording("the ground station stopped")
-        self.link.close()
+        self.vehicle.link.close()

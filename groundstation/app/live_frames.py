@@ -11,6 +11,7 @@ import numpy as np
 
 from onboard.camera_model import CameraModel
 from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustCommand
+from onboard.estimation.self_calibration import SelfCalEstimate
 from onboard.frames import Frame, SortieEvent, Vec3
 from onboard.gains import Gains
 from onboard.link import telemetry as tm
@@ -64,7 +65,16 @@ def telemetry_from_values(t: Values, law: str) -> ControlTelemetry:
         dkf_time_since_detection_s=_num(_one(t, _D["time_since_detection_s"]), math.inf),
         dkf_lost=bool(_one(t, _D["lost"])),
         guard_tripped=False,
+        self_cal=_self_cal(t),
     )
+
+
+def _self_cal(t: Values) -> SelfCalEstimate | None:
+    """The in-flight estimates the link carries (their 1 sigma stays onboard: NaN)."""
+    d, o = _one(t, _D["target_diameter_m"]), _one(t, _D["camera_offset_s"])
+    if d is None or o is None or not (math.isfinite(d) and math.isfinite(o)):
+        return None
+    return SelfCalEstimate(float(d), math.nan, float(o), math.nan, 0, 0)
 
 
 def detection_from_values(t: Values, camera: CameraModel) -> Detection | None:

@@ -11,6 +11,7 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -44,15 +45,22 @@ LINK_TIMEOUT_S = 2.0
 
 
 class LinkState:
-    """The vehicle as the link last reported it. Messages are taken on the link thread under
-    ``self._lock``; subclasses hear of telemetry and events through ``_on_telemetry`` and
-    ``_on_event``."""
+    """The vehicle as the link last reported it. Messages are taken (:meth:`take`) on the
+    link thread under ``self.lock``; its owner hears of telemetry and events through
+    ``on_telemetry(values, now)`` and ``on_event(level, text)``."""
 
-    def __init__(self, url: str, signing_key: bytes | None) -> None:
+    def __init__(
+        self,
+        url: str,
+        signing_key: bytes | None,
+        on_telemetry: Callable[[dict[str, float | None], float], None] = lambda t, now: None,
+        on_event: Callable[[str, str], None] = lambda level, text: None,
+    ) -> None:
+        self.on_telemetry, self.on_event = on_telemetry, on_event
         self.link = MavLink(url, GCS_SYSTEM_ID, GCS_COMPONENT_ID, signing_key, unsigned_ok=None)
         self.url = url
         self.signed = signing_key is not None
-        self._lock = threading.RLock()
+        self.lock = threading.RLock()
         self.params: dict[str, float] = {}
         self.pending: dict[str, float] = {}  # PARAM_SET sent, PARAM_VALUE not yet back
         self.refused: dict[str, str] = {}
@@ -75,25 +83,19 @@ class LinkState:
         self.events: deque[dict[str, Any]] = deque(maxlen=50)
         self.acks: dict[int, tuple[float, int]] = {}
         self.last_ack: dict[str, Any] | None = None
-        self._acked = threading.Condition(self._lock)
-        self._trail_vehicle: list[list[float]] = []
-        self._trail_target: list[list[float]] = []
+        self.acked = threading.Condition(self.lock)
+        self.trail_vehicle: list[list[float]] = []
+        self.trail_target: list[list[float]] = []
         self._last_trail = -1.0
         self._prev_vel: tuple[float, list[float]] | None = None
         self.normal_accel_m_s2: float | None = None
-
-    def _on_telemetry(self, t: dict[str, float | None], now: float) -> None:
-        """A telemetry message was taken (``t``: its values, checked)."""
-
-    def _on_event(self, level: str, text: str) -> None:
-        """An event (``STATUSTEXT``) was taken."""
 
     def link_up(self) -> bool:
         return (
             self.onboard_rx_s is not None and time.monotonic() - self.onboard_rx_s < LINK_TIMEOUT_S
         )
 
-    def _take(self, m, now: float) -> None:
+    def take(self, m, now: float) -> None:
         kind = m.get_type()
         sys_id, comp = m.get_srcSystem(), m.get_srcComponent()
         if sys_id == TARGET_SYSTEM_ID:
@@ -150,7 +152,7 @@ class LinkState:
                     self.initial_gains = self.gains
         elif kind == "COMMAND_ACK" and m.target_component in (0, GCS_COMPONENT_ID):
             self.acks[int(m.command)] = (now, int(m.result))
-            self._acked.notify_all()
+            self.acked.notify_all()
 
     def _event(self, now: float, source: str, text: str, severity: int) -> None:
         self.events.append(
@@ -161,7 +163,7 @@ class LinkState:
             if severity <= mavlink.MAV_SEVERITY_ERROR
             else ("warning" if severity == mavlink.MAV_SEVERITY_WARNING else "info")
         )
-        self._on_event(level, f"{source}: {text}")
+        self.on_event(level, f"{source}: {text}")
 
     def _telemetry(self, t: dict[str, float | None], now: float) -> None:
         for key, codes in (
@@ -195,12 +197,12 @@ class LinkState:
                 a = (np.array(v) - np.array(self._prev_vel[1])) / dt
                 self.normal_accel_m_s2 = normal_component(a, np.array(v))
             self._prev_vel = (ts, v)
-        self._on_telemetry(t, now)
+        self.on_telemetry(t, now)
         if self.vehicle_p is not None and ts is not None and ts - self._last_trail >= 0.1:
             self._last_trail = ts
-            self._trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
+            self.trail_vehicle.append([round(c, 3) for c in self.vehicle_p])
             if self.target_p is not None:
-                self._trail_target.append([round(c, 3) for c in self.target_p])
+                self.trail_target.append([round(c, 3) for c in self.target_p])
 
     def camera_model(self) -> CameraModel:
         """The onboard camera: image size and focal length as the telemetry reports them (the

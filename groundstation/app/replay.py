@@ -22,14 +22,14 @@ from onboard.datatypes import ControlTelemetry, Detection, LoopMode, RateThrustC
 from onboard.frames import Frame
 from onboard.gains import GainError, Gains
 
-from ..recording.reader import inspect_log, iter_messages, scenario_attachment
+from ..recording.reader import SCENARIO_ATTACHMENT, iter_messages, read_log
 from ..scenario import ScenarioError, parse_scenario
-from ..sim.beliefs import true_camera
 from .numbers import fmt_num
 from .scene import SceneState
 from .snapshot import frame_snapshot
 
 OVERVIEW = ["/world/vehicle", "/world/target", "/control", "/dkf", "/gains", "/events"]
+CAMERA_TOPIC = "/camera/image"
 FRAME_WINDOW_S = 0.5  # a camera frame older than this at the cursor is not shown
 PLOT_KEYS = ("normal_accel_m_s2", "speed_m_s", "normal_vel_m_s", "e_x_px", "e_y_px", "range_m")
 
@@ -43,7 +43,10 @@ class ReplayPlayer:
     def __init__(self, path: Path, name: str | None = None) -> None:
         self.path = Path(path)
         self.name = name or self.path.name  # as the API names it (relative to the log folder)
-        self.info = inspect_log(self.path)
+        # one pass over the file: its status and summary, the overview and the scenario
+        log = read_log(self.path, OVERVIEW, (CAMERA_TOPIC,))
+        self.info = log.info
+        self.frame_times = log.times[CAMERA_TOPIC]  # of the recorded camera frames (s)
         self.tv: list[float] = []
         self.vp: list[tuple[float, float, float]] = []
         self.vq: list[tuple[float, float, float, float]] = []
@@ -56,7 +59,7 @@ class ReplayPlayer:
         self.dkf: list[dict] = []
         self.tg: list[float] = []
         self.gains: list[Gains] = []
-        for topic, t, m in iter_messages(self.path, OVERVIEW):
+        for topic, t, m in log.messages:
             if topic == "/world/vehicle":
                 o = m["pose"]["orientation"]
                 self.tv.append(t)
@@ -85,8 +88,10 @@ class ReplayPlayer:
         self.duration_s = max(self.tv[-1], self.tt[-1])
         self.camera = CameraModel()
         self.diameter_m = 0.3
-        text = scenario_attachment(self.path)
+        text = self.scenario_text = log.attachment_text(SCENARIO_ATTACHMENT)
         if text:
+            from ..sim.beliefs import true_camera  # the simulator: imported at the first replay
+
             try:
                 sc = parse_scenario(text, source=self.path.name)
                 self.camera = true_camera(sc)  # the camera the sortie's frames came from
@@ -180,12 +185,20 @@ class ReplayPlayer:
         """The last camera frame at or before t, found through the index."""
         return self.frame_at(t)[1]
 
+    def frame_time_at(self, t: float) -> float | None:
+        """The log time of the camera frame :meth:`frame_at` finds at ``t`` (None: none), from
+        the times read with the overview: no read of the file."""
+        k = bisect.bisect_right(self.frame_times, t + 1e-6) - 1
+        if k < 0 or self.frame_times[k] < t - FRAME_WINDOW_S:
+            return None
+        return round(self.frame_times[k], 6)
+
     def frame_at(self, t: float) -> tuple[float | None, str | None]:
         """(its log time, the JPEG as base64) of the last camera frame at or before ``t``
         and at most FRAME_WINDOW_S before it, found through the index; (None, None) if none."""
         last, last_t = None, None
         for _topic, tf, m in iter_messages(
-            self.path, ["/camera/image"], max(t - FRAME_WINDOW_S, 0.0), t + 1e-6
+            self.path, [CAMERA_TOPIC], max(t - FRAME_WINDOW_S, 0.0), t + 1e-6
         ):
             if tf <= t + 1e-6:
                 last, last_t = m, tf
@@ -239,10 +252,10 @@ class ReplayPlayer:
             guard_trips=0,
         )
 
-    def series(self, every: int = 1) -> dict[str, Any]:
+    def series(self, every: int = 1, fields: bool = True) -> dict[str, Any]:
         """The whole recorded sortie for the plots: ``t_s``, the dashboard's plot columns and
-        every other numeric /control and /dkf field (``dkf.`` names; arrays split as
-        ``name.0``, ``name.1``; /dkf as last recorded at each /control time), and the
+        (``fields``) every other numeric /control and /dkf field (``dkf.`` names; arrays split
+        as ``name.0``, ``name.1``; /dkf as last recorded at each /control time), and the
         timeline's markers."""
         # through the one snapshot builder: the plots show what the page shows live
         rows = self.ctrl[::every]
@@ -255,6 +268,8 @@ class ReplayPlayer:
                 cols[k].append(snap[k])
             cols["e_x_px"].append(e[0] if e else None)
             cols["e_y_px"].append(e[1] if e else None)
+            if not fields:
+                continue
             d = self.dkf[self._at(self.td, t)] if self.dkf else {}
             for prefix, msg in (("", c), ("dkf.", d)):  # /dkf as last recorded at t
                 for k, v in msg.items():
@@ -304,7 +319,7 @@ def overlay_entry(path: Path, name: str) -> dict[str, Any]:
 @functools.lru_cache(maxsize=64)
 def _overlay_entry(path: str, name: str, _size: int, _mtime_ns: int) -> dict[str, Any]:
     p = ReplayPlayer(Path(path), name)
-    s = p.series()
+    s = p.series(fields=False)
     rel = []
     for t in s["t_s"]:
         v, g = p.vp[p._at(p.tv, t)], p.tp[p._at(p.tt, t)]

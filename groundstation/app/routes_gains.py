@@ -13,8 +13,9 @@ from fastapi.responses import JSONResponse, Response
 from onboard.gains import GAIN_GROUPS, GAIN_SPECS, GainError, Gains
 
 from .api_models import GainSetSaved, GainsOut, GainSpecOut
+from .errors import SessionError
 from .gainsets import GainSetError, GainSetStore
-from .session import SessionError, SimSession
+from .protocol import Session
 
 
 def check_each(gains: Gains, changes: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
@@ -31,7 +32,7 @@ def check_each(gains: Gains, changes: dict[str, Any]) -> tuple[dict[str, Any], d
     return valid, refused
 
 
-def router(session: Any, gainsets: GainSetStore) -> APIRouter:
+def router(session: Session, gainsets: GainSetStore) -> APIRouter:
     r = APIRouter(tags=["gains"])
 
     def gains_out() -> GainsOut:
@@ -56,10 +57,7 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
 
     async def apply(gains: Gains, source: str | None = None) -> GainsOut:
         try:
-            if source is not None and isinstance(session, SimSession):
-                await asyncio.to_thread(session.set_gains, gains, source)
-            else:
-                await asyncio.to_thread(session.set_gains, gains)
+            await asyncio.to_thread(session.set_gains, gains, source)
         except SessionError as exc:
             raise HTTPException(409, str(exc)) from None
         return gains_out()
@@ -93,15 +91,11 @@ def router(session: Any, gainsets: GainSetStore) -> APIRouter:
         """Drop the operator's edits: back to the gain set in force (the defaults, the
         scenario's [gains] or the loaded gain set) in the simulator, the vehicle's own
         parameters as first read in live mode."""
-        reset_edits = getattr(session, "reset_edits", None)
-        if reset_edits is not None:  # the simulator: the operator's edits dropped for good
-            await asyncio.to_thread(reset_edits)
-            return gains_out()
         try:
-            gains = session.default_gains()
+            await asyncio.to_thread(session.reset_edits)
         except SessionError as exc:
             raise HTTPException(409, str(exc)) from None
-        return await apply(gains)
+        return gains_out()
 
     @r.get("/api/gainsets")
     async def list_gainsets() -> list[str]:

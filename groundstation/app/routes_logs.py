@@ -13,17 +13,18 @@ from fastapi.responses import FileResponse
 
 from onboard.gains import GainError, Gains
 
-from ..recording.reader import LogError, LogIndex, scenario_attachment
-from ..scenario import ScenarioError, parse_scenario
-from ..sim.camera import CAMERA_MODES
+from ..recording.reader import LogError, LogIndex
+from ..scenario import CAMERA_MODES, ScenarioError, parse_scenario
 from .api_models import Deleted, ReflyRequest, Status
+from .errors import SessionError
+from .protocol import Session
 from .replay import OVERLAY_MAX, ReplayPlayer, overlay_entry
 from .routes_gains import check_each
 from .routes_sortie import command
-from .session import SessionError, SortieConfig
+from .session_config import SortieConfig
 
 
-def router(session: Any, logs: LogIndex) -> APIRouter:
+def router(session: Session, logs: LogIndex) -> APIRouter:
     r = APIRouter()
 
     def log_path(name: str) -> Path:
@@ -143,7 +144,7 @@ def router(session: Any, logs: LogIndex) -> APIRouter:
         """Fly the recorded target track again (another law, seed or gains), recorded, with
         the old sortie overlaid."""
         rp = await asyncio.to_thread(player, name)
-        text = scenario_attachment(rp.path)
+        text = rp.scenario_text
         if not text:
             raise HTTPException(422, f"{name}: no scenario recorded with it")
         try:

@@ -8,10 +8,9 @@ from fastapi import APIRouter, Body, HTTPException
 
 from onboard import enums
 
-from ..scenario import load_scenario, parse_scenario, scenario_toml, shipped_scenarios
-from ..sim.camera import CAMERA_MODES
+from ..scenario import CAMERA_MODES, load_scenario, parse_scenario, scenario_toml, shipped_scenarios
 from .api_models import Meta, ScenarioCheck, ScenarioSummary, ScenarioText
-from .session import SPEEDS
+from .session_config import SPEEDS
 
 
 def router() -> APIRouter:

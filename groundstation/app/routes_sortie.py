@@ -13,10 +13,12 @@ from fastapi import APIRouter, HTTPException
 from ..scenario import load_scenario, parse_scenario, shipped_scenarios
 from ..sim.profiles import with_profile
 from .api_models import LiveAck, SpeedRequest, StartRequest, Status
-from .session import SessionError, SortieConfig, with_wind
+from .errors import SessionError
+from .protocol import Session
+from .session_config import SortieConfig, with_wind
 
 
-def command(session: Any, fn: Callable[..., Any], *args: Any) -> dict[str, Any]:
+def command(session: Session, fn: Callable[..., Any], *args: Any) -> dict[str, Any]:
     """Carry out a session command; one that cannot be carried out now answers 409."""
     try:
         fn(*args)
@@ -45,7 +47,7 @@ def scenario_from(req: StartRequest):
     return with_profile(scenario, req.profile)
 
 
-def router(session: Any) -> APIRouter:
+def router(session: Session) -> APIRouter:
     r = APIRouter()
 
     @r.post("/api/sortie/start", tags=["sortie"])
@@ -78,21 +80,15 @@ def router(session: Any) -> APIRouter:
     async def sortie_series() -> dict[str, Any]:
         """The sortie on screen so far (plot columns and timeline markers), for a page that
         loads mid-sortie; a recorded sortie's are at /api/logs/{name}/series."""
-        fn = getattr(session, "series", None)
-        if fn is None:
-            return {"t_s": [], "columns": {}, "events": []}
-        return fn()
+        return session.series()
 
     @r.get("/api/status", tags=["sortie"])
     async def status() -> Status:
         return session.status()
 
     async def live(action: str) -> dict[str, Any]:
-        fn = getattr(session, f"live_{action}", None)
-        if fn is None:
-            raise HTTPException(409, "simulator mode: there is no live vehicle")
         try:
-            ack = await asyncio.to_thread(fn)
+            ack = await asyncio.to_thread(session.live_command, action)
         except SessionError as exc:
             raise HTTPException(409, str(exc)) from None
         return {"ack": ack, "status": session.status()}

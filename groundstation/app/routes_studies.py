@@ -7,7 +7,9 @@ the vehicle's behaviour, so it sits behind the token like every route."""
 from __future__ import annotations
 
 import asyncio
+import functools
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,8 +20,9 @@ from onboard.gains import GainError, Gains
 
 from ..scenario import ScenarioError
 from .api_models import Speed, Status
+from .protocol import Session
 from .routes_sortie import command
-from .session import SortieConfig
+from .session_config import SortieConfig
 
 
 class FlyTrialRequest(BaseModel):
@@ -135,21 +138,25 @@ def _fly_recorded(job, log_dir: Path) -> Path:
     return rec.path
 
 
-def router(session: Any, storage_url: str, log_dir: Path | None) -> APIRouter:
+def router(session: Session, storage: Callable[[], str], log_dir: Path | None) -> APIRouter:
+    """``storage``: the studies' storage URL, asked at the first request (finding it may
+    import the tuning code, slow to import, which the server's start does not wait for)."""
     r = APIRouter()
-    db_path = (
-        Path(storage_url[len("sqlite:///") :]) if storage_url.startswith("sqlite:///") else None
-    )
+
+    @functools.cache
+    def where() -> tuple[str, Path | None]:
+        url = storage()
+        return url, Path(url[len("sqlite:///") :]) if url.startswith("sqlite:///") else None
 
     @r.get("/api/studies", tags=["studies"])
     async def studies() -> list[dict[str, Any]]:
         """The gain-tuning studies (``groundstation tune``) in the server's storage."""
-        return await asyncio.to_thread(list_studies, storage_url, db_path)
+        return await asyncio.to_thread(lambda: list_studies(*where()))
 
     @r.get("/api/studies/{name}", tags=["studies"])
     async def study(name: str) -> dict[str, Any]:
         """A study's trials (gains, loss, figures) and its best-so-far loss per trial."""
-        return await asyncio.to_thread(study_detail, storage_url, name)
+        return await asyncio.to_thread(lambda: study_detail(where()[0], name))
 
     @r.post("/api/studies/{name}/trials/{number}/fly", tags=["studies"])
     async def fly_trial(name: str, number: int, req: FlyTrialRequest | None = None) -> Status:
@@ -157,9 +164,9 @@ def router(session: Any, storage_url: str, log_dir: Path | None) -> APIRouter:
         the scenario's gains flies first, recorded; then the trial's gains fly it on screen
         at ``speed`` with the defaults' sortie overlaid."""
         req = req or FlyTrialRequest()
-        if log_dir is None or not hasattr(session, "compare_with") or session.state == "live":
+        if log_dir is None or not session.simulated:
             raise HTTPException(409, "flying a trial needs the simulator with a log folder")
-        detail = await asyncio.to_thread(study_detail, storage_url, name)
+        detail = await asyncio.to_thread(lambda: study_detail(where()[0], name))
         trial = next((t for t in detail["trials"] if t["number"] == number), None)
         if trial is None:
             raise HTTPException(404, f"study {name!r} has no trial {number}")

@@ -31,14 +31,16 @@ from fastapi.staticfiles import StaticFiles
 
 from onboard.link.address import bind_tcp_listener
 
-from ..campaigns.tune import default_storage_url
 from ..recording.reader import LogIndex
 from ..scenario import ScenarioError
 from . import routes_gains, routes_logs, routes_scenarios, routes_sortie, routes_studies
 from .auth import TokenAuthMiddleware, is_loopback, new_token
 from .gainsets import GainSetStore, default_data_dir
+from .protocol import Session
 from .scene import SceneView
+from .scene_listener import SceneListener
 from .session import SimSession
+from .telemetry_hub import TelemetryHub
 
 VISER_INDEX = Path(viser.__file__).parent / "client" / "build" / "index.html"
 
@@ -56,58 +58,19 @@ def web_dir() -> Path:
     return Path(__file__).resolve().parents[2] / "web"
 
 
-class TelemetryHub:
-    """Fans telemetry out to websocket subscribers; a slow one loses old frames, not new.
-
-    A subscriber may send ``{"frames": false}`` (a hidden browser tab does) to stop receiving
-    camera frames, the bulk of the traffic, and ``{"frames": true}`` to resume."""
-
-    def __init__(self) -> None:
-        self.loop: asyncio.AbstractEventLoop | None = None
-        self.queues: dict[asyncio.Queue, bool] = {}  # queue -> wants camera frames
-        self.last: str | None = None
-        self.sent: dict[int, int] = {}  # messages sent, per connected subscriber
-        self.published = 0  # snapshots handed in by the session
-
-    def publish_from_thread(self, snapshot: dict[str, Any]) -> None:
-        self.published += 1
-        full = json.dumps(snapshot, separators=(",", ":"))
-        lean = full
-        if "frame_jpeg_b64" in snapshot:
-            lean = json.dumps(
-                {k: v for k, v in snapshot.items() if k != "frame_jpeg_b64"}, separators=(",", ":")
-            )
-        self.last = lean
-        if self.loop is not None and self.queues:
-            self.loop.call_soon_threadsafe(self._broadcast, full, lean)
-
-    def _broadcast(self, full: str, lean: str) -> None:
-        has_frame = full is not lean
-        for q, frames in list(self.queues.items()):
-            item = (has_frame and frames, full if frames else lean)
-            if q.full():
-                # a slow subscriber loses its oldest message without a camera frame: a frame
-                # (sent once, after a seek) is not lost to the snapshots that follow it
-                held = [q.get_nowait() for _ in range(q.qsize())]
-                drop = next((k for k, (f, _) in enumerate(held) if not f), 0)
-                del held[drop]
-                for h in held:
-                    q.put_nowait(h)
-            q.put_nowait(item)
-
-
 def create_app(
-    session: SimSession,
+    session: Session,
     hub: TelemetryHub,
     token: str | None,
     viser_port: int,
     gainsets: GainSetStore,
     logs: LogIndex | None = None,
-    studies_url: str | None = None,
+    studies_url: Callable[[], str] | None = None,
     scene_port: Callable[[], int | None] = lambda: None,
 ) -> FastAPI:
-    """``scene_port``: the port of the 3D view's own listener (:class:`SceneListener`) once
-    it listens, None to serve the 3D view from this origin."""
+    """``studies_url``: the gain studies' storage URL, asked at the first request about them;
+    ``scene_port``: the port of the 3D view's own listener (:class:`SceneListener`) once it
+    listens, None to serve the 3D view from this origin."""
     logs = logs or LogIndex(Path("logs"))
 
     @contextlib.asynccontextmanager
@@ -215,9 +178,7 @@ def create_app(
     @app.websocket("/ws/telemetry")
     async def telemetry(ws: WebSocket) -> None:
         await ws.accept()
-        request_frame = getattr(session, "request_frame", None)
-        if request_frame is not None:
-            request_frame()  # a page that (re)loads shows the camera frame at once
+        session.request_frame()  # a page that (re)loads shows the camera frame at once
         q: asyncio.Queue = asyncio.Queue(maxsize=4)
         hub.queues[q] = True
         key = id(q)
@@ -254,8 +215,7 @@ def create_app(
     app.include_router(routes_sortie.router(session))
     app.include_router(routes_logs.router(session, logs))
     if studies_url is not None:
-        log_dir = getattr(session, "log_dir", None)
-        app.include_router(routes_studies.router(session, studies_url, log_dir))
+        app.include_router(routes_studies.router(session, studies_url, session.log_dir))
 
     _declare_errors(app)
     return TokenAuthMiddleware(app, token)  # type: ignore[return-value]
@@ -289,79 +249,17 @@ def _declare_errors(app: FastAPI) -> None:
     app.openapi = document  # type: ignore[method-assign]
 
 
+def studies_storage_url(data_dir: Path) -> str:
+    """Where ``groundstation tune`` keeps its studies by default (the same data folder)."""
+    from ..campaigns.tune import default_storage_url  # slow to import: not at the start
+
+    return default_storage_url(data_dir)
+
+
 def free_loopback_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-SCENE_PATHS = ("/viser/", "/viser", "/static/scene3d.js")
-
-
-class SceneListener:
-    """The 3D view (viser's client and its websocket) on a port of its own, same address, same
-    token (the access cookie is the host's, whatever the port), nothing else served there.
-
-    Another port is another origin; with ``Origin-Agent-Cluster: ?1`` Chromium gives the 3D
-    view's frame a process of its own. Its WebGL then never stalls the dashboard's thread:
-    a browser that renders WebGL in software (no GPU) reads every 3D frame back on the thread
-    of the page that drew it, and in the page's own process that thread is the one drawing the
-    plots and numbers (5 headless viewers on 2 cores: 0.4 frames/s painted with the 3D view in
-    the page's process, 1.0-1.6 with it in its own)."""
-
-    def __init__(self, app: Any, host: str, port: int = 0) -> None:
-        async def scene_only(scope, receive, send):
-            if scope.get("path") not in SCENE_PATHS:
-                if scope["type"] == "websocket":
-                    await send({"type": "websocket.close", "code": 1008})
-                    return
-                await send({"type": "http.response.start", "status": 404, "headers": []})
-                await send({"type": "http.response.body", "body": b""})
-                return
-
-            async def send_isolated(message):
-                if message["type"] == "http.response.start":
-                    headers = [*message.get("headers", []), (b"origin-agent-cluster", b"?1")]
-                    message = {**message, "headers": headers}
-                await send(message)
-
-            await app(scope, receive, send_isolated)
-
-        self.server = uvicorn.Server(
-            uvicorn.Config(
-                scene_only,
-                host=host,
-                port=port,
-                log_level="warning",
-                ws="websockets-sansio",
-                lifespan="off",  # the dashboard's listener runs the app's lifespan
-            )
-        )
-        self._thread = threading.Thread(target=self.server.run, name="scene-http", daemon=True)
-
-    @property
-    def port(self) -> int | None:
-        """The port it listens on, None until it does (or if it could not)."""
-        if not self.server.started:
-            return None
-        for srv in getattr(self.server, "servers", []):
-            for sock in srv.sockets:
-                return sock.getsockname()[1]
-        return None
-
-    def start(self, timeout_s: float = 10.0) -> None:
-        """Listen; if it cannot (the port taken), the page serves the 3D view itself."""
-        self._thread.start()
-        deadline = time.monotonic() + timeout_s
-        while not self.server.started and self._thread.is_alive():
-            if time.monotonic() > deadline:
-                break
-            time.sleep(0.02)
-
-    def stop(self) -> None:
-        self.server.should_exit = True
-        if self._thread.is_alive():
-            self._thread.join(timeout=10.0)
 
 
 class GroundStation:
@@ -428,8 +326,7 @@ class GroundStation:
             self.viser_port,
             self.gainsets,
             LogIndex(log_dir or Path("logs")),
-            # where `groundstation tune` keeps its studies by default (same data folder)
-            default_storage_url(self.data_dir),
+            lambda: studies_storage_url(self.data_dir),
             scene_port=lambda: None if self.scene_http is None else self.scene_http.port,
         )
         self.scene_http = None if scene_port is None else SceneListener(self.app, host, scene_port)

@@ -5,11 +5,7 @@ reset, speed, gains) and observed through telemetry snapshots published at a fix
 Commands are queued and carried out by the simulation thread between control ticks, so a gain
 edit takes effect at the next control tick of the running sortie.
 
-The gains rule (docs/operator-gains.md): the operator's gains are a gain set (the defaults or
-a loaded named set) plus the edits the operator applied; a plain Start flies them, or, when the
-scenario has a ``[gains]`` table, that table (the edits are then dropped and ``gains_note`` names
-them). A re-fly or a study trial flies gains given for that sortie only: the operator's gain set
-and edits are left as they were, and the next plain Start flies them again.
+Which gains a sortie flies is the rule in :mod:`.operator_gains` (docs/operator-gains.md).
 """
 
 from __future__ import annotations
@@ -21,22 +17,23 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from onboard.gains import Gains
 
-from ..recording.writer import SortieRecorder
-from ..scenario import Scenario, load_scenario, with_changes
-from ..sim.simulation import Simulation
+from ..scenario import load_scenario
 from .errors import SessionError
 from .numbers import fmt_num
-from .replay import ReplayPlayer
-from .session_replay import SessionReplay
-from .session_view import HISTORY_EVERY_S, PUBLISH_HZ, SessionView, _empty_history
+from .operator_gains import FlownGains, OperatorGains
+from .session_config import SPEEDS, SortieConfig, with_wind
 
-SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}
+if TYPE_CHECKING:
+    from ..recording.writer import SortieRecorder
+    from ..sim.simulation import Simulation
+from .session_replay import SessionReplay
+from .session_view import PUBLISH_HZ, SessionView
+
 TRAIL_EVERY_S = 0.1
 BEHIND_PUBLISH_HZ = 10.0  # snapshots per second while the simulator is starved (below)
 # how far (wall seconds) the simulator may trail the clock and still publish every point of its
@@ -51,22 +48,15 @@ STEP_SLICE_S = 0.05  # most wall time one paced stepping call runs before comman
 MAX_EVENTS = 200
 
 
-@dataclass(frozen=True)
-class SortieConfig:
-    scenario: Scenario
-    law: str = "png"
-    seed: int = 0
-    camera: str = "projected"
-    speed: str = "1"
-
-
 __all__ = ["SPEEDS", "SessionError", "SimSession", "SortieConfig", "with_wind"]
 
 
-class SimSession(SessionView, SessionReplay):
-    """The operator's simulator: commands and the paced thread here; what the page sees in
-    :class:`~.session_view.SessionView`, replay in :class:`~.session_replay.SessionReplay`."""
+class SimSession:
+    """The operator's simulator: commands and the paced thread here; what the page sees is
+    its ``view`` (:class:`~.session_view.SessionView`), the recorded sorties on screen its
+    ``replays`` (:class:`~.session_replay.SessionReplay`)."""
 
+    simulated = True  # the routers' Session protocol (protocol.py)
     foxglove = None  # a FoxgloveLive publishing each sortie's channels (serve --foxglove)
 
     def __init__(
@@ -77,30 +67,20 @@ class SimSession(SessionView, SessionReplay):
         log_dir: Path | None = None,
     ) -> None:
         self.log_dir = log_dir  # every sortie is recorded there (None: not recorded)
-        self.replay: ReplayPlayer | None = None
-        self.compare: ReplayPlayer | None = None
-        self.replay_t = 0.0
-        self.replay_playing = False
-        self._force_frame = False
-        self._on_snapshot = on_snapshot
+        self.on_snapshot = on_snapshot
         self.scene = scene
         self.publish_period_s = 1.0 / publish_hz
         self._commands: queue.Queue = queue.Queue()
-        self._lock = threading.RLock()
+        self.lock = threading.RLock()  # the plots' series, read by the web server's thread
         self._stop = threading.Event()
         self.config = SortieConfig(load_scenario("cv-top-to-bottom"))
-        self.gain_set = Gains()  # the operator's gain set (the defaults or a loaded one)
-        self.gain_set_source = "defaults"
-        self.gain_edits: dict[str, float] = {}  # the operator's applied edits
-        self.gains = self.gain_set  # in force on the sortie on screen
+        self.operator = OperatorGains()  # the operator's gain set and applied edits
+        self.gains = self.operator.gain_set  # in force on the sortie on screen
         self.gains_base = self.gains  # the set the sortie on screen started from
         self.gains_source = "defaults"
         self.gains_note: str | None = None
-        self._gains_edited: tuple[Gains, Gains, dict[str, list[float]]] | None = None
         self.epoch = 0  # counts sorties shown (start, replay, reset): a page reloads its data
         self.events: list[list] = []  # [t_s, kind, text] of the sortie on screen
-        self.history: dict[str, list] = _empty_history()
-        self._last_history_t = -1.0
         self._last_mode: str | None = None
         self._last_lost = False
         self.sim: Simulation | None = None
@@ -110,7 +90,6 @@ class SimSession(SessionView, SessionReplay):
         self._anchor_wall = 0.0
         self._anchor_sim = 0.0
         self._tick_walls: deque[float] = deque()
-        self._publish_count = 0
         self._trail_vehicle: list[list[float]] = []
         self._trail_target: list[list[float]] = []
         self._last_trail_t = -1.0
@@ -121,8 +100,8 @@ class SimSession(SessionView, SessionReplay):
         self.published_behind = 0  # snapshots published at the slower rate (the sim starved)
         self._next_publish_sim = 0.0  # the simulated time of the next snapshot (paced)
         self._last_publish_wall = 0.0  # when the last snapshot of a paced sortie went out
-        self.scene_errors = 0
-        self.last_scene_error: str | None = None
+        self.view = SessionView(self)
+        self.replays = SessionReplay(self)
         self._thread = threading.Thread(target=self._run, name="sim-session", daemon=True)
         self._thread.start()
 
@@ -159,31 +138,22 @@ class SimSession(SessionView, SessionReplay):
         if config.speed not in SPEEDS:
             raise SessionError(f"speed must be one of {', '.join(SPEEDS)}")
 
+        # the simulator and the recorder are imported at the first sortie, not when the
+        # server starts (they pull the loop, the renderer and the channels in)
+        from ..recording.writer import SortieRecorder
+        from ..sim.simulation import Simulation
+
         def go():
-            sc = config.scenario
-            keep_compare = self.compare if self.state == "idle" else None
-            if sortie_gains is not None:  # this sortie's own gains: the operator's stay put
-                base, source, note = sortie_gains, sortie_source or "given for this sortie", None
-                gains = base
-            elif sc.gains:  # the scenario has a [gains] table: it replaces the edits
-                dropped = sorted(self.gain_edits)
-                base, source = sc.gains_obj(), f"scenario {sc.name}"
-                note = f"scenario {sc.name} carries its own gains ([gains])" + (
-                    f"; your edits to {', '.join(dropped)} were replaced" if dropped else ""
-                )
-                self.gain_edits = {}
-                gains = base
-            else:  # the operator's gain set and edits
-                base, source, note = self.gain_set, self.gain_set_source, None
-                gains = base.replace(**self.gain_edits)
-            self._close_current("the operator started another sortie")
+            keep_compare = self.replays.compare if self.state == "idle" else None
+            flown = self.operator.for_start(config.scenario, sortie_gains, sortie_source)
+            self.close_current("the operator started another sortie")
             self.recorder = None if self.log_dir is None else SortieRecorder(self.log_dir)
             self.sim = Simulation(
                 config.scenario,
                 config.law,
                 config.seed,
                 config.camera,
-                gains,
+                flown.gains,
                 keep_records=False,
                 observers=tuple(
                     o
@@ -193,23 +163,24 @@ class SimSession(SessionView, SessionReplay):
                 target_track=target_track,
             )
             self.config = config
-            self.gains, self.gains_base = gains, base
-            self.gains_source, self.gains_note = source, note
+            self._show_gains(flown)
             self._gains_pending = None
             self.gains_applied_time_s = None
             self.speed = SPEEDS[config.speed]
             self._trail_vehicle, self._trail_target = [], []
             self._last_trail_t = -1.0
-            self._new_epoch()
+            self.new_epoch()
             self._tick_walls.clear()
             self.run_wall_s = self.run_sim_s = 0.0
             self._set_running()
             if self.scene is not None:
                 self.scene.reset(
-                    self.sim.camera_model, config.scenario.target.diameter_m, self._scene_state()
+                    self.sim.camera_model,
+                    config.scenario.target.diameter_m,
+                    self.view.scene_state(),
                 )
             if keep_compare is not None:  # compared from an idle page: overlaid on this one
-                self.compare = keep_compare
+                self.replays.compare = keep_compare
                 if self.scene is not None:
                     self.scene.overlay(*keep_compare.trails(keep_compare.duration_s))
 
@@ -247,22 +218,24 @@ class SimSession(SessionView, SessionReplay):
             self._advance_one()
             if self.sim.done:
                 self.state = "finished"
-            self._publish(force=True)
+            self.view.publish(force=True)
 
         self.submit(go)
 
     def reset(self) -> None:
         def go():
-            self._close_current("operator reset")
+            self.close_current("operator reset")
             self.sim = None
-            self.replay = self.compare = None
+            self.replays.clear()
             self.state = "idle"
-            self._operator_gains_in_force()
+            # nothing flies: the gains shown are those a plain Start flies (a scenario with a
+            # [gains] table aside), not the last re-fly's or trial's
+            self._show_gains(self.operator.in_force())
             self._trail_vehicle, self._trail_target = [], []
-            self._new_epoch()
+            self.new_epoch()
             if self.scene is not None:
                 self.scene.clear()
-            self._publish(force=True)
+            self.view.publish(force=True)
 
         self.submit(go)
 
@@ -286,17 +259,10 @@ class SimSession(SessionView, SessionReplay):
         def go():
             old = self.gains
             if source is not None:
-                self.gain_set, self.gain_set_source, self.gain_edits = gains, source, {}
-                self.gains_base, self.gains_source, self.gains_note = gains, source, None
+                self.operator.load(gains, source)
+                self._show_gains(self.operator.in_force())
             else:
-                base = self.gains_base.to_dict()
-                for k, v in gains.to_dict().items():
-                    if v == getattr(old, k):
-                        continue
-                    if v == base[k]:  # back to the value the sortie started with
-                        self.gain_edits.pop(k, None)
-                    else:
-                        self.gain_edits[k] = v
+                self.operator.take_edits(old, gains, self.gains_base)
             self.gains = gains
             t = None if self.sim is None else round(self.sim.time_s, 3)
             for k, v in gains.to_dict().items():
@@ -310,52 +276,62 @@ class SimSession(SessionView, SessionReplay):
 
         return self.submit(go)
 
-    def _operator_gains_in_force(self) -> None:
-        """Nothing flies: the gains shown are those a plain Start flies (a scenario with a
-        [gains] table aside), not the last re-fly's or trial's."""
-        self.gains_base, self.gains_source, self.gains_note = (
-            self.gain_set,
-            self.gain_set_source,
-            None,
-        )
-        self.gains = self.gain_set.replace(**self.gain_edits)
+    def _show_gains(self, flown: FlownGains) -> None:
+        """The gains of the sortie on screen, the set they start from, its name and note."""
+        self.gains, self.gains_base = flown.gains, flown.base
+        self.gains_source, self.gains_note = flown.source, flown.note
 
     def reset_edits(self) -> Gains:
         """Drop the operator's edits: the sortie on screen flies its gain set again, and so
         does the next plain Start."""
 
-        def go():
-            self.gain_edits = {}
-
-        self.submit(go)
+        self.submit(self.operator.drop_edits)
         return self.set_gains(self.gains_base)
 
     def default_gains(self) -> Gains:
         """What "reset gains" restores: the base set in force, without the operator's edits."""
         return self.gains_base
 
-    def gains_edited(self) -> dict[str, list[float]]:
-        """The operator's edits: name -> [base value, value in force]. Worked out again only
-        when either set changes (they are frozen): every snapshot's status carries it, and
-        two ``to_dict`` calls cost the simulation thread more than the rest of the snapshot."""
-        base_gains, gains = self.gains_base, self.gains
-        cached = self._gains_edited
-        if cached is None or cached[0] is not base_gains or cached[1] is not gains:
-            base, now = base_gains.to_dict(), gains.to_dict()
-            edited = {k: [base[k], v] for k, v in now.items() if v != base[k]}
-            cached = self._gains_edited = (base_gains, gains, edited)
-        return {k: list(v) for k, v in cached[2].items()}
+    def live_command(self, action: str) -> dict[str, Any]:
+        raise SessionError("simulator mode: there is no live vehicle")
+
+    def gains_pending(self) -> bool:
+        """An edit is applied to the running sortie and not yet flown by a control tick."""
+        return self._gains_pending is not None
+
+    # ------------------------------------------------------------------ what the page sees
+    def status(self) -> dict[str, Any]:
+        return self.view.status()
+
+    def snapshot(self) -> dict[str, Any]:
+        return self.view.snapshot()
+
+    def series(self) -> dict[str, Any]:
+        return self.view.series()
+
+    @property
+    def recording(self) -> dict[str, Any] | None:
+        return self.view.recording
 
     def request_frame(self) -> None:
-        """Send a camera frame with the next snapshot (a page has just (re)connected)."""
-        self._force_frame = True
+        self.view.request_frame()
 
-    def _new_epoch(self) -> None:
+    # ------------------------------------------------------------------ recorded sorties
+    def open_replay(self, path: Path, name: str | None = None) -> None:
+        self.replays.open(path, name)
+
+    def compare_with(self, path: Path, name: str | None = None) -> None:
+        self.replays.compare_with(path, name)
+
+    def replay_command(self, action: str, t_s: float | None = None) -> None:
+        self.replays.command(action, t_s)
+
+    def new_epoch(self) -> None:
+        """Another sortie on screen (start, replay, reset): a page reloads its data."""
         self.epoch += 1
         self.gains_applied_time_s = None  # an edit applied to an earlier sortie
         self.events = []
-        self.history = _empty_history()
-        self._last_history_t = -1.0
+        self.view.new_sortie()
         self._last_mode, self._last_lost = None, False
 
     def _event(self, t_s: float | None, kind: str, text: str) -> None:
@@ -365,14 +341,14 @@ class SimSession(SessionView, SessionReplay):
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)
-        self._close_current("the ground station stopped")
+        self.close_current("the ground station stopped")
 
-    def _close_current(self, reason: str) -> None:
+    def close_current(self, reason: str) -> None:
         """End the recording of the sortie on screen (an unfinished one is kept, marked
         INCOMPLETE with the reason: nothing recorded is ever lost)."""
         if self.sim is not None:
             self.sim.close(reason)
-        self.replay = self.compare = None
+        self.replays.clear()
 
     # ------------------------------------------------------------------ the thread
     def _advance_one(self) -> None:
@@ -397,9 +373,7 @@ class SimSession(SessionView, SessionReplay):
                 text = "detection lost" if tel.dkf_lost else "detection regained"
                 self._event(round(sim.time_s, 3), "detection", text)
                 self._last_lost = tel.dkf_lost
-        if sim.time_s - self._last_history_t >= HISTORY_EVERY_S - 1e-9:
-            self._last_history_t = sim.time_s
-            self._record_history()
+        self.view.record_history()
         if sim.done:
             self._event(
                 round(sim.closest_time_s, 3),
@@ -410,6 +384,15 @@ class SimSession(SessionView, SessionReplay):
             self._last_trail_t = sim.time_s
             self._trail_vehicle.append([round(c, 3) for c in sim.vehicle.p])
             self._trail_target.append([round(c, 3) for c in sim.target.p])
+
+    def loop_rate_hz(self) -> float:
+        """Control ticks run per wall-clock second, over the last second."""
+        if self.state != "running":
+            return 0.0
+        now = time.perf_counter()
+        # read-only here: status() is also called from the web server's thread
+        recent = sum(1 for t in tuple(self._tick_walls) if t >= now - 1.0)
+        return recent / min(1.0, max(now - self._anchor_wall, 1e-3))
 
     def _publish_gap_s(self, clock_sim_s: float) -> float:
         """The least wall time between two snapshots of a paced sortie (``clock_sim_s``: where
@@ -457,7 +440,7 @@ class SimSession(SessionView, SessionReplay):
             if gap_s > 0.0:
                 self.published_behind += 1
             self._last_publish_wall = wall
-            self._publish()
+            self.view.publish()
         return sim.time_s < target
 
     def _run(self) -> None:
@@ -495,20 +478,14 @@ class SimSession(SessionView, SessionReplay):
                     self.state = "finished"
                     next_publish = 0.0
                     paced = False
-            if self.state == "replay" and self.replay is not None and self.replay_playing:
-                speed = self.replay_speed()
-                self.replay_t = min(
-                    self.replay_t + (now - last_wall_replay) * speed, self.replay.duration_s
-                )
-                if self.replay_t >= self.replay.duration_s:
-                    self.replay_playing = False
+            self.replays.advance(now - last_wall_replay)
             last_wall_replay = now
             was_running = self.state == "running"
             now2 = time.perf_counter()
             if not paced and now2 >= next_publish:
                 # not paced by the simulator (idle, paused, finished, replay, max speed): on a
                 # fixed wall-clock grid; one more than half a period late starts it again
-                self._publish()
+                self.view.publish()
                 period = self.publish_period_s
                 next_publish = max(next_publish + period, now2 + 0.5 * period)
             if paced:
@@ -521,16 +498,3 @@ class SimSession(SessionView, SessionReplay):
             else:
                 nap_s = 0.002 if was_running else 0.01
             self._stop.wait(nap_s)
-
-
-def with_wind(scenario: Scenario, mean_m_s: tuple[float, float, float], gust_m_s: float):
-    """The scenario with its wind's mean and gust replaced (validated); the model (uniform or
-    a fan jet with its source) and the gust time constant are kept."""
-    return with_changes(
-        scenario,
-        wind=dataclasses.replace(
-            scenario.wind,
-            mean_m_s=tuple(float(c) for c in mean_m_s),
-            gust_m_s=float(gust_m_s),
-        ),
-    )

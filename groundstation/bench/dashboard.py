@@ -73,7 +73,7 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
     from playwright.sync_api import sync_playwright
 
     from ..app.server import GroundStation
-    from ..app.session import SortieConfig
+    from ..app.session_config import SortieConfig
     from ..scenario import with_changes
 
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -64,6 +64,7 @@ def run_overlay_bench(n: int = 20, as_json: bool = False) -> int:
                         {
                             "wall_s": time.perf_counter() - t0,
                             "page_ms": page.evaluate("window.peregrine.openedMs"),
+                            "fetch_ms": page.evaluate("window.peregrine.fetchMs"),
                         }
                     )
                 fps = page.evaluate(
@@ -95,6 +96,10 @@ def run_overlay_bench(n: int = 20, as_json: bool = False) -> int:
         for k in ("open_cold", "open_warm"):
             o = out[k]
             page_s = o["page_ms"] / 1000
-            print(f"  {k}: {o['wall_s']:.2f} s to load and draw ({page_s:.2f} s in the page)")
+            fetch_s = o["fetch_ms"] / 1000
+            print(
+                f"  {k}: {o['wall_s']:.2f} s to load and draw ({page_s:.2f} s in the page, "
+                f"{fetch_s:.2f} s of it the request)"
+            )
         print(f"  scrub: {fps:.1f} frames/s over {SCRUB_S:g} s of dragging")
     return 0

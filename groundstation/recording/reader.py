@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from mcap.reader import make_reader
-from mcap.records import Message, Metadata
+from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 MAGIC = b"\x89MCAP0\r\n"
+SCENARIO_ATTACHMENT = "scenario.toml"  # the scenario flown, as the recorder attaches it
 BEING_WRITTEN_S = 5.0  # a truncated file changed this recently is taken as being written
 
 
@@ -112,11 +113,21 @@ def _apply_metadata(info: LogInfo, name: str, data: dict[str, str]) -> None:
         info.intercept_time_s = t if isinstance(t, (int, float)) else None
 
 
-def _stream_scan(path: Path, info: LogInfo) -> bool:
-    """Read every record in order with CRCs checked; stop at the first bad one. Returns whether
-    it stopped because the file ended early."""
+def _stream_scan(
+    path: Path,
+    info: LogInfo,
+    topics: frozenset[str] = frozenset(),
+    found: list[tuple[int, str, bytes]] | None = None,
+    attachments: dict[str, bytes] | None = None,
+    times: dict[str, list[int]] | None = None,
+) -> bool:
+    """Read every record in order with CRCs checked; stop at the first bad one. The messages
+    on ``topics`` are kept in ``found`` as (log time ns, topic, data), the log times (ns) of
+    those on the topics of ``times`` there, and the attachments in ``attachments``, from the
+    same pass. Returns whether it stopped because the file ended early."""
     first = last = None
     ended_early = False
+    channels: dict[int, str] = {}
     with open(path, "rb") as f:
         try:
             for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
@@ -124,8 +135,17 @@ def _stream_scan(path: Path, info: LogInfo) -> bool:
                     info.messages += 1
                     first = rec.log_time if first is None else min(first, rec.log_time)
                     last = rec.log_time if last is None else max(last, rec.log_time)
+                    topic = channels.get(rec.channel_id)
+                    if found is not None and topic in topics:
+                        found.append((rec.log_time, topic, rec.data))
+                    if times is not None and topic in times:
+                        times[topic].append(rec.log_time)
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = rec.topic
                 elif isinstance(rec, Metadata):
                     _apply_metadata(info, rec.name, rec.metadata)
+                elif isinstance(rec, Attachment) and attachments is not None:
+                    attachments[rec.name] = rec.data
         except Exception as exc:  # mcap, zstd and lz4 each raise their own types
             # a cut inside a record's header surfaces as a short struct read: at the end of
             # the file that is the file ending early, not corrupt bytes
@@ -147,12 +167,40 @@ def _stream_scan(path: Path, info: LogInfo) -> bool:
     return ended_early
 
 
+@dataclass
+class ReadLog:
+    """One pass over a log (:func:`read_log`): its summary, the messages of the topics asked
+    for (topic, time s, decoded JSON) in time order, and its attachments by name."""
+
+    info: LogInfo
+    messages: list[tuple[str, float, Any]]
+    attachments: dict[str, bytes]
+    times: dict[str, list[float]]  # the log times (s, sorted) of the topics asked for
+
+    def attachment_text(self, name: str) -> str | None:
+        data = self.attachments.get(name)
+        return None if data is None else data.decode()
+
+
 def inspect_log(path: Path) -> LogInfo:
     """Status and summary of one log (reads the whole file once, checking every CRC)."""
+    return read_log(path).info
+
+
+def read_log(
+    path: Path, topics: list[str] | tuple[str, ...] = (), times_of: tuple[str, ...] = ()
+) -> ReadLog:
+    """Status and summary of one log, the messages on ``topics`` (decoded), the times of the
+    messages on ``times_of`` (not decoded: camera frames) and the attachments, in one pass
+    that checks every CRC (a damaged or truncated file is read up to the damage): what opening
+    a sortie for replay needs, without reading the file a second time."""
     path = Path(path)
     _check_magic(path)
     info = LogInfo(name=path.name, size_bytes=path.stat().st_size, status="ok", problem=None)
-    ended_early = _stream_scan(path, info)
+    found: list[tuple[int, str, bytes]] = []
+    attachments: dict[str, bytes] = {}
+    times: dict[str, list[int]] = {t: [] for t in times_of}
+    ended_early = _stream_scan(path, info, frozenset(topics), found, attachments, times)
     if info.problem is not None:
         info.status = "truncated" if ended_early else "damaged"
         if ended_early:
@@ -161,7 +209,11 @@ def inspect_log(path: Path) -> LogInfo:
                 info.problem += f" so far: still being written ({age_s:.1f} s since its last write)"
             else:
                 info.problem += " (the file ends early: a crash or a copy cut it)"
-    return info
+    found.sort(key=lambda m: m[0])  # stable: messages of one time keep the order written
+    messages = [(topic, t / 1e9, json.loads(data)) for t, topic, data in found]
+    return ReadLog(
+        info, messages, attachments, {k: [t / 1e9 for t in sorted(v)] for k, v in times.items()}
+    )
 
 
 class LogIndex:
@@ -326,7 +378,7 @@ def scenario_attachment(path: Path) -> str | None:
     with open(path, "rb") as f:
         try:
             for att in make_reader(f).iter_attachments():
-                if att.name == "scenario.toml":
+                if att.name == SCENARIO_ATTACHMENT:
                     return att.data.decode()
         except Exception:
             return None
@@ -337,8 +389,10 @@ __all__ = [
     "LogError",
     "LogIndex",
     "LogInfo",
+    "ReadLog",
     "inspect_log",
     "iter_messages",
     "metadata_values",
+    "read_log",
     "scenario_attachment",
 ]

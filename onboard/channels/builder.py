@@ -314,6 +314,7 @@ class ChannelBuilder:
                         frame.acquired,
                         tel.dkf_lost,
                         tel.dkf_time_since_detection_s,
+                        tel.self_cal,
                     ),
                 )
             )

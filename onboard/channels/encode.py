@@ -26,7 +26,11 @@ _CONTROL = (
     '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%s,'
     '"range_m":%s,"vel_m_s":%s,"e_raw_px":%s,"raw_capture_t_s":%s}'
 )
-_DKF = '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s}'
+_DKF = (
+    '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s,'
+    '"target_diameter_m":%s,"target_diameter_std_m":%s,"camera_offset_s":%s,'
+    '"camera_offset_std_s":%s}'
+)
 
 
 def js(x: float | None) -> str:
@@ -77,8 +81,10 @@ def control(
     ).encode()  # fmt: skip
 
 
-def dkf(t_s, state, cov, acquired: bool, lost: bool, since) -> bytes:
-    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None)."""
+def dkf(t_s, state, cov, acquired: bool, lost: bool, since, self_cal=None) -> bytes:
+    """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None, ``self_cal`` a
+    :class:`~onboard.estimation.self_calibration.SelfCalEstimate` or None)."""
+    c = self_cal
     return (
         _DKF
         % (
@@ -88,6 +94,10 @@ def dkf(t_s, state, cov, acquired: bool, lost: bool, since) -> bytes:
             "true" if acquired else "false",
             "true" if lost else "false",
             js(since),
+            js(None if c is None else c.target_diameter_m),
+            js(None if c is None else c.target_diameter_std_m),
+            js(None if c is None else c.camera_offset_s),
+            js(None if c is None else c.camera_offset_std_s),
         )
     ).encode()
 

@@ -53,6 +53,9 @@ def loop_values(tel: ControlTelemetry) -> dict[str, float]:
         **_elements(_D["time_since_detection_s"], min(tel.dkf_time_since_detection_s, 1e6)),
         **_elements(_D["lost"], float(tel.dkf_lost)),
     }
+    if tel.self_cal is not None:
+        vals.update(_elements(_D["target_diameter_m"], tel.self_cal.target_diameter_m))
+        vals.update(_elements(_D["camera_offset_s"], tel.self_cal.camera_offset_s))
     if tel.e_est_px is not None:
         vals.update(_elements(_C["e_px"], tel.e_est_px))
         vals.update(_elements(_C["e_rate_px_s"], tel.e_rate_est_px_s))
