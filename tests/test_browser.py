@@ -360,6 +360,9 @@ def free_udp_port() -> int:
 
 
 def test_option_lists_come_from_the_api_and_the_chosen_law_flies(station, browser):
+    # the module's earlier tests leave a sortie or a replay and a speed: start from the defaults
+    station.session.reset()
+    station.session.set_speed("1")
     page = browser.new_page(viewport={"width": 1500, "height": 1000})
     errors = []
     page.on("pageerror", lambda e: errors.append(str(e)))
