@@ -1,5 +1,6 @@
 """What every browser test module shares: Debian's chromium (a failure with ``CI`` set, a
-skip elsewhere), its flags, one ground station and one browser per module."""
+skip elsewhere), its flags, one ground station and one browser per module, and a page whose
+script errors fail the test."""
 
 import os
 import shutil
@@ -42,3 +43,15 @@ def browser():
         b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         yield b
         b.close()
+
+
+@pytest.fixture
+def page(station, browser):
+    """A new page of the module's browser; a script error on it fails the test."""
+    pg = browser.new_page(viewport={"width": 1500, "height": 1100})
+    pg.errors = []
+    pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+    yield pg
+    errors = pg.errors
+    pg.close()
+    assert not errors, errors

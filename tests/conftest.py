@@ -11,8 +11,8 @@ import pytest
 
 from onboard.geometry import attitude_from_yaw_pitch_roll
 
-# the browser tests' ground station and chromium, one of each per module
-from .browser_support import browser, station  # noqa: F401
+# the browser tests' ground station and chromium, one of each per module, and their pages
+from .browser_support import browser, page, station  # noqa: F401
 
 _FUZZ: dict[str, tuple[int, int]] = {}  # suite -> (cases tried, failures)
 
@@ -25,6 +25,55 @@ def fuzz_summary():
         _FUZZ[suite] = (cases, failures)
 
     return record
+
+
+def pytest_sessionfinish(session) -> None:
+    """Under pytest-xdist a worker hands its fuzz totals to the controller, which prints them."""
+    out = getattr(session.config, "workeroutput", None)
+    if out is not None:
+        out["fuzz"] = {suite: list(totals) for suite, totals in _FUZZ.items()}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error) -> None:
+    for suite, (cases, failures) in getattr(node, "workeroutput", {}).get("fuzz", {}).items():
+        _FUZZ[suite] = (cases, failures)
+
+
+def _flies_the_rig(item) -> bool:
+    """Does the test fly the SITL rig (the simulator standing in for PX4 and the onboard
+    runtime, each a real-time process)? Its module or the test itself uses ``Rig``."""
+    from .sitl_rig import Rig
+
+    code = getattr(getattr(item, "function", None), "__code__", None)
+    return getattr(item.module, "Rig", None) is Rig or (
+        code is not None and "Rig" in code.co_varnames + code.co_names
+    )
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items) -> None:
+    """Groups for pytest-xdist (``--dist loadgroup``: a group runs on one worker, in file
+    order). The tests that fly the SITL rig form one group, so two real-time rigs never share
+    the two cores. Tests that share a module-scoped fixture (a ground station, a browser, a
+    flown log) form one group per module: the fixture is made once, and a test that expects
+    the state the previous ones left (the browser modules) finds it."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        if _flies_the_rig(item):
+            item.add_marker(pytest.mark.xdist_group("sitl-rig"))
+            continue
+        info = getattr(item, "_fixtureinfo", None)
+        if info is None:
+            continue
+        shared = any(
+            d.scope in ("module", "class", "package")
+            for name in info.names_closure
+            for d in info.name2fixturedefs.get(name, ())
+        )
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
 
 
 def pytest_terminal_summary(terminalreporter) -> None:

@@ -14,7 +14,7 @@ from groundstation.recording.reader import iter_messages
 from groundstation.scenario import load_scenario
 
 from .browser_support import needs_chromium
-from .test_dashboard import api
+from .dashboard_support import api
 
 pytestmark = needs_chromium
 

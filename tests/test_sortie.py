@@ -50,14 +50,14 @@ def test_moving_targets_png(name, tolerance_m):
         assert r.outcome == "HIT" and r.miss_m <= tolerance_m, r
 
 
-def test_every_shipped_scenario_runs_to_an_outcome():
-    for p in shipped_scenarios():
-        sim = Simulation(load_scenario(p), "png", seed=3, keep_records=False)
-        r = sim.run()
-        assert r.outcome in {o.value for o in Outcome}
-        # the interception within the duration, the recovery at most RECOVERY_TIMEOUT_S more
-        assert r.sim_time_s <= sim.scenario.duration_s + RECOVERY_TIMEOUT_S + 1e-6
-        assert r.guard_trips == 0
+@pytest.mark.parametrize("path", shipped_scenarios(), ids=lambda p: p.stem)
+def test_every_shipped_scenario_runs_to_an_outcome(path):
+    sim = Simulation(load_scenario(path), "png", seed=3, keep_records=False)
+    r = sim.run()
+    assert r.outcome in {o.value for o in Outcome}
+    # the interception within the duration, the recovery at most RECOVERY_TIMEOUT_S more
+    assert r.sim_time_s <= sim.scenario.duration_s + RECOVERY_TIMEOUT_S + 1e-6
+    assert r.guard_trips == 0
 
 
 def test_outdoor_static_matches_paper_speed_envelope():

@@ -8,6 +8,19 @@ from pathlib import Path
 
 from onboard.enums import GuidanceLaw, codes
 
+_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
+
+
+def _idle_cpu_s() -> float | None:
+    """CPU seconds the whole machine has spent idle so far, all cores (Linux /proc/stat: idle
+    and iowait), None elsewhere."""
+    try:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+        return (ticks[3] + ticks[4]) * _TICK_S
+    except (OSError, ValueError, IndexError):
+        return None
+
 
 def _worker_start() -> dict[str, float]:
     """How soon 2 workers answer: the first pool's first result (it waits for the server
@@ -38,11 +51,17 @@ def run_campaign_bench(as_json: bool = False) -> int:
     figures: dict[str, float] = _worker_start()
     with tempfile.TemporaryDirectory() as tmp:
         for workers in (1, 2):
+            idle0 = _idle_cpu_s()
             res = run_campaign(
                 "static", n=20, workers=workers, progress=False, out=Path(tmp) / f"w{workers}"
             )
+            idle1 = _idle_cpu_s()
             figures[f"throughput_{workers}_workers"] = res["meta"]["throughput_sim_s_per_s"]
             figures[f"wall_s_{workers}_workers"] = res["meta"]["wall_s"]
+            if idle0 is not None and idle1 is not None:
+                # cores nobody used during the run: a second worker gains only where the
+                # first run left about one core idle (other work on the machine takes it)
+                figures[f"idle_cores_{workers}_workers"] = (idle1 - idle0) / res["meta"]["wall_s"]
         res = run_campaign(
             "static", workers=default_workers(), progress=False, out=Path(tmp) / "full"
         )
@@ -60,9 +79,12 @@ def run_campaign_bench(as_json: bool = False) -> int:
         return 0
     print("Campaign benchmark: static, projected, laws " + ",".join(codes(GuidanceLaw)))
     for w in (1, 2):
+        idle = figures.get(f"idle_cores_{w}_workers")
         print(
             f"  n=20 (60 sorties), {w} worker(s): {figures[f'throughput_{w}_workers']:6.1f} "
-            f"sortie-s per wall s ({figures[f'wall_s_{w}_workers']:.1f} s wall)"
+            f"sortie-s per wall s ({figures[f'wall_s_{w}_workers']:.1f} s wall"
+            + ("" if idle is None else f", machine idle {idle:.2f} cores")
+            + ")"
         )
     print(
         f"  workers: the first pool's first result {figures['first_pool_ready_s']:.2f} s after "
