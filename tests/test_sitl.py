@@ -250,8 +250,11 @@ def test_detections_stopped_brake_and_hold_within_the_timeout(tmp_path, rig_fact
     anchor = before["t_s"] - before["dkf_since_det_s"]  # that detection's capture time
     assert before["t_s"] - anchor < 1.7 + 0.05, seen
     assert first["t_s"] - anchor >= 1.7 - 0.05, seen
-    # it counts from the last detection the camera delivered (telemetry's floats are 32-bit)
-    assert abs(first["raw_capture_t_s"] - anchor) < 1e-3, (anchor, first)
+    # it counts from the last detection the camera delivered, its stamp moved by the in-flight
+    # camera-offset estimate (self-calibration; telemetry's floats are 32-bit, and the
+    # estimate may move by a fraction of a millisecond after that detection)
+    moved = first["raw_capture_t_s"] - first["selfcal_offset_s"]
+    assert abs(moved - anchor) < 2e-3, (anchor, first)
     coasting = [t for t in rig.telemetry if t["state"] == 4 and t["loop_mode"] == 4]
     speeds = [np.hypot(t["vel_e_m_s"], t["vel_n_m_s"]) for t in coasting]
     assert max(speeds) > 1.0  # it was flying when the camera went dark, and coasted on
