@@ -24,12 +24,12 @@ def goto(page, station, query: str = "") -> None:
     page.wait_for_function("window.peregrine.plots.length >= 5", timeout=10000)
 
 
-def fly(station, scenario="cv-top-to-bottom", law="png", speed="max") -> str:
+def fly(station, scenario="cv-top-to-bottom", law="png", speed="max", camera="projected") -> str:
     """Fly a whole sortie through the session; the name of its recording."""
     s = station.session
-    s.start(SortieConfig(load_scenario(scenario), law, 0, "projected", speed))
+    s.start(SortieConfig(load_scenario(scenario), law, 0, camera, speed))
     name = s.recording["file"]
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 120
     while s.state != "finished":
         assert time.monotonic() < deadline, "the sortie did not finish"
         time.sleep(0.05)

@@ -4,46 +4,20 @@ controls whole at a laptop's 1280 x 800."""
 
 import json
 import math
-import time
 
 import pytest
 
 from groundstation.app.replay import FRAME_WINDOW_S
-from groundstation.app.session import SortieConfig
 from groundstation.recording.reader import iter_messages
-from groundstation.scenario import load_scenario
 
 from .browser_support import needs_chromium
-from .dashboard_support import api
+from .dashboard_support import api, fly
 
 pytestmark = needs_chromium
 
 
-@pytest.fixture
-def page(station, browser):
-    """A page whose script errors fail the test."""
-    pg = browser.new_page(viewport={"width": 1500, "height": 1100})
-    errors: list[str] = []
-    pg.on("pageerror", lambda e: errors.append(str(e)))
-    yield pg
-    pg.close()
-    assert not errors, errors
-
-
-def fly(station, law="png", camera="projected", seed=0) -> str:
-    """Fly cv-top-to-bottom whole through the session; the name of its recording."""
-    s = station.session
-    s.start(SortieConfig(load_scenario("cv-top-to-bottom"), law, seed, camera, "max"))
-    name = s.recording["file"]
-    deadline = time.monotonic() + 120
-    while s.state != "finished":
-        assert time.monotonic() < deadline, "the sortie never finished"
-        time.sleep(0.05)
-    return name
-
-
 def test_overlay_draws_each_trajectory_relative_to_its_target_in_3d(station, page):
-    names = [fly(station, law) for law in ("png", "pg")]
+    names = [fly(station, law=law) for law in ("png", "pg")]
     entries = api(station, "GET", "/api/overlay?names=" + ",".join(names))
     page.goto(station.url())
     page.goto(station.url().split("?")[0] + "overlay?names=" + ",".join(names))

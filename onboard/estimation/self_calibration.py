@@ -226,7 +226,7 @@ class SelfCalibration:
         self.size = TargetSizeEstimator(f_px, believed_diameter_m, self.config)
         self.offset = CameraOffsetEstimator(f_px, self.config)
         self._R_g = np.eye(3)  # body attitude carried by the gyro (any start)
-        self._hist: deque[tuple[float, np.ndarray]] = deque()  # (t, camera attitude R_g R_BC)
+        self._hist: deque[tuple[float, np.ndarray]] = deque()  # (t, body attitude R_g)
         self._closing: deque[tuple[float, float, int]] = deque()  # (t, S, segment)
         self._S = 0.0
         self._segment = 0  # a new one each time the line of sight comes back
@@ -267,7 +267,7 @@ class SelfCalibration:
             else:
                 self._no_los = True
         self._t_prev = t_s
-        self._hist.append((t_s, self._R_g @ self._R_BC))
+        self._hist.append((t_s, self._R_g))
         self._closing.append((t_s, math.nan if self._no_los else self._S, self._segment))
         horizon = t_s - self.config.history_s
         while len(self._hist) > 2 and self._hist[1][0] <= horizon:
@@ -337,7 +337,8 @@ class SelfCalibration:
         Rs = np.stack([h[1] for h in hist])
         k = np.clip(np.searchsorted(T, times_s, side="right") - 1, 0, len(T) - 2)
         a = (times_s - T[k]) / np.maximum(T[k + 1] - T[k], _MIN_DT_S)
-        na, nb = Rs[k] @ ray, Rs[k + 1] @ ray
+        ray_b = self._R_BC @ ray  # the camera ray in the body frame (the mount is fixed)
+        na, nb = Rs[k] @ ray_b, Rs[k + 1] @ ray_b
         return na + a[:, None] * (nb - na)
 
     def _closing_at(self, t: float) -> tuple[float, int] | None:
