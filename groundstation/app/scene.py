@@ -118,13 +118,17 @@ class SceneView:
         another's camera."""
         dd = client.gui.add_dropdown("View", VIEW_PRESETS, initial_value="fit engagement")
         self._views[client.client_id] = dd
-        fitted = []
+        fitted_aspect: list[float] = []
 
         @client.camera.on_update
-        def _(_camera) -> None:  # the first report gives the view's size: frame it then
-            if not fitted:
-                fitted.append(True)
-                self._apply_static_view(client, dd.value)
+        def _(camera) -> None:
+            # The first report gives the view's size: frame it then. A later change of size
+            # (the page laid out again, a resized window) frames it again; orbiting does not.
+            aspect = float(camera.aspect)
+            if fitted_aspect and abs(aspect - fitted_aspect[0]) <= 0.03 * fitted_aspect[0]:
+                return
+            fitted_aspect[:] = [aspect]
+            self._apply_static_view(client, dd.value)
 
         @dd.on_update
         def _(_event) -> None:
