@@ -15,7 +15,7 @@ import numpy as np
 from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 
-from ..scenario import load_scenario, with_changes
+from ..scenario import load_scenario, with_changes, with_overrides
 from . import agility
 from .aggregate import median_iqr, miss_stats, success_rate
 from .errors import CampaignError
@@ -214,6 +214,35 @@ def _summarize_outdoor(outcomes):
             "paper": PAPER["outdoor"][scenario] if law == "png" else None,
         }
     return {"cells": cells}
+
+
+# ------------------------------------------------------------------------- drag
+# The two sorties that need the speed ramp to beat the airframe's drag (docs/air.md), each
+# sortie's drag drawn in this range (N s/m-equivalent at 10 m/s): the loop believes only k_drag.
+DRAG_SCENARIOS = ("fast-crossing-50m", "climbing-turn")
+DRAG_RANGE_N_S_M = (0.25, 0.5)
+
+
+def _build_drag(n, laws, camera, seed):
+    jobs = _build_grid([("scenario", s, s) for s in DRAG_SCENARIOS], n, laws, camera, seed)
+    lo, hi = DRAG_RANGE_N_S_M
+    ranged = {"interceptor.drag_min_n_s_m": lo, "interceptor.drag_max_n_s_m": hi}
+    drawn = {name: with_overrides(load_scenario(name), ranged) for name in DRAG_SCENARIOS}
+    return [dataclasses.replace(j, scenario=drawn[dict(j.labels)["scenario"]]) for j in jobs]
+
+
+def _summarize_drag(outcomes):
+    cells = {}
+    for (scenario, law), outs in _group(outcomes, "scenario", "law").items():
+        cells.setdefault(scenario, {})[law] = {
+            **miss_stats([o.result["miss_m"] for o in outs]),
+            "success_rate": success_rate([o.result["outcome"] for o in outs]),
+            "outcomes": sorted({o.result["outcome"] for o in outs}),
+            "terminal_speed_mean_m_s": _terminal_speed(outs),
+            "intercept_time_mean_s": float(np.mean([o.result["intercept_time_s"] for o in outs])),
+            "paper": None,
+        }
+    return {"cells": cells, "drag_range_n_s_m": DRAG_RANGE_N_S_M}
 
 
 # ------------------------------------------------------------------------- envelope maps
@@ -424,6 +453,7 @@ CAMPAIGNS: dict[str, Campaign] = {
     "moving": Campaign("moving", 10, "seeds per cell", _build_moving, _summarize_moving),
     "wind": Campaign("wind", 20, "tries per wind speed", _build_wind, _summarize_wind),
     "outdoor": Campaign("outdoor", 5, "seeds per cell", _build_outdoor, _summarize_outdoor),
+    "drag": Campaign("drag", 20, "seeds per scenario", _build_drag, _summarize_drag),
     "envelope": Campaign(
         "envelope", 20, "tries per elevation x azimuth cell", _build_envelope, _summarize_envelope
     ),

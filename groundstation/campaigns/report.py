@@ -261,6 +261,7 @@ def write_report(
         "moving": lambda: _moving_plots(outcomes, out),
         "wind": lambda: _wind_plots(outcomes, summary, out),
         "outdoor": lambda: _outdoor_plots(outcomes, out),
+        "drag": lambda: _outdoor_plots(outcomes, out),
         "envelope": lambda: _envelope_plots(summary, out),
         "range": lambda: _range_plots(outcomes, summary, out),
         "agility": lambda: agility.plots(summary, out),
