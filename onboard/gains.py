@@ -94,8 +94,10 @@ class Gains:
     omega_max: float = _gain(
         4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)", "limits"
     )
+    # 1 m/s, not less: below it a GNSS-grade velocity estimate (0.1-0.2 m/s a component) does
+    # not know the velocity's direction, and PN would turn that noise into the flight path
     v_min: float = _gain(
-        0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)", "guidance"
+        1.0, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)", "guidance"
     )
     k_brake: float = _gain(
         1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)", "track loss"
