@@ -54,6 +54,11 @@ class ImmConfig:
     min_position_sigma_m: float = 0.02  # the measurement's floor per axis
     max_position_sigma_m: float = 50.0  # a measurement poorer than this (RMS per axis) is unused
     max_gap_s: float = 1.0  # a gap longer than this between updates restarts the filter
+    # the vehicle's own state estimate as the measurement sees it (1 sigma): its position's
+    # error, and its attitude's, which moves the target across the line of sight by the range
+    # times the angle (GNSS and a magnetometer's heading: decimetres and degrees)
+    pose_position_sigma_m: float = 0.3
+    pose_attitude_sigma_deg: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -103,6 +108,18 @@ def position_from_estimate(
     xn, yn = e_px[0] / f_px, e_px[1] / f_px
     rho = math.sqrt(1.0 + xn * xn + yn * yn) / range_m
     return position_from_image(xn, yn, rho, P6[:3, :3], R_WC, camera_enu_m)
+
+
+def pose_covariance_m2(rel_enu_m: np.ndarray, config: ImmConfig) -> np.ndarray:
+    """What the vehicle's own pose error adds to the target's placed position (m^2): its
+    position's variance on every axis, and its attitude's, (range sigma_att)^2, across the
+    line of sight ``rel_enu_m`` (target less camera, m)."""
+    r2 = float(rel_enu_m @ rel_enu_m)
+    cov = config.pose_position_sigma_m**2 * np.eye(3)
+    if r2 > 0.0:
+        across = np.eye(3) - np.outer(rel_enu_m, rel_enu_m) / r2
+        cov += r2 * math.radians(config.pose_attitude_sigma_deg) ** 2 * across
+    return cov
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -200,10 +217,12 @@ class TargetMotionImm:
         position_enu_m: np.ndarray,
         cov_m2: np.ndarray,
         velocity_guess_enu_m_s: np.ndarray | None = None,
+        camera_enu_m: np.ndarray | None = None,
     ) -> MotionEstimate | None:
         """Predict to ``t`` (s) and fuse the target's position (m ENU) with covariance
         ``cov_m2`` (3x3, m^2); ``velocity_guess_enu_m_s`` starts a new track's velocity (zero
-        without it). A measurement that is not finite, or poorer than ``max_position_sigma_m``,
+        without it); with ``camera_enu_m`` (where the camera believes it is) the vehicle's own
+        pose uncertainty is added (:func:`pose_covariance_m2`). A measurement that is not finite, or poorer than ``max_position_sigma_m``,
         changes nothing; a time that does not advance is ignored; a gap over ``max_gap_s``, a
         covariance gone singular or a state gone non-finite restarts the track. Returns the
         estimate."""
@@ -217,6 +236,8 @@ class TargetMotionImm:
             return self.estimate
         floor = self.config.min_position_sigma_m**2
         R = 0.5 * (R + R.T) + floor * np.eye(3)
+        if camera_enu_m is not None:
+            R = R + pose_covariance_m2(p - np.asarray(camera_enu_m, dtype=float), self.config)
         if np.trace(R) > 3.0 * self.config.max_position_sigma_m**2:
             return self.estimate  # no depth to speak of: nothing to learn of the motion
         v = np.zeros(3) if velocity_guess_enu_m_s is None else np.asarray(velocity_guess_enu_m_s)
