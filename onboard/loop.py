@@ -578,7 +578,9 @@ class InterceptionLoop:
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
                         disturbance_enu_m_s2=d_hat,
-                        target_accel_enu_m_s2=manoeuvre_accel_m_s2(motion, gains.z_off, gains.z_full),
+                        target_accel_enu_m_s2=manoeuvre_accel_m_s2(
+                            motion, gains.z_off, gains.z_full
+                        ),
                         accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
                         ),

@@ -222,10 +222,10 @@ class TargetMotionImm:
         """Predict to ``t`` (s) and fuse the target's position (m ENU) with covariance
         ``cov_m2`` (3x3, m^2); ``velocity_guess_enu_m_s`` starts a new track's velocity (zero
         without it); with ``camera_enu_m`` (where the camera believes it is) the vehicle's own
-        pose uncertainty is added (:func:`pose_covariance_m2`). A measurement that is not finite, or poorer than ``max_position_sigma_m``,
-        changes nothing; a time that does not advance is ignored; a gap over ``max_gap_s``, a
-        covariance gone singular or a state gone non-finite restarts the track. Returns the
-        estimate."""
+        pose uncertainty is added (:func:`pose_covariance_m2`). A measurement that is not
+        finite, or poorer than ``max_position_sigma_m``, changes nothing; a time that does not
+        advance is ignored; a gap over ``max_gap_s``, a covariance gone singular or a state
+        gone non-finite restarts the track. Returns the estimate."""
         p = np.asarray(position_enu_m, dtype=float)
         R = np.asarray(cov_m2, dtype=float)
         if (
