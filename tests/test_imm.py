@@ -7,7 +7,13 @@ import math
 
 import numpy as np
 
-from onboard.estimation.imm import MODELS, TargetMotionImm, position_from_image
+from onboard.estimation.imm import (
+    MODELS,
+    ImmConfig,
+    TargetMotionImm,
+    pose_covariance_m2,
+    position_from_image,
+)
 
 DT = 1.0 / 30.0  # the camera's rate
 # the DKF's position error: 5 cm across the line of sight (+y), 40 cm along it
@@ -93,3 +99,37 @@ def test_position_from_image_and_its_covariance():
     sigma_along = math.sqrt(float(along @ cov @ along))
     np.testing.assert_allclose(sigma_along, 2.0 * np.linalg.norm(ray), rtol=0.01)
     np.testing.assert_allclose(math.sqrt(float(across @ cov @ across)), 0.02, rtol=0.01)
+
+
+def test_the_pose_uncertainty_is_added_across_the_line_of_sight():
+    cfg = ImmConfig(pose_position_sigma_m=0.3, pose_attitude_sigma_deg=1.5)
+    cov = pose_covariance_m2(np.array((0.0, 20.0, 0.0)), cfg)
+    across = 0.09 + (20.0 * math.radians(1.5)) ** 2  # 0.09 + 0.274
+    np.testing.assert_allclose(np.diag(cov), (across, 0.09, across), rtol=1e-12)
+    assert abs(cov[0, 1]) < 1e-15
+
+
+def _hover_with_pose_errors(camera: bool) -> float:
+    """A hovering target 20 m north, placed from a vehicle whose believed position wanders
+    (Gauss-Markov, 0.3 m, 2 s, as a GNSS fix does) and whose heading wanders (1.5 deg) while
+    the image's own covariance says centimetres; the RMS of the estimated acceleration
+    (m/s^2) over the last 8 s."""
+    rng = np.random.default_rng(7)
+    imm = TargetMotionImm()
+    image_cov = np.diag([0.02**2, 1.0, 0.02**2])
+    err, yaw, out = np.zeros(3), 0.0, []
+    k = math.exp(-DT / 2.0)
+    for i in range(round(10.0 / DT)):
+        err = k * err + math.sqrt(1 - k * k) * 0.3 * rng.standard_normal(3)
+        yaw = k * yaw + math.sqrt(1 - k * k) * math.radians(1.5) * rng.standard_normal()
+        rel = 20.0 * np.array([-math.sin(yaw), math.cos(yaw), 0.0])  # the target, 20 m north
+        cam = np.array([0.0, 0.0, 10.0]) + err
+        e = imm.update(i * DT, cam + rel, image_cov, np.zeros(3), cam if camera else None)
+        if i * DT > 2.0:
+            out.append(np.linalg.norm(e.accel_enu_m_s2))
+    return math.sqrt(float(np.mean(np.square(out))))
+
+
+def test_the_vehicles_own_pose_errors_are_not_taken_for_a_manoeuvre():
+    assert _hover_with_pose_errors(camera=True) < 0.3
+    assert _hover_with_pose_errors(camera=False) > 1.0  # the image's covariance alone
