@@ -40,6 +40,7 @@ GAIN_GROUPS: tuple[str, ...] = (
     "attitude",
     "limits",
     "baselines (PG, IBVS)",
+    "augmented PN",
     "disturbance and latency",
     "track loss",
     "search",
@@ -311,7 +312,39 @@ class Gains:
         10.0,
         80.0,
         "APN: the airframe's tilt limit (PX4 MPC_TILTMAX_AIR), caps its lateral accel",
-        "limits",
+        "augmented PN",
+    )
+    tilt_end: float = _gain(
+        70.0,
+        "deg",
+        10.0,
+        80.0,
+        "APN: tilt allowed in the endgame (time to go under t_end), caps its lateral accel",
+        "augmented PN",
+    )
+    t_end: float = _gain(
+        1.0,
+        "s",
+        0.0,
+        5.0,
+        "APN: the endgame's time to go, in which tilt_end replaces tilt_max",
+        "augmented PN",
+    )
+    z_off: float = _gain(
+        1.0,
+        "-",
+        0.0,
+        10.0,
+        "APN: the target's acceleration within this many sigmas of its estimate is not flown",
+        "augmented PN",
+    )
+    z_full: float = _gain(
+        2.0,
+        "-",
+        0.0,
+        20.0,
+        "APN: the target's acceleration is flown whole from this many sigmas on",
+        "augmented PN",
     )
     a_z_margin: float = _gain(
         2.0,
@@ -319,7 +352,7 @@ class Gains:
         0.0,
         10.0,
         "APN: vertical acceleration kept in reserve from the thrust",
-        "limits",
+        "augmented PN",
     )
 
     def __post_init__(self) -> None:

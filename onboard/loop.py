@@ -11,7 +11,7 @@ from collections import deque
 import numpy as np
 
 from .camera_model import CameraModel
-from .control.apn import available_lateral_accel_m_s2
+from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, time_to_go_s
 from .control.attitude import command_floats
 from .control.disturbance import DisturbanceObserver, DisturbanceObserverConfig
 from .control.fov_hold import yaw_rate_command
@@ -224,8 +224,10 @@ class InterceptionLoop:
         point and inverse depth now, placed from the camera's believed pose; a lost estimate
         ends its track."""
         motion = self.motion
-        if est is None or est.lost:
+        if est is None:
             motion.reset()
+            return None
+        if est.lost:  # a dropout: the IMM keeps its track (it restarts after its own max gap)
             return None
         fused = (FusionResult.ACCEPTED, FusionResult.INITIALISED)
         dv = self.dkf.depth_velocity() if any(r in fused for r in self.last_fusion) else None
@@ -235,7 +237,7 @@ class InterceptionLoop:
         p, cov = position_from_estimate(
             est.e_px, self.camera.f_px, dv[0], dv[2], R_WC, camera_enu_m
         )
-        return motion.update(t, p, cov, dv[1])
+        return motion.update(t, p, cov, dv[1], camera_enu_m)
 
     # ------------------------------------------------------------------ track loss
     def _screening(self, t: float) -> bool:
@@ -576,9 +578,15 @@ class InterceptionLoop:
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
                         disturbance_enu_m_s2=d_hat,
-                        target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
+                        target_accel_enu_m_s2=manoeuvre_accel_m_s2(
+                            motion, gains.z_off, gains.z_full
+                        ),
                         accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
+                        ),
+                        time_to_go_s=time_to_go_s(est_range, (n0, n1, n2), v, motion),
+                        endgame_accel_limit_m_s2=available_lateral_accel_m_s2(
+                            self.vehicle.hover_thrust_normalised, gains.tilt_end, gains.a_z_margin
                         ),
                     ),
                     gains,
