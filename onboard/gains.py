@@ -303,8 +303,10 @@ class Gains:
     )
 
     # ground clearance near a low target (onboard/control/clearance.py)
+    # 1 m: twice the altitude error of a GNSS/barometer estimate (sigma up to 0.5 m); a
+    # vehicle that knows its height to centimetres (motion capture, a rangefinder) sets less
     h_clear: float = _gain(
-        0.5,
+        1.0,
         "m",
         0.0,
         100.0,

@@ -610,9 +610,9 @@ class InterceptionLoop:
         if mode is LoopMode.COAST or mode is LoopMode.REACQUIRE or mode is LoopMode.SEARCH:
             # without a live track: never descend below h_floor above home (z = 0)
             a_d = floor_guard_accel(a_d, alt, float(v[2]), gains)
-        if mode is LoopMode.TRACKING or mode is LoopMode.COAST:
+        if mode is not LoopMode.WAITING:
             # a descent the believed airframe could not stop above h_clear is braked with its
-            # upward capability (the pass of a low target; the brake modes null it anyway)
+            # upward capability (the pass of a low target and the brake after it)
             a_d = clearance_guard_accel(a_d, alt, float(v[2]), a_up, gains)
 
         # drag and disturbance feed-forward: the attitude loop flies a_d - D (D the believed

@@ -170,14 +170,14 @@ def _low_static_sortie(gains: Gains):
 
 
 def test_a_low_target_is_hit_and_the_vehicle_recovers_above_the_ground():
-    """Without the limit (k_up = 0) the vehicle passes the target diving at over 6 m/s and
-    hits the ground; with it the approach slows to about 3 m/s, hits, and the recovery stops
-    the descent about 1 m above the ground (h_clear 0.5 m below the target's 1.43 m)."""
+    """Without the limit (k_up = 0) the vehicle passes the target at over 10 m/s, diving at
+    over 6 m/s, and hits the ground; with it the approach slows to about 2 m/s, hits, and the
+    recovery stops the descent above h_clear (1 m; the target is at 1.43 m)."""
     off = _low_static_sortie(Gains(k_up=0.0))
     assert off.outcome == "CRASHED" and off.miss_m < off.hit_radius_m
     on = _low_static_sortie(Gains())
     assert on.outcome == "HIT" and on.recovered
     assert on.miss_m < 0.1
-    assert 2.0 < on.terminal_speed_m_s < 4.5  # off: over 10 m/s
+    assert 1.5 < on.terminal_speed_m_s < 3.0
     assert off.terminal_speed_m_s > 10.0
-    assert on.min_alt_after_pass_m > 0.6
+    assert on.min_alt_after_pass_m > 1.0
