@@ -305,6 +305,43 @@ class Gains:
         "limits",
     )
 
+    # ground clearance near a low target (onboard/control/clearance.py)
+    # 1 m: twice the altitude error of a GNSS/barometer estimate (sigma up to 0.5 m); a
+    # vehicle that knows its height to centimetres (motion capture, a rangefinder) sets less
+    h_clear: float = _gain(
+        1.0,
+        "m",
+        0.0,
+        100.0,
+        "low targets: stop a descent this high above home (approach speed, recovery)",
+        "limits",
+    )
+    k_up: float = _gain(
+        0.5,
+        "-",
+        0.0,
+        1.0,
+        "low targets: part of the believed airframe's upward accel (TW-1)g used (0 = off)",
+        "limits",
+    )
+    t_up_lag: float = _gain(
+        0.25,
+        "s",
+        0.0,
+        2.0,
+        "low targets: response lag before an upward command acts on the descent",
+        "limits",
+    )
+
+    v_tgt_sink: float = _gain(
+        1.0,
+        "m/s",
+        0.0,
+        20.0,
+        "low targets: fastest sink of the target assumed between range estimates",
+        "limits",
+    )
+
     # the augmented law's command limit from the airframe (onboard/control/apn.py)
     tilt_max: float = _gain(
         45.0,

@@ -13,6 +13,11 @@ import numpy as np
 from .camera_model import CameraModel
 from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, time_to_go_s
 from .control.attitude import command_floats
+from .control.clearance import (
+    clearance_guard_accel,
+    track_speed_cap_m_s,
+    upward_accel_m_s2,
+)
 from .control.disturbance import DisturbanceObserver, DisturbanceObserverConfig
 from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
@@ -72,14 +77,18 @@ ATTITUDE_JUMP_MAX_PERIODS = 2.0
 ATTITUDE_STALE_S = 1e-6
 
 
-def brake_accel(velocity_enu_m_s: np.ndarray, gains: Gains) -> np.ndarray:
+def brake_accel(
+    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
+) -> np.ndarray:
     """Brake and hold (after the pass, on an abort, with the target lost): the vertical
-    velocity nulled first (``k_brake_z``, up to ``a_max``: a vehicle diving through a low
-    target must not reach the ground), the horizontal with ``k_brake`` in what is left of
-    ``a_max`` (m/s^2, ENU)."""
+    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
+    the believed airframe's upward capability, :func:`.control.clearance.upward_accel_m_s2`;
+    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
+    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
     v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
     a_max = gains.a_max
-    az = min(max(-gains.k_brake_z * v2, -a_max), a_max)
+    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
+    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
     room = math.sqrt(max(a_max * a_max - az * az, 0.0))
     ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
     n = math.hypot(ax, ay)
@@ -137,6 +146,8 @@ class InterceptionLoop:
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
+        self.speed_cap_m_s = math.inf  # the last tick's approach speed limit (clearance.py)
+        self._target_low_m = -math.inf  # the target's lowest height held over the track
         self.acquired = False
         # track loss and search (onboard/control/reacquire.py)
         self.screen = DetectionScreen()
@@ -503,12 +514,15 @@ class InterceptionLoop:
         yaw_rate = 0.0
         mode = self._next_mode(t, est)
         self.mode = mode
+        a_up = upward_accel_m_s2(self.vehicle.hover_thrust_normalised, gains.k_up)
+        alt = float(state.position_enu_m[2])
         if brake:
             mode = LoopMode.BRAKE
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
             self._dq_flown = _NO_FLOWN
             self._los_prev = None  # no line of sight for the size estimate's displacement
+            self._target_low_m = -math.inf
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -524,7 +538,7 @@ class InterceptionLoop:
                 self._search_cue, R_WC[:, 2], self._search_dir, gains, t - self._search_start_s
             )
         elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
-            a_d = brake_accel(v, gains)  # brake and hold
+            a_d = brake_accel(v, gains, a_up)  # brake and hold
             if est is not None and not est.lost:
                 e_est, e_rate = est.e_px, est.e_rate_px_s
         else:  # tracking, or coasting on the prediction: the guidance law
@@ -552,21 +566,25 @@ class InterceptionLoop:
             self._los_prev = np.array((n0, n1, n2))
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
+            # the approach's speed near the ground (control/clearance.py)
+            dv = self.dkf.depth_velocity()
+            v_cap, self._target_low_m = track_speed_cap_m_s(
+                self._target_low_m, dt, alt, (n0, n1, n2), vf, e_n, dv, a_up, gains
+            )
+            self.speed_cap_m_s = v_cap
             mean_range = est_range if gains.tau_zem > 0.0 else None
             # within r_mid the midcourse weight is 0 whatever the covariance: skip computing it
-            if mean_range is not None and mean_range > gains.r_mid:
-                dv = self.dkf.depth_velocity()
-                if dv is not None:
-                    # the range the DKF is confident of: its inverse depth one sigma high
-                    # (a poorly known depth must not switch the midcourse term on)
-                    rng, v_t, P = dv
-                    rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
-                    range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
-                    var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
+            if mean_range is not None and mean_range > gains.r_mid and dv is not None:
+                # the range the DKF is confident of: its inverse depth one sigma high
+                # (a poorly known depth must not switch the midcourse term on)
+                rng, v_t, P = dv
+                rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
+                range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(
                     hold, (n0, n1, n2), q_y, dq_y, dq_z, vf, R_WC, self.fov_edges_rad,
-                    range_m, v_t, var_v, gains, d_hat,
+                    range_m, v_t, var_v, gains, d_hat, v_cap,
                 )  # fmt: skip
                 a_d = np.array((a0, a1, a2))
             else:
@@ -588,6 +606,7 @@ class InterceptionLoop:
                         endgame_accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_end, gains.a_z_margin
                         ),
+                        speed_cap_m_s=v_cap,
                     ),
                     gains,
                 )
@@ -598,7 +617,11 @@ class InterceptionLoop:
 
         if mode is LoopMode.COAST or mode is LoopMode.REACQUIRE or mode is LoopMode.SEARCH:
             # without a live track: never descend below h_floor above home (z = 0)
-            a_d = floor_guard_accel(a_d, float(state.position_enu_m[2]), float(v[2]), gains)
+            a_d = floor_guard_accel(a_d, alt, float(v[2]), gains)
+        if mode is not LoopMode.WAITING:
+            # a descent the believed airframe could not stop above h_clear is braked with its
+            # upward capability (the pass of a low target and the brake after it)
+            a_d = clearance_guard_accel(a_d, alt, float(v[2]), a_up, gains)
 
         # drag and disturbance feed-forward: the attitude loop flies a_d - D (D the believed
         # drag plus d^; its part normal to v in flight, the along-track part being the speed

@@ -105,6 +105,7 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
         lim = max(lim, inp.endgame_accel_limit_m_s2)
     G = gains.packed.copy()
     G[GainIndex.a_max] = lim
+    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s)
     vt = inp.target_vel_enu_m_s
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
     R = inp.R_WC

@@ -46,6 +46,9 @@ class GuidanceInput:
     # airframe's limit in the endgame (m/s^2; nan: accel_limit_m_s2): the augmented law's
     time_to_go_s: float = math.nan
     endgame_accel_limit_m_s2: float = math.nan
+    # the speed ramp's reference at most this (m/s; inf: v_max alone), the approach's limit
+    # near the ground (onboard/control/clearance.py)
+    speed_cap_m_s: float = math.inf
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer
