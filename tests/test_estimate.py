@@ -18,7 +18,8 @@ from groundstation.scenario import (
     scenario_toml,
     with_overrides,
 )
-from groundstation.sim.estimate import DelayLine, GaussMarkov, RandomWalk, StateEstimateModel
+from groundstation.sim.estimate import DelayLine, StateEstimateModel
+from groundstation.sim.random_processes import GaussMarkov, RandomWalk
 from groundstation.sim.simulation import Simulation, run_sortie
 from onboard.datatypes import Detection, VehicleState
 

@@ -28,6 +28,7 @@ from groundstation.cli import main
 from onboard.gains import GAIN_SPECS, Gains
 
 from .as_written import AS_WRITTEN
+from .cli_support import run_cli
 
 TARGET = "static-ahead-20m,cv-top-to-bottom"  # two short sorties per seed
 
@@ -174,16 +175,11 @@ def _args(tmp_path, *extra, trials=2, out="r"):
 
 def _tune(tmp_path, capsys, *extra, trials=2, out="r", check=True):
     """Run ``groundstation tune`` in this process; its JSON, or (status, stderr)."""
-    capsys.readouterr()
-    try:
-        code = main(_args(tmp_path, *extra, trials=trials, out=out))
-    except SystemExit as exc:  # argparse's usage errors
-        code = exc.code
-    captured = capsys.readouterr()
+    code, out, err = run_cli(main, _args(tmp_path, *extra, trials=trials, out=out), capsys)
     if check:
-        assert code == 0, captured.err
-        return json.loads(captured.out)
-    return code, captured.err
+        assert code == 0, err
+        return json.loads(out)
+    return code, err
 
 
 def _spawn(tmp_path, trials, out):
@@ -303,11 +299,7 @@ def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
 )
 def test_bad_tune_options_are_one_line_and_exit_2(args, message, tmp_path, capsys):
     cmd = ["tune", "wind", "--gains", "K_y", "--n", "1", "--data-dir", str(tmp_path / "data")]
-    try:
-        code = main([*cmd, "--out", str(tmp_path / "x"), *args])
-    except SystemExit as exc:
-        code = exc.code
-    err = capsys.readouterr().err
+    code, _, err = run_cli(main, [*cmd, "--out", str(tmp_path / "x"), *args], capsys)
     assert code == 2, err
     assert message in err.strip().splitlines()[-1] and "Traceback" not in err
     assert not (tmp_path / "x").exists() and not (tmp_path / "data" / "gainsets").exists()
