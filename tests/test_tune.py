@@ -250,7 +250,8 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, c
 
 
 def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
-    p = _spawn(tmp_path, 8, "r")
+    TRIALS = 5  # the crash leaves at most TRIALS - 1 done: the two processes share the rest
+    p = _spawn(tmp_path, TRIALS, "r")
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         try:
@@ -263,9 +264,9 @@ def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
     p.communicate()
     crashed = _trials(tmp_path)
     n_complete = sum(s == "COMPLETE" for _, s in crashed)
-    assert 1 <= n_complete < 8
+    assert 1 <= n_complete < TRIALS
     # two processes at once on the same study finish it together
-    a, b = (_spawn(tmp_path, 8, f"w{k}") for k in range(2))
+    a, b = (_spawn(tmp_path, TRIALS, f"w{k}") for k in range(2))
     for proc in (a, b):
         _, err = proc.communicate(timeout=300)
         assert proc.returncode == 0, err
@@ -273,7 +274,8 @@ def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
     numbers = [n for n, _ in rows]
     assert numbers == list(range(len(rows)))  # one row per trial, none flown twice
     complete = sum(s == "COMPLETE" for _, s in rows)
-    assert 8 <= complete <= 9  # the two stop together at the target (one may overshoot by one)
+    # the two stop together at the target (one may overshoot by one)
+    assert TRIALS <= complete <= TRIALS + 1
     assert [r for r in rows[: len(crashed)] if r[1] == "COMPLETE"] == [
         r for r in crashed if r[1] == "COMPLETE"
     ]
