@@ -46,6 +46,7 @@ def test_static_targets_are_seeded_and_inside_the_view():
         assert 15 <= r <= 35 and z >= 1.0 and y > 0
 
 
+@pytest.mark.early
 def test_results_identical_whatever_the_worker_count():
     jobs = build_jobs("static", n=2, laws=("png", "pg"), seed=5)  # 4 jobs over 2 workers
     one = LocalPoolRunner(1).run(jobs)
@@ -83,6 +84,7 @@ def test_parse_laws():
         parse_laws("png,png")
 
 
+@pytest.mark.early
 def test_moving_campaign_end_to_end(tmp_path):
     out = tmp_path / "moving"
     r = subprocess.run(
@@ -132,6 +134,7 @@ def test_moving_campaign_end_to_end(tmp_path):
     assert "(0.71)" in report and "cv-top-to-bottom" in report  # the paper's PG number beside ours
 
 
+@pytest.mark.early
 def test_static_campaign_png_centimetre_cep_beats_ibvs(tmp_path):
     res = run_campaign(
         "static",
@@ -174,6 +177,7 @@ def test_override_reaches_every_sortie_and_the_report(tmp_path):
     assert literal["outcomes"][0].result["max_normal_accel_m_s2"] > 4.5  # saturates (a_max 5)
 
 
+@pytest.mark.early
 def test_wind_campaign_png_always_hits_in_still_air(tmp_path):
     res = run_campaign(
         "wind",
@@ -197,6 +201,7 @@ def test_wind_campaign_png_always_hits_in_still_air(tmp_path):
     assert (tmp_path / "w" / "success_rate.png").exists()
 
 
+@pytest.mark.early
 def test_outdoor_campaign_reports_speed(tmp_path):
     res = run_campaign(
         "outdoor",

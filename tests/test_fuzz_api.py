@@ -34,6 +34,7 @@ def api_schema(station):
     return schemathesis.openapi.from_asgi("/openapi.json", station.app, headers=auth)
 
 
+@pytest.mark.early
 def test_rest_api_gives_no_server_error_and_keeps_its_schema(api_schema, station, fuzz_summary):
     """Every operation of the document: up to EXAMPLES generated requests each, valid and
     invalid ones (seeded)."""

@@ -90,6 +90,7 @@ def _cli_json(capsys, *args) -> str:
     return out
 
 
+@pytest.mark.early
 @pytest.mark.parametrize("camera", ["projected", "rendered"])
 def test_same_scenario_and_seed_give_identical_json(camera, capsys):
     args = ("sm-tailgate", "--seed", "7", "--camera", camera)

@@ -198,6 +198,7 @@ def _params(tmp_path):
     return sorted(rows)
 
 
+@pytest.mark.early
 def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, capsys):
     first = _tune(tmp_path, capsys, trials=2)
     meta, figs = first["meta"], first["figures"]
@@ -249,6 +250,7 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, c
     assert not (tmp_path / "r4").exists()
 
 
+@pytest.mark.early
 def test_a_killed_study_resumes_and_two_processes_share_one(tmp_path):
     TRIALS = 5  # the crash leaves at most TRIALS - 1 done: the two processes share the rest
     p = _spawn(tmp_path, TRIALS, "r")
