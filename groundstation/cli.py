@@ -91,7 +91,9 @@ def _build_parser() -> argparse.ArgumentParser:
     add_sitl_parser(sub)
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
-    c.add_argument("name", help="static | moving | wind | outdoor | envelope | range | agility")
+    c.add_argument(
+        "name", help="static | moving | wind | outdoor | drag | size | envelope | range | agility"
+    )
     c.add_argument(
         "--n", type=COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"
     )

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from groundstation.campaigns import LocalPoolRunner
-from groundstation.campaigns.definitions import (
-    _build_envelope,
-    _summarize_envelope,
+from groundstation.campaigns.maps import (
+    build_envelope,
     envelope_target,
     range_metrics,
+    summarize_envelope,
     zem_series,
 )
 from groundstation.campaigns.plots import envelope_grid
@@ -312,14 +312,14 @@ def test_zem_of_a_straight_pass():
 
 
 def test_envelope_map_of_a_tiny_campaign(tmp_path):
-    jobs = _build_envelope(1, ("png",), "projected", 0, elevations=(0.0, 30.0), azimuths=(0.0,))
+    jobs = build_envelope(1, ("png",), "projected", 0, elevations=(0.0, 30.0), azimuths=(0.0,))
     assert [j.labels for j in jobs] == [
         (("elev_deg", 0.0), ("azim_deg", 0.0), ("law", "png"), ("try", 0)),
         (("elev_deg", 30.0), ("azim_deg", 0.0), ("law", "png"), ("try", 0)),
     ]
     jobs = [dataclasses.replace(j, scenario=as_written(j.scenario)) for j in jobs]
     outcomes = LocalPoolRunner(1).run(jobs)
-    summary = _summarize_envelope(outcomes)
+    summary = summarize_envelope(outcomes)
     grid, rows, cols = envelope_grid(summary, "png", "success_rate")
     assert grid.shape == (2, 1) and rows == ["0", "30"] and cols == ["0"]
     assert np.array_equal(grid, [[1.0], [1.0]])

@@ -166,11 +166,11 @@ def test_range_sortie_nulls_the_zem_within_seconds():
     after it, 88 m away (the paper's PN, tau_zem = 0: 6.88 s, 60 m away), a hit (0.014 m)."""
     import dataclasses
 
-    from groundstation.campaigns.definitions import _build_range, range_metrics
+    from groundstation.campaigns.maps import build_range, range_metrics
     from groundstation.campaigns.runner import run_job
     from groundstation.scenario import with_overrides
 
-    job = next(j for j in _build_range(1, ("png",), "projected", 0) if j.labels[0][1] == 100)
+    job = next(j for j in build_range(1, ("png",), "projected", 0) if j.labels[0][1] == 100)
     # pinned to what it was written for: ideal sensors and a detector without its range limit
     # (the 3.2 px minimum blob sees a 0.3 m balloon from about 30 m only)
     job = dataclasses.replace(

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.campaigns.definitions import _build_range
+from groundstation.campaigns.maps import build_range
 from groundstation.recording.reader import iter_messages
 from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import parse_overrides, with_overrides
@@ -150,7 +150,7 @@ def test_a_false_blob_at_the_start_is_dropped_for_the_target():
 def test_search_flies_the_launch_course_into_detection_range():
     # the range campaign's 50 m target with a 3 px minimum blob (seen from 32 m): the loop
     # waits 0.5 s, searches along its launch course at v_search, acquires and hits
-    (job,) = [j for j in _build_range(1, ("png",), "projected", 0) if j.labels[0][1] == 50]
+    (job,) = [j for j in build_range(1, ("png",), "projected", 0) if j.labels[0][1] == 50]
     sc = with_overrides(as_written(job.scenario), parse_overrides(["camera.min_blob_px=3"]))
     sim = Simulation(sc, "png", seed=job.seed, keep_records=False)
     ticks = _fly(sim)

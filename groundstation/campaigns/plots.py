@@ -395,7 +395,7 @@ def _envelope_plots(summary, out: Path) -> list[str]:
 
 
 def _range_plots(outcomes, summary, out: Path) -> list[str]:
-    from .definitions import ZEM_LIMIT_M, acquisition, zem_series
+    from .maps import ZEM_LIMIT_M, acquisition, zem_series
 
     plots: list[str] = []
     cells = summary["cells"]

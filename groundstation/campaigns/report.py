@@ -50,6 +50,23 @@ def _md_static(summary, outcomes) -> str:
             f"{_fmt(s['p90_m'])} m | {_fmt(s['max_m'])} m | {100 * s['success_rate']:.0f} % | "
             f"{_fmt(s['terminal_speed_mean_m_s'], 2)} m/s | {_fmt(s['paper_cep_m'])} |"
         )
+    sides = [
+        (law, side, s[side])
+        for law, s in summary["laws"].items()
+        for side in ("believed_smaller", "believed_larger")
+        if side in s
+    ]
+    if sides:
+        lines += [
+            "",
+            "| law | believed size | n | HIT rate | CEP | max |",
+            "|---|---|---|---|---|---|",
+        ]
+        for law, side, c in sides:
+            lines.append(
+                f"| {LAW_NAMES.get(law, law)} | {side.split('_')[1]} than true | {c['n']} | "
+                f"{100 * c['success_rate']:.0f} % | {_fmt(c['cep_m'])} m | {_fmt(c['max_m'])} m |"
+            )
     lines.append(f"\nPaper: {summary['paper_note']}.\n\nEvery miss (m):\n")
     laws = _laws_of(outcomes)
     lines.append("| target | position (m) | " + " | ".join(laws) + " |")
@@ -207,7 +224,7 @@ def _md_range(summary) -> str:
 
 
 def tables_markdown(name: str, summary: dict[str, Any], outcomes: list[SortieOutcome]) -> str:
-    if name == "static":
+    if name in ("static", "size"):
         return _md_static(summary, outcomes)
     if name == "moving":
         return _md_moving(summary)
@@ -261,6 +278,8 @@ def write_report(
         "moving": lambda: _moving_plots(outcomes, out),
         "wind": lambda: _wind_plots(outcomes, summary, out),
         "outdoor": lambda: _outdoor_plots(outcomes, out),
+        "drag": lambda: _outdoor_plots(outcomes, out),
+        "size": lambda: _static_plots(outcomes, out),
         "envelope": lambda: _envelope_plots(summary, out),
         "range": lambda: _range_plots(outcomes, summary, out),
         "agility": lambda: agility.plots(summary, out),

@@ -28,9 +28,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from filterpy.kalman import IMMEstimator, KalmanFilter
+
+if TYPE_CHECKING:  # filterpy pulls in scipy (about 1.5 s): imported when a track starts
+    from filterpy.kalman import IMMEstimator
 
 MODELS = ("cv", "ca", "ct")  # the models, in the order of every probability vector
 
@@ -164,6 +167,8 @@ class TargetMotionImm:
         self.estimate = None
 
     def _start(self, t: float, p: np.ndarray, R: np.ndarray, v: np.ndarray) -> None:
+        from filterpy.kalman import IMMEstimator, KalmanFilter
+
         cfg = self.config
         filters = []
         for _ in MODELS:
