@@ -153,7 +153,7 @@ def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
     tick before the pass completes; the vehicle is on it (a balloon bursts on contact), so the
     sortie is a hit. Out of contact the same loss ends the sortie as TARGET_LOST."""
     sim = Simulation(load_scenario("static-ahead-20m"), law="png", seed=0)
-    sim.loop.acquired = True
+    sim.loop.ladder.acquired = True
     sim.loop.mode = LoopMode.LOST  # the loop's failsafe: its search is over
     sim.miss_m = 0.02  # closest approach so far: inside the hit radius
     assert not sim._check_loop_outcome(1.0) and sim.outcome is None
