@@ -40,6 +40,7 @@ GAIN_GROUPS: tuple[str, ...] = (
     "attitude",
     "limits",
     "baselines (PG, IBVS)",
+    "augmented PN",
     "disturbance and latency",
     "track loss",
     "search",
@@ -94,8 +95,10 @@ class Gains:
     omega_max: float = _gain(
         4.0, "rad/s", 0.1, 10.0, "body-rate command norm limit (eq. 24)", "limits"
     )
+    # 1 m/s, not less: below it a GNSS-grade velocity estimate (0.1-0.2 m/s a component) does
+    # not know the velocity's direction, and PN would turn that noise into the flight path
     v_min: float = _gain(
-        0.5, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)", "guidance"
+        1.0, "m/s", 0.05, 5.0, "below this speed fly along the LOS (no PNG)", "guidance"
     )
     k_brake: float = _gain(
         1.0, "1/s", 0.1, 5.0, "velocity gain when holding (no/lost target)", "track loss"
@@ -302,6 +305,43 @@ class Gains:
         "limits",
     )
 
+    # ground clearance near a low target (onboard/control/clearance.py)
+    # 1 m: twice the altitude error of a GNSS/barometer estimate (sigma up to 0.5 m); a
+    # vehicle that knows its height to centimetres (motion capture, a rangefinder) sets less
+    h_clear: float = _gain(
+        1.0,
+        "m",
+        0.0,
+        100.0,
+        "low targets: stop a descent this high above home (approach speed, recovery)",
+        "limits",
+    )
+    k_up: float = _gain(
+        0.5,
+        "-",
+        0.0,
+        1.0,
+        "low targets: part of the believed airframe's upward accel (TW-1)g used (0 = off)",
+        "limits",
+    )
+    t_up_lag: float = _gain(
+        0.25,
+        "s",
+        0.0,
+        2.0,
+        "low targets: response lag before an upward command acts on the descent",
+        "limits",
+    )
+
+    v_tgt_sink: float = _gain(
+        1.0,
+        "m/s",
+        0.0,
+        20.0,
+        "low targets: fastest sink of the target assumed between range estimates",
+        "limits",
+    )
+
     # the augmented law's command limit from the airframe (onboard/control/apn.py)
     tilt_max: float = _gain(
         45.0,
@@ -309,7 +349,39 @@ class Gains:
         10.0,
         80.0,
         "APN: the airframe's tilt limit (PX4 MPC_TILTMAX_AIR), caps its lateral accel",
-        "limits",
+        "augmented PN",
+    )
+    tilt_end: float = _gain(
+        70.0,
+        "deg",
+        10.0,
+        80.0,
+        "APN: tilt allowed in the endgame (time to go under t_end), caps its lateral accel",
+        "augmented PN",
+    )
+    t_end: float = _gain(
+        1.0,
+        "s",
+        0.0,
+        5.0,
+        "APN: the endgame's time to go, in which tilt_end replaces tilt_max",
+        "augmented PN",
+    )
+    z_off: float = _gain(
+        1.0,
+        "-",
+        0.0,
+        10.0,
+        "APN: the target's acceleration within this many sigmas of its estimate is not flown",
+        "augmented PN",
+    )
+    z_full: float = _gain(
+        2.0,
+        "-",
+        0.0,
+        20.0,
+        "APN: the target's acceleration is flown whole from this many sigmas on",
+        "augmented PN",
     )
     a_z_margin: float = _gain(
         2.0,
@@ -317,7 +389,7 @@ class Gains:
         0.0,
         10.0,
         "APN: vertical acceleration kept in reserve from the thrust",
-        "limits",
+        "augmented PN",
     )
 
     def __post_init__(self) -> None:

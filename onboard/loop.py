@@ -10,8 +10,13 @@ import math
 import numpy as np
 
 from .camera_model import CameraModel
-from .control.apn import available_lateral_accel_m_s2
+from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, time_to_go_s
 from .control.attitude import command_floats
+from .control.clearance import (
+    clearance_guard_accel,
+    track_speed_cap_m_s,
+    upward_accel_m_s2,
+)
 from .control.disturbance import DisturbanceObserver, DisturbanceObserverConfig
 from .control.fov_hold import yaw_rate_command
 from .control.guidance import (
@@ -61,14 +66,18 @@ _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's L
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 
 
-def brake_accel(velocity_enu_m_s: np.ndarray, gains: Gains) -> np.ndarray:
+def brake_accel(
+    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
+) -> np.ndarray:
     """Brake and hold (after the pass, on an abort, with the target lost): the vertical
-    velocity nulled first (``k_brake_z``, up to ``a_max``: a vehicle diving through a low
-    target must not reach the ground), the horizontal with ``k_brake`` in what is left of
-    ``a_max`` (m/s^2, ENU)."""
+    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
+    the believed airframe's upward capability, :func:`.control.clearance.upward_accel_m_s2`;
+    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
+    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
     v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
     a_max = gains.a_max
-    az = min(max(-gains.k_brake_z * v2, -a_max), a_max)
+    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
+    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
     room = math.sqrt(max(a_max * a_max - az * az, 0.0))
     ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
     n = math.hypot(ax, ay)
@@ -122,6 +131,8 @@ class InterceptionLoop:
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
+        self.speed_cap_m_s = math.inf  # the last tick's approach speed limit (clearance.py)
+        self._target_low_m = -math.inf  # the target's lowest height held over the track
         self.ladder = TrackLossLadder(camera, self.dkf)  # track loss, re-acquisition, search
         self.mode = LoopMode.WAITING
         self.disturbance = DisturbanceObserver(
@@ -136,24 +147,12 @@ class InterceptionLoop:
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
         self._dq_flown = _NO_FLOWN  # the last command's (dq_y, dq_z, hold_s) (los_terms)
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
-        # the image's top/bottom edges above body x (upright: a portrait camera's long side)
-        roll = math.radians(camera.mount_roll_deg)
-        half_v = math.atan(
-            (abs(math.cos(roll)) * camera.height_px + abs(math.sin(roll)) * camera.width_px)
-            / (2.0 * camera.f_px)
-        )
-        pitch = math.radians(camera.mount_pitch_deg)
-        self.fov_edges_rad = (pitch + half_v, pitch - half_v)
+        self.fov_edges_rad = camera.fov_edges_rad  # the image's top and bottom above body x
 
     @property
     def last_tick_time_s(self) -> float | None:
         """Time of the last tick, or None before the first."""
         return self._prev_time_s
-
-    @property
-    def acquired(self) -> bool:
-        """Has a track been live since the start?"""
-        return self.ladder.acquired
 
     # ------------------------------------------------------------------ inputs
     def set_gains(self, gains: Gains) -> None:
@@ -174,18 +173,9 @@ class InterceptionLoop:
         self.gyro_turn.add(sample.rates_flu_rad_s)
 
     def on_detection(self, detection: Detection) -> None:
-        """Queue a detection (the lens's pixels) for the next tick: undistorted with the
-        camera calibration the loop believes (a clipped blob's box is left as the detector saw
-        it: the DKF reads it only to know whether the blob is whole)."""
-        cam = self.camera
-        if cam.distorted:
-            d = detection
-            try:
-                u, v = cam.undistort_px(float(d.center_px[0]), float(d.center_px[1]))
-            except (TypeError, ValueError, IndexError):
-                u = v = math.nan  # the DKF refuses it
-            detection = Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
-        self._detections.append(detection)
+        """Queue a detection (the lens's pixels) for the next tick, undistorted with the
+        camera calibration the loop believes (:meth:`.CameraModel.undistorted`)."""
+        self._detections.append(self.camera.undistorted(detection))
 
     def _track_motion(
         self,
@@ -199,8 +189,10 @@ class InterceptionLoop:
         point and inverse depth now, placed from the camera's believed pose; a lost estimate
         ends its track."""
         motion = self.motion
-        if est is None or est.lost:
+        if est is None:
             motion.reset()
+            return None
+        if est.lost:  # a dropout: the IMM keeps its track (it restarts after its own max gap)
             return None
         fused = (FusionResult.ACCEPTED, FusionResult.INITIALISED)
         dv = self.dkf.depth_velocity() if any(r in fused for r in self.last_fusion) else None
@@ -210,7 +202,7 @@ class InterceptionLoop:
         p, cov = position_from_estimate(
             est.e_px, self.camera.f_px, dv[0], dv[2], R_WC, camera_enu_m
         )
-        return motion.update(t, p, cov, dv[1])
+        return motion.update(t, p, cov, dv[1], camera_enu_m)
 
     def fuse_detections(self) -> list[FusionResult]:
         """Fuse the detections handed in so far into the DKF now, against its last prediction,
@@ -355,12 +347,15 @@ class InterceptionLoop:
         yaw_rate = 0.0
         mode = ladder.next_mode(t, est, v, gains)
         self.mode = mode
+        a_up = upward_accel_m_s2(self.vehicle.hover_thrust_normalised, gains.k_up)
+        alt = float(state.position_enu_m[2])
         if brake:
             mode = LoopMode.BRAKE
         if mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             self._dq_filt = _NAN2
             self._dq_flown = _NO_FLOWN
             self._los_prev = None  # no line of sight for the size estimate's displacement
+            self._target_low_m = -math.inf
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -376,7 +371,7 @@ class InterceptionLoop:
                 ladder.search_cue, R_WC[:, 2], ladder.search_dir, gains, t - ladder.search_start_s
             )
         elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
-            a_d = brake_accel(v, gains)  # brake and hold
+            a_d = brake_accel(v, gains, a_up)  # brake and hold
             if est is not None and not est.lost:
                 e_est, e_rate = est.e_px, est.e_rate_px_s
         else:  # tracking, or coasting on the prediction: the guidance law
@@ -404,21 +399,25 @@ class InterceptionLoop:
             self._los_prev = np.array((n0, n1, n2))
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
+            # the approach's speed near the ground (control/clearance.py)
+            dv = self.dkf.depth_velocity()
+            v_cap, self._target_low_m = track_speed_cap_m_s(
+                self._target_low_m, dt, alt, (n0, n1, n2), vf, e_n, dv, a_up, gains
+            )
+            self.speed_cap_m_s = v_cap
             mean_range = est_range if gains.tau_zem > 0.0 else None
             # within r_mid the midcourse weight is 0 whatever the covariance: skip computing it
-            if mean_range is not None and mean_range > gains.r_mid:
-                dv = self.dkf.depth_velocity()
-                if dv is not None:
-                    # the range the DKF is confident of: its inverse depth one sigma high
-                    # (a poorly known depth must not switch the midcourse term on)
-                    rng, v_t, P = dv
-                    rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
-                    range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
-                    var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
+            if mean_range is not None and mean_range > gains.r_mid and dv is not None:
+                # the range the DKF is confident of: its inverse depth one sigma high
+                # (a poorly known depth must not switch the midcourse term on)
+                rng, v_t, P = dv
+                rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
+                range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(
                     hold, (n0, n1, n2), q_y, dq_y, dq_z, vf, R_WC, self.fov_edges_rad,
-                    range_m, v_t, var_v, gains, d_hat,
+                    range_m, v_t, var_v, gains, d_hat, v_cap,
                 )  # fmt: skip
                 a_d = np.array((a0, a1, a2))
             else:
@@ -430,10 +429,17 @@ class InterceptionLoop:
                         target_vel_enu_m_s=v_t,
                         target_vel_var_m2_s2=var_v,
                         disturbance_enu_m_s2=d_hat,
-                        target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
+                        target_accel_enu_m_s2=manoeuvre_accel_m_s2(
+                            motion, gains.z_off, gains.z_full
+                        ),
                         accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
                         ),
+                        time_to_go_s=time_to_go_s(est_range, (n0, n1, n2), v, motion),
+                        endgame_accel_limit_m_s2=available_lateral_accel_m_s2(
+                            self.vehicle.hover_thrust_normalised, gains.tilt_end, gains.a_z_margin
+                        ),
+                        speed_cap_m_s=v_cap,
                     ),
                     gains,
                 )
@@ -444,7 +450,11 @@ class InterceptionLoop:
 
         if mode is LoopMode.COAST or mode is LoopMode.REACQUIRE or mode is LoopMode.SEARCH:
             # without a live track: never descend below h_floor above home (z = 0)
-            a_d = floor_guard_accel(a_d, float(state.position_enu_m[2]), float(v[2]), gains)
+            a_d = floor_guard_accel(a_d, alt, float(v[2]), gains)
+        if mode is not LoopMode.WAITING:
+            # a descent the believed airframe could not stop above h_clear is braked with its
+            # upward capability (the pass of a low target and the brake after it)
+            a_d = clearance_guard_accel(a_d, alt, float(v[2]), a_up, gains)
 
         # drag and disturbance feed-forward: the attitude loop flies a_d - D (D the believed
         # drag plus d^; its part normal to v in flight, the along-track part being the speed

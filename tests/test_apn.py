@@ -10,8 +10,15 @@ import numpy as np
 import pytest
 
 from onboard.constants import GRAVITY_M_S2
-from onboard.control.apn import apn_law, apn_term, available_lateral_accel_m_s2
+from onboard.control.apn import (
+    apn_law,
+    apn_term,
+    available_lateral_accel_m_s2,
+    manoeuvre_accel_m_s2,
+    time_to_go_s,
+)
 from onboard.control.guidance import GuidanceInput, direction_angles
+from onboard.estimation.imm import MotionEstimate
 from onboard.gains import Gains
 from onboard.geometry import wrap_pi
 
@@ -89,3 +96,51 @@ def test_apn_intercepts_a_constant_acceleration_target_as_linear_theory_says():
     miss_pn, _ = _intercept(False, 6.0, limit)
     assert miss_apn < 0.1 and miss_pn > 1.0
     assert cmd_apn.max() <= limit
+
+
+def _motion(accel, var, velocity=(0.0, 0.0, 0.0)):
+    return MotionEstimate(0.0, accel, velocity, var, (0.5, 0.3, 0.2))
+
+
+def test_an_acceleration_within_its_noise_is_not_flown():
+    # sigma = sqrt(0.75 / 3) = 0.5 m/s^2: |a| = 0.4 is 0.8 sigma (off), 0.75 is 1.5 sigma
+    # (half), 3 is 6 sigma (whole)
+    assert manoeuvre_accel_m_s2(_motion((0.4, 0.0, 0.0), 0.75), 1.0, 2.0) == (0.0, 0.0, 0.0)
+    half = manoeuvre_accel_m_s2(_motion((0.0, 0.6, 0.45), 0.75), 1.0, 2.0)
+    np.testing.assert_allclose(half, (0.0, 0.3, 0.225), rtol=1e-12)
+    assert manoeuvre_accel_m_s2(_motion((3.0, 0.0, 0.0), 0.75), 1.0, 2.0) == (3.0, 0.0, 0.0)
+    assert manoeuvre_accel_m_s2(None, 1.0, 2.0) is None
+
+
+def test_time_to_go_is_range_over_closing_speed():
+    n = (0.0, 1.0, 0.0)
+    v = np.array((0.0, 10.0, 0.0))
+    assert time_to_go_s(20.0, n, v, None) == pytest.approx(2.0)
+    # a target receding at 2 m/s along the LOS: closing at 8
+    rec = _motion((0.0, 0.0, 0.0), 0.0, velocity=(1.0, 2.0, 0.0))
+    assert time_to_go_s(20.0, n, v, rec) == pytest.approx(2.5)
+    assert math.isnan(time_to_go_s(None, n, v, None))
+    assert math.isnan(time_to_go_s(20.0, n, -v, None))  # opening
+
+
+def test_the_endgame_flies_the_endgame_limit():
+    """A target accelerating hard across the LOS: the command saturates at the tilt limit
+    (g at 45 deg) until the time to go falls under t_end, then at the endgame's (70 deg:
+    g tan 70 = 26.95 m/s^2, just under the thrust's 26.96 with 2 m/s^2 kept for the
+    vertical)."""
+    gains = Gains()
+    lim = available_lateral_accel_m_s2(1 / 3, gains.tilt_max, gains.a_z_margin)
+    end = available_lateral_accel_m_s2(1 / 3, gains.tilt_end, gains.a_z_margin)
+    assert end == pytest.approx(G * math.tan(math.radians(70.0)), rel=1e-12)  # 26.95
+    n = np.array((0.0, 1.0, 0.0))
+    norms = []
+    for t_go in (2.0 * gains.t_end, 0.5 * gains.t_end, math.nan):
+        inp = GuidanceInput(
+            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 10.0, 0.0)), (0.0, 0.0), np.eye(3),
+            target_accel_enu_m_s2=(30.0, 0.0, 0.0), accel_limit_m_s2=lim,
+            time_to_go_s=t_go, endgame_accel_limit_m_s2=end,
+        )  # fmt: skip
+        norms.append(float(np.linalg.norm(apn_law(inp, gains).accel_desired_enu_m_s2)))
+    assert norms[0] == pytest.approx(lim, rel=1e-9)
+    assert norms[1] == pytest.approx(end, rel=1e-9)
+    assert norms[2] == pytest.approx(lim, rel=1e-9)  # unknown time to go: no endgame

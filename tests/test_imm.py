@@ -6,8 +6,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
-from onboard.estimation.imm import MODELS, TargetMotionImm, position_from_image
+from onboard.estimation.imm import (
+    MODELS,
+    ImmConfig,
+    TargetMotionImm,
+    pose_covariance_m2,
+    position_from_image,
+)
 
 DT = 1.0 / 30.0  # the camera's rate
 # the DKF's position error: 5 cm across the line of sight (+y), 40 cm along it
@@ -93,3 +100,96 @@ def test_position_from_image_and_its_covariance():
     sigma_along = math.sqrt(float(along @ cov @ along))
     np.testing.assert_allclose(sigma_along, 2.0 * np.linalg.norm(ray), rtol=0.01)
     np.testing.assert_allclose(math.sqrt(float(across @ cov @ across)), 0.02, rtol=0.01)
+
+
+def test_the_pose_uncertainty_is_added_across_the_line_of_sight():
+    cfg = ImmConfig(pose_position_sigma_m=0.3, pose_attitude_sigma_deg=1.5)
+    cov = pose_covariance_m2(np.array((0.0, 20.0, 0.0)), cfg)
+    across = 0.09 + (20.0 * math.radians(1.5)) ** 2  # 0.09 + 0.274
+    np.testing.assert_allclose(np.diag(cov), (across, 0.09, across), rtol=1e-12)
+    assert abs(cov[0, 1]) < 1e-15
+
+
+def _hover_with_pose_errors(camera: bool) -> float:
+    """A hovering target 20 m north, placed from a vehicle whose believed position wanders
+    (Gauss-Markov, 0.3 m, 2 s, as a GNSS fix does) and whose heading wanders (1.5 deg) while
+    the image's own covariance says centimetres; the RMS of the estimated acceleration
+    (m/s^2) over the last 8 s."""
+    rng = np.random.default_rng(7)
+    imm = TargetMotionImm()
+    image_cov = np.diag([0.02**2, 1.0, 0.02**2])
+    err, yaw, out = np.zeros(3), 0.0, []
+    k = math.exp(-DT / 2.0)
+    for i in range(round(10.0 / DT)):
+        err = k * err + math.sqrt(1 - k * k) * 0.3 * rng.standard_normal(3)
+        yaw = k * yaw + math.sqrt(1 - k * k) * math.radians(1.5) * rng.standard_normal()
+        rel = 20.0 * np.array([-math.sin(yaw), math.cos(yaw), 0.0])  # the target, 20 m north
+        cam = np.array([0.0, 0.0, 10.0]) + err
+        e = imm.update(i * DT, cam + rel, image_cov, np.zeros(3), cam if camera else None)
+        if i * DT > 2.0:
+            out.append(np.linalg.norm(e.accel_enu_m_s2))
+    return math.sqrt(float(np.mean(np.square(out))))
+
+
+def test_the_vehicles_own_pose_errors_are_not_taken_for_a_manoeuvre():
+    assert _hover_with_pose_errors(camera=True) < 0.3
+    assert _hover_with_pose_errors(camera=False) > 1.0  # the image's covariance alone
+
+
+def test_the_stacked_filters_mix_as_filterpys_imm():
+    """The same stream through filterpy's IMMEstimator over three KalmanFilters with the same
+    models: every estimate equal to 1e-9."""
+    from filterpy.kalman import IMMEstimator, KalmanFilter
+
+    from onboard.estimation import imm as imm_module
+
+    cfg = ImmConfig()
+    rng = np.random.default_rng(11)
+    ours = TargetMotionImm(cfg)
+    p, v = np.array([0.0, 20.0, 10.0]), np.array([4.0, 0.0, 0.0])
+    ref = None
+    for k in range(150):
+        t = k * DT
+        if t > 2.0:
+            w = 3.0 / 4.0 * DT
+            v = np.array(
+                [
+                    math.cos(w) * v[0] - math.sin(w) * v[1],
+                    math.sin(w) * v[0] + math.cos(w) * v[1],
+                    0.0,
+                ]
+            )
+        p = p + v * DT
+        z = p + rng.multivariate_normal(np.zeros(3), R_MEAS)
+        est = ours.update(t, z, R_MEAS, v)
+        if ref is None:
+            filters = []
+            for _ in MODELS:
+                kf = KalmanFilter(dim_x=9, dim_z=3)
+                kf.x = np.concatenate([z, v, np.zeros(3)])
+                kf.P = np.zeros((9, 9))
+                kf.P[0:3, 0:3] = R_MEAS + cfg.min_position_sigma_m**2 * np.eye(3)
+                kf.P[3:6, 3:6] = 4.0 * np.eye(3)
+                kf.P[6:9, 6:9] = cfg.initial_accel_sigma_m_s2**2 * np.eye(3)
+                kf.H = np.hstack([np.eye(3), np.zeros((3, 6))])
+                filters.append(kf)
+            ref = IMMEstimator(
+                filters, np.array(cfg.initial_probabilities), np.array(cfg.switching)
+            )
+        else:
+            x = ref.filters[1].x
+            vh2 = float(x[3] ** 2 + x[4] ** 2)
+            omega = float(x[3] * x[7] - x[4] * x[6]) / vh2 if vh2 > 0.25 else 0.0
+            omega = min(max(omega, -cfg.max_turn_rad_s), cfg.max_turn_rad_s)
+            cv, ca, ct = ref.filters
+            cv.F, cv.Q = imm_module._cv_matrices(DT, cfg.q_cv_m_s2)
+            ca.F, ca.Q = imm_module._ca_matrices(DT, cfg.q_ca_m_s3)
+            ct.F, ct.Q = imm_module._ct_matrices(DT, cfg.q_ct_m_s2, omega)
+            ref.predict()
+            for kf in ref.filters:
+                kf.R = R_MEAS + cfg.min_position_sigma_m**2 * np.eye(3)
+            ref.update(z)
+        np.testing.assert_allclose(est.accel_enu_m_s2, ref.x[6:9], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(est.velocity_enu_m_s, ref.x[3:6], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(est.probabilities, ref.mu, rtol=1e-9, atol=1e-12)
+        assert est.accel_var_m2_s4 == pytest.approx(float(np.trace(ref.P[6:9, 6:9])), rel=1e-9)

@@ -181,15 +181,12 @@ def test_pymavlink_mavftp_downloads_parameters_and_metadata(onboard, tmp_path):
     try:
         client = mavftp.MAVFTP(master, 1, 191)
         values, defaults = tmp_path / "values.param", tmp_path / "defaults.param"
-        t0 = time.monotonic()
         client.cmd_getparams([str(values), str(defaults)])
         ret = client.process_ftp_reply("OpenFileRO", timeout=10)
-        took = time.monotonic() - t0
         assert ret.error_code == 0, ret.display_message()
         text = values.read_text()
         assert "PRG_K_A" in text and "PRG_HOLD_SPEED" in text
         assert "PRG_K_A,2" in defaults.read_text().replace(" ", "").replace("\t", ",")
-        assert took < 5.0  # no timeout and fallback on the way (generous for a busy CI)
         for name in ("general.json", "param.json"):
             local = tmp_path / name
             client.cmd_get([name, str(local)])

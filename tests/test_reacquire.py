@@ -235,13 +235,14 @@ def test_the_recording_tells_the_loss_and_the_reacquisition(tmp_path):
 def _low_target_sortie(h_floor: float) -> tuple[str, float, list[LoopMode], list]:
     """A balloon on the ground (centre 0.15 m up) 8 m ahead of a vehicle at 5 m: PNG dives
     at it and the detections stop for good at 1.0 s, so the loop coasts, re-acquires toward
-    the ground and searches. Returns (outcome, lowest true altitude m, modes, per tick
-    (mode, commanded a_d, true altitude, true vertical velocity))."""
+    the ground and searches (the approach's descent limit near the ground off, ``k_up`` = 0:
+    this is the floor guard's case alone). Returns (outcome, lowest true altitude m, modes,
+    per tick (mode, commanded a_d, true altitude, true vertical velocity))."""
     sc = load_as_written("static-ahead-20m")
     ic = dataclasses.replace(sc.interceptor, position_m=(0.0, 0.0, 5.0))
     tg = dataclasses.replace(sc.target, position_m=(0.0, 8.0, 0.15))
     sc = dataclasses.replace(sc, interceptor=ic, target=tg, duration_s=8.0)
-    sim = Simulation(sc, "png", seed=0, gains=Gains(h_floor=h_floor), keep_records=False)
+    sim = Simulation(sc, "png", seed=0, gains=Gains(h_floor=h_floor, k_up=0.0), keep_records=False)
     _with_gap(sim, 1.0, math.inf)
     z_min, modes, ticks = math.inf, [], []
     while not sim.done:

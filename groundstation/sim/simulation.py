@@ -240,7 +240,7 @@ class Simulation:
             detection=self.last_detection,
             dkf_state_px=None if state is None else tuple(state[0].tolist()),
             dkf_cov_diag=None if state is None else tuple(state[1].tolist()),
-            acquired=loop.acquired,
+            acquired=loop.ladder.acquired,
             gains=loop.gains,
             guard_trips=loop.guard_trips,
         )

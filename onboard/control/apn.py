@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..datatypes import GRAVITY_M_S2
+from ..estimation.imm import MotionEstimate
 from ..gains import GainIndex, Gains
 from .guidance_io import GuidanceInput, GuidanceOutput
 from .los import _f3, saturate3
@@ -42,6 +45,43 @@ def available_lateral_accel_m_s2(
     return min(by_thrust, GRAVITY_M_S2 * math.tan(math.radians(tilt_max_deg)))
 
 
+def time_to_go_s(
+    range_m: float | None,
+    los_enu: tuple[float, float, float],
+    velocity_enu_m_s: np.ndarray,
+    motion: MotionEstimate | None,
+) -> float:
+    """R / V_c (s): the DKF's range over the closing speed, the vehicle's velocity less the
+    target's (the IMM's; zero without it) along the unit LOS; nan without a range or when
+    not closing."""
+    if range_m is None or not math.isfinite(range_m):
+        return math.nan
+    n0, n1, n2 = los_enu
+    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
+    if motion is not None:
+        t0, t1, t2 = motion.velocity_enu_m_s
+        v0, v1, v2 = v0 - t0, v1 - t1, v2 - t2
+    closing = v0 * n0 + v1 * n1 + v2 * n2
+    return range_m / closing if closing > 0.0 else math.nan
+
+
+def manoeuvre_accel_m_s2(
+    motion: MotionEstimate | None, z_off: float, z_full: float
+) -> tuple[float, float, float] | None:
+    """The IMM's acceleration (m/s^2 ENU) as far as it stands out of its own noise: scaled by
+    w = clip((z - z_off) / (z_full - z_off), 0, 1), z = |a| / sqrt(tr P_a / 3) its size in
+    standard deviations. An acceleration within its noise is no manoeuvre: APN then flies PN
+    and does not chase the estimate's noise with its larger limit. None without an estimate."""
+    if motion is None:
+        return None
+    a0, a1, a2 = motion.accel_enu_m_s2
+    norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    sigma = math.sqrt(max(motion.accel_var_m2_s4, 0.0) / 3.0)
+    z = norm / sigma if sigma > 0.0 else math.inf
+    w = min(max((z - z_off) / (z_full - z_off), 0.0), 1.0) if z_full > z_off else float(z >= z_off)
+    return a0 * w, a1 * w, a2 * w
+
+
 def apn_term(
     target_accel_enu_m_s2: tuple[float, float, float],
     los_enu: tuple[float, float, float],
@@ -60,11 +100,12 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """APN (module docstring): PNG with the airframe's limit ``inp.accel_limit_m_s2`` (the
     gains' a_max when it is not given), plus N/2 a_T,perp when the target's acceleration is
     known, saturated to that limit, then the FOV guard."""
-    import numpy as np
-
     lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
+    if inp.time_to_go_s < gains.t_end and math.isfinite(inp.endgame_accel_limit_m_s2):
+        lim = max(lim, inp.endgame_accel_limit_m_s2)
     G = gains.packed.copy()
     G[GainIndex.a_max] = lim
+    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s)
     vt = inp.target_vel_enu_m_s
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
     R = inp.R_WC

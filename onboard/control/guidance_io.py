@@ -42,6 +42,13 @@ class GuidanceInput:
     # the augmented law's inputs (onboard/control/apn.py)
     target_accel_enu_m_s2: tuple[float, float, float] | None = None
     accel_limit_m_s2: float = math.nan
+    # the time to go (s) from the DKF's range and the closing speed (nan: unknown), and the
+    # airframe's limit in the endgame (m/s^2; nan: accel_limit_m_s2): the augmented law's
+    time_to_go_s: float = math.nan
+    endgame_accel_limit_m_s2: float = math.nan
+    # the speed ramp's reference at most this (m/s; inf: v_max alone), the approach's limit
+    # near the ground (onboard/control/clearance.py)
+    speed_cap_m_s: float = math.inf
 
 
 @dataclass(slots=True)  # not frozen (read-only by convention): a frozen init is 4x dearer

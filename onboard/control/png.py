@@ -281,6 +281,7 @@ def png_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
         inp.dt_s, _f3(inp.los_enu), inp.los_elev_rad, inp.d_los_elev_rad, inp.d_los_azim_rad,
         _f3(inp.velocity_enu_m_s), inp.R_WC, inp.fov_edges_rad, inp.range_m,
         inp.target_vel_enu_m_s, inp.target_vel_var_m2_s2, gains, inp.disturbance_enu_m_s2,
+        inp.speed_cap_m_s,
     )  # fmt: skip
     return GuidanceOutput(np.array((a0, a1, a2)), sigma_y, sigma_z, hovering)
 
@@ -299,10 +300,12 @@ def png_command(
     target_vel_var_m2_s2: float,
     gains: Gains,
     disturbance_enu_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    speed_cap_m_s: float = math.inf,
 ) -> tuple[float, float, float, float, float, bool]:
     """:func:`png_law` from floats (:class:`GuidanceInput`'s fields, the LOS, the velocity
     and the believed drag and disturbance as three floats each; the loop's tick calls it so):
-    (a_d ENU m/s^2 as three floats, sigma_y, sigma_z (nan while hovering), hovering)."""
+    (a_d ENU m/s^2 as three floats, sigma_y, sigma_z (nan while hovering), hovering).
+    ``speed_cap_m_s`` below ``v_max`` is the speed ramp's reference instead (eq. 14)."""
     e0, e1, e2 = disturbance_enu_m_s2
     l0, l1, l2 = los_enu
     v0, v1, v2 = velocity_enu_m_s
@@ -310,10 +313,14 @@ def png_command(
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
     top, bottom = fov_edges_rad
     R = R_WC
+    G = gains.packed
+    if speed_cap_m_s < gains.v_max:
+        G = G.copy()
+        G[GainIndex.v_max] = speed_cap_m_s
     a0, a1, a2, sigma_y, sigma_z, hovering = png_floats(
         dt_s, l0, l1, l2, los_elev_rad, d_los_elev_rad, d_los_azim_rad, v0, v1, v2,
         float(R[0, 2]), float(R[1, 2]), float(R[2, 2]), top, bottom, range_m, vt is not None,
-        t0, t1, t2, target_vel_var_m2_s2, e0, e1, e2, gains.packed,
+        t0, t1, t2, target_vel_var_m2_s2, e0, e1, e2, G,
     )  # fmt: skip
     if hovering != 0.0:  # the angles are math.nan itself (telemetry compares equal)
         return a0, a1, a2, math.nan, math.nan, True

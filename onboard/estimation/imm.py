@@ -15,8 +15,10 @@ models (Bar-Shalom, Li & Kirubarajan 2001, ch. 6 and 11.7):
   (sigma ``q_ct_m_s2``). With omega taken from the estimate, the model is linear in the state
   at each step (the turn rate is its linearisation point).
 
-The models mix through filterpy's :class:`~filterpy.kalman.IMMEstimator` with the Markov
-switching matrix of :class:`ImmConfig` (per update, about the camera's 30 Hz). The combined
+The models mix as filterpy's :class:`~filterpy.kalman.IMMEstimator` mixes them (Kalman
+filters with Joseph-form updates; tests/test_imm.py holds the two equal), the three filters
+stacked in arrays so that one update is a few batched products, with the Markov switching
+matrix of :class:`ImmConfig` (per update, about the camera's 30 Hz). The combined
 acceleration is the model-probability weighted one, so a target the filter believes to fly
 straight (CV) reports almost none: an unmanoeuvring target gives the guidance no term to
 follow. The measurement is the target's position z = p with the covariance from the DKF's
@@ -27,13 +29,10 @@ poor along it. Pure maths: no clock, no I/O.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:  # filterpy pulls in scipy (about 1.5 s): imported when a track starts
-    from filterpy.kalman import IMMEstimator
 
 MODELS = ("cv", "ca", "ct")  # the models, in the order of every probability vector
 
@@ -57,6 +56,11 @@ class ImmConfig:
     min_position_sigma_m: float = 0.02  # the measurement's floor per axis
     max_position_sigma_m: float = 50.0  # a measurement poorer than this (RMS per axis) is unused
     max_gap_s: float = 1.0  # a gap longer than this between updates restarts the filter
+    # the vehicle's own state estimate as the measurement sees it (1 sigma): its position's
+    # error, and its attitude's, which moves the target across the line of sight by the range
+    # times the angle (GNSS and a magnetometer's heading: decimetres and degrees)
+    pose_position_sigma_m: float = 0.3
+    pose_attitude_sigma_deg: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -108,6 +112,18 @@ def position_from_estimate(
     return position_from_image(xn, yn, rho, P6[:3, :3], R_WC, camera_enu_m)
 
 
+def pose_covariance_m2(rel_enu_m: np.ndarray, config: ImmConfig) -> np.ndarray:
+    """What the vehicle's own pose error adds to the target's placed position (m^2): its
+    position's variance on every axis, and its attitude's, (range sigma_att)^2, across the
+    line of sight ``rel_enu_m`` (target less camera, m)."""
+    r2 = float(rel_enu_m @ rel_enu_m)
+    cov = config.pose_position_sigma_m**2 * np.eye(3)
+    if r2 > 0.0:
+        across = np.eye(3) - np.outer(rel_enu_m, rel_enu_m) / r2
+        cov += r2 * math.radians(config.pose_attitude_sigma_deg) ** 2 * across
+    return cov
+
+
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     F = np.eye(9)
     F[0:3, 3:6] = dt * np.eye(3)
@@ -151,13 +167,68 @@ def _ct_matrices(dt: float, q: float, omega: float) -> tuple[np.ndarray, np.ndar
     return F, Q
 
 
+class _ImmState:
+    """The three filters stacked (model order :data:`MODELS`): states X (3, 9), covariances
+    P (3, 9, 9), model probabilities mu, the switching matrix M, and the mixing terms of
+    filterpy's IMMEstimator (cbar = mu M, omega_ij = M_ij mu_i / cbar_j) with the combined
+    state x and covariance Pc."""
+
+    def __init__(self, X: np.ndarray, P: np.ndarray, mu: np.ndarray, M: np.ndarray) -> None:
+        self.X, self.P, self.M = X, P, M
+        self.mu = mu / np.sum(mu)
+        self._mixing()
+        self._combine()
+
+    def _mixing(self) -> None:
+        self.cbar = self.mu @ self.M
+        self.omega = self.M * self.mu[:, None] / self.cbar[None, :]
+
+    def _combine(self) -> None:
+        mu = self.mu
+        self.x = mu @ self.X
+        Y = self.X - self.x
+        self.Pc = np.einsum("i,ijk->jk", mu, Y[:, :, None] * Y[:, None, :] + self.P)
+
+    def predict(self, F: np.ndarray, Q: np.ndarray) -> None:
+        """Mix, then x = F x, P = F P F^T + Q per model (F, Q stacked (3, 9, 9))."""
+        w = self.omega  # w[j, i]: the weight of filter j in model i's start
+        Xm = w.T @ self.X
+        D = self.X[None, :, :] - Xm[:, None, :]  # (i, j, 9)
+        Pm = np.einsum("ji,ijkl->ikl", w, D[:, :, :, None] * D[:, :, None, :] + self.P[None])
+        self.X = np.einsum("ikl,il->ik", F, Xm)
+        self.P = F @ Pm @ F.transpose(0, 2, 1) + Q
+        self._combine()
+
+    def update(self, z: np.ndarray, R: np.ndarray) -> None:
+        """Fuse the position z (covariance R) in every model (H = [I 0 0], Joseph form), weigh
+        the models by the likelihood of their innovations (floored at the smallest float)."""
+        y = z[None, :] - self.X[:, :3]
+        PHT = self.P[:, :, :3]
+        S = self.P[:, :3, :3] + R[None]
+        SI = np.linalg.inv(S)
+        K = PHT @ SI
+        self.X = self.X + np.einsum("ikl,il->ik", K, y)
+        I_KH = np.broadcast_to(np.eye(9), (3, 9, 9)).copy()
+        I_KH[:, :, :3] -= K
+        KT = K.transpose(0, 2, 1)
+        self.P = I_KH @ self.P @ I_KH.transpose(0, 2, 1) + K @ R[None] @ KT
+        _, logdet = np.linalg.slogdet(S)
+        maha = np.einsum("ik,ikl,il->i", y, SI, y)
+        lik = np.exp(-0.5 * (maha + logdet + 3.0 * math.log(2.0 * math.pi)))
+        lik = np.maximum(lik, sys.float_info.min)
+        mu = self.cbar * lik
+        self.mu = mu / np.sum(mu)
+        self._mixing()
+        self._combine()
+
+
 class TargetMotionImm:
     """The IMM over CV, CA and CT (module docstring). Call :meth:`update` with each new
     position measurement; read :attr:`estimate`."""
 
     def __init__(self, config: ImmConfig | None = None) -> None:
         self.config = config or ImmConfig()
-        self._imm: IMMEstimator | None = None
+        self._imm: _ImmState | None = None
         self._time_s = math.nan
         self.estimate: MotionEstimate | None = None
 
@@ -167,29 +238,25 @@ class TargetMotionImm:
         self.estimate = None
 
     def _start(self, t: float, p: np.ndarray, R: np.ndarray, v: np.ndarray) -> None:
-        from filterpy.kalman import IMMEstimator, KalmanFilter
-
         cfg = self.config
-        filters = []
-        for _ in MODELS:
-            kf = KalmanFilter(dim_x=9, dim_z=3)
-            kf.x = np.concatenate([p, v, np.zeros(3)])
-            kf.P = np.zeros((9, 9))
-            kf.P[0:3, 0:3] = R
-            kf.P[3:6, 3:6] = 4.0 * np.eye(3)
-            kf.P[6:9, 6:9] = cfg.initial_accel_sigma_m_s2**2 * np.eye(3)
-            kf.H = np.hstack([np.eye(3), np.zeros((3, 6))])
-            filters.append(kf)
-        filters[0].x[6:9] = 0.0
-        self._imm = IMMEstimator(
-            filters, np.array(cfg.initial_probabilities), np.array(cfg.switching)
+        x = np.concatenate([p, v, np.zeros(3)])
+        P = np.zeros((9, 9))
+        P[0:3, 0:3] = R
+        P[3:6, 3:6] = 4.0 * np.eye(3)
+        P[6:9, 6:9] = cfg.initial_accel_sigma_m_s2**2 * np.eye(3)
+        n = len(MODELS)
+        self._imm = _ImmState(
+            np.tile(x, (n, 1)),
+            np.tile(P, (n, 1, 1)),
+            np.array(cfg.initial_probabilities, dtype=float),
+            np.array(cfg.switching, dtype=float),
         )
         self._time_s = t
         self._publish(t)
 
     def _publish(self, t: float) -> None:
         imm = self._imm
-        x, P = imm.x, imm.P
+        x, P = imm.x, imm.Pc
         mu = tuple(float(m) for m in imm.mu)
         self.estimate = MotionEstimate(
             t,
@@ -205,13 +272,15 @@ class TargetMotionImm:
         position_enu_m: np.ndarray,
         cov_m2: np.ndarray,
         velocity_guess_enu_m_s: np.ndarray | None = None,
+        camera_enu_m: np.ndarray | None = None,
     ) -> MotionEstimate | None:
         """Predict to ``t`` (s) and fuse the target's position (m ENU) with covariance
         ``cov_m2`` (3x3, m^2); ``velocity_guess_enu_m_s`` starts a new track's velocity (zero
-        without it). A measurement that is not finite, or poorer than ``max_position_sigma_m``,
-        changes nothing; a time that does not advance is ignored; a gap over ``max_gap_s``, a
-        covariance gone singular or a state gone non-finite restarts the track. Returns the
-        estimate."""
+        without it); with ``camera_enu_m`` (where the camera believes it is) the vehicle's own
+        pose uncertainty is added (:func:`pose_covariance_m2`). A measurement that is not
+        finite, or poorer than ``max_position_sigma_m``, changes nothing; a time that does not
+        advance is ignored; a gap over ``max_gap_s``, a covariance gone singular or a state
+        gone non-finite restarts the track. Returns the estimate."""
         p = np.asarray(position_enu_m, dtype=float)
         R = np.asarray(cov_m2, dtype=float)
         if (
@@ -222,6 +291,8 @@ class TargetMotionImm:
             return self.estimate
         floor = self.config.min_position_sigma_m**2
         R = 0.5 * (R + R.T) + floor * np.eye(3)
+        if camera_enu_m is not None:
+            R = R + pose_covariance_m2(p - np.asarray(camera_enu_m, dtype=float), self.config)
         if np.trace(R) > 3.0 * self.config.max_position_sigma_m**2:
             return self.estimate  # no depth to speak of: nothing to learn of the motion
         v = np.zeros(3) if velocity_guess_enu_m_s is None else np.asarray(velocity_guess_enu_m_s)
@@ -235,13 +306,11 @@ class TargetMotionImm:
             return self.estimate
         try:
             self._predict(dt)
-            for kf in self._imm.filters:
-                kf.R = R
-            self._imm.update(p)
+            self._imm.update(p, R)
         except np.linalg.LinAlgError:  # a covariance gone singular: start again from here
             self._start(t, p, R, v)
             return self.estimate
-        if not (np.isfinite(self._imm.x).all() and np.isfinite(self._imm.P).all()):
+        if not (np.isfinite(self._imm.x).all() and np.isfinite(self._imm.Pc).all()):
             self._start(t, p, R, v)
             return self.estimate
         self._time_s = t
@@ -251,12 +320,13 @@ class TargetMotionImm:
     def _predict(self, dt: float) -> None:
         cfg = self.config
         imm = self._imm
-        x = imm.filters[1].x  # CA's own estimate: its acceleration is not shrunk by CV's
+        x = imm.X[1]  # CA's own estimate: its acceleration is not shrunk by CV's
         vh2 = float(x[3] * x[3] + x[4] * x[4])
         omega = float(x[3] * x[7] - x[4] * x[6]) / vh2 if vh2 > 0.25 else 0.0
         omega = min(max(omega, -cfg.max_turn_rad_s), cfg.max_turn_rad_s)
-        cv, ca, ct = imm.filters
-        cv.F, cv.Q = _cv_matrices(dt, cfg.q_cv_m_s2)
-        ca.F, ca.Q = _ca_matrices(dt, cfg.q_ca_m_s3)
-        ct.F, ct.Q = _ct_matrices(dt, cfg.q_ct_m_s2, omega)
-        imm.predict()
+        models = (
+            _cv_matrices(dt, cfg.q_cv_m_s2),
+            _ca_matrices(dt, cfg.q_ca_m_s3),
+            _ct_matrices(dt, cfg.q_ct_m_s2, omega),
+        )
+        imm.predict(np.stack([m[0] for m in models]), np.stack([m[1] for m in models]))
