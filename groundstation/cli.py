@@ -13,20 +13,19 @@ from pathlib import Path
 # filterpy/scipy, OpenCV or viser; each command imports what it needs when it runs.
 from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 from onboard.gains import GainError
-from onboard.link.address import add_host_port_option
 
 from .campaigns.tune_options import add_tune_arguments
 from .cli_bench import add_bench_parser, run_bench_command
 from .cli_options import (
     COUNT,
-    PORT,
     SEED,
     SET_HELP,
     existing_file,
     scenario_arg,
-    seconds,
     writable_dir,
 )
+from .cli_serve import add_serve_parser, run_serve
+from .cli_sitl import add_sitl_parser, run_sitl
 from .scenario import (
     CAMERA_MODES,
     ESTIMATE_PROFILES,
@@ -88,121 +87,8 @@ def _build_parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true")
 
     sub.add_parser("scenarios", help="list the shipped scenarios")
-
-    sv = sub.add_parser("serve", help="start the operator's web app (simulator mode)")
-    sv.add_argument(
-        "--sim",
-        action="store_true",
-        default=True,
-        help="simulator mode (the default unless --mavlink is given)",
-    )
-    sv.add_argument("--host", default="127.0.0.1", help="address to listen on")
-    sv.add_argument("--port", type=PORT, default=8000, help="0: any free port")
-    sv.add_argument(
-        "--scene-port",
-        type=PORT,
-        default=0,
-        help="the 3D view's own port on the same address (default 0: any free port)",
-    )
-    sv.add_argument(
-        "--no-auth",
-        action="store_true",
-        help="no access token (refused unless the host is a loopback address)",
-    )
-    sv.add_argument(
-        "--data-dir",
-        type=writable_dir,
-        help="where named gain sets are kept (default ~/.peregrine)",
-    )
-
-    sv.add_argument(
-        "--mavlink",
-        metavar="URL",
-        default=None,
-        help="live mode: the onboard computer's ground link (e.g. udpin:127.0.0.1:14550)",
-    )
-    sv.add_argument(
-        "--signing-key",
-        metavar="FILE",
-        type=existing_file("a file of 64 hex digits"),
-        help="MAVLink 2 signing key (live mode)",
-    )
-    sv.add_argument(
-        "--log-dir",
-        type=writable_dir,
-        default="logs",
-        help="where sorties are recorded (default logs)",
-    )
-    add_host_port_option(
-        sv,
-        "--foxglove",
-        8765,
-        "also publish every sortie's channels (the recording's) to Foxglove over its "
-        "WebSocket protocol on HOST:PORT (alone: 127.0.0.1:8765; a bare PORT is on "
-        "127.0.0.1); in Foxglove: Open connection, Foxglove WebSocket, ws://HOST:PORT",
-    )
-    add_host_port_option(
-        sv,
-        "--video",
-        5600,
-        "live mode: show the vehicle's H.264/RTP video (onboard run --video) in the "
-        "image panel, received on UDP HOST:PORT (alone: 127.0.0.1:5600)",
-    )
-
-    st = sub.add_parser("sitl", help="run the simulator as a PX4-like vehicle over MAVLink")
-    st.add_argument(
-        "scenario",
-        nargs="?",
-        default="cv-top-to-bottom",
-        type=scenario_arg,
-        help="scenario TOML file or shipped name (default cv-top-to-bottom)",
-    )
-    st.add_argument(
-        "--mavlink",
-        metavar="URL",
-        default=None,
-        help="pymavlink connection string (default udpout:127.0.0.1:14540, PX4's)",
-    )
-    st.add_argument(
-        "--camera-port",
-        type=PORT,
-        default=5600,
-        help="TCP port of the camera stream on 127.0.0.1 (0: any free port)",
-    )
-    st.add_argument("--seed", type=SEED, default=0)
-    st.add_argument(
-        "--set",
-        action="append",
-        metavar="SECTION.KEY=VALUE",
-        help="change one scenario value, as for sorties: --set estimate.enabled=false (ideal "
-        "sensors), --set camera.false_probability=0.05 (detector faults)",
-    )
-    st.add_argument("--duration", type=seconds(0, False), help="stop after this many seconds")
-    st.add_argument(
-        "--on-ground",
-        action="store_true",
-        help="start disarmed and landed below the scenario's start (arm, then takeoff)",
-    )
-    st.add_argument(
-        "--home",
-        metavar="LAT,LON,ALT",
-        default=None,
-        help="home: latitude, longitude (deg), altitude AMSL (m) of local (0, 0, 0) "
-        "(default PX4 SITL's, 47.397742,8.545594,488)",
-    )
-    st.add_argument(
-        "--offboard-loss",
-        type=seconds(0, False),
-        default=1.0,
-        help="PX4 COM_OF_LOSS_T: seconds without setpoints before HOLD",
-    )
-    st.add_argument(
-        "--camera-blackout-after",
-        type=seconds(0, True),
-        default=None,
-        metavar="S",
-        help="fault injection: no camera frames after S s of sortie time",
-    )
+    add_serve_parser(sub)
+    add_sitl_parser(sub)
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument(
@@ -317,121 +203,6 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def _port_problem(host: str, port: int) -> str | None:
-    """Why ``serve`` could not listen on host:port, or None (checked before anything
-    starts, so a port in use prints no URL)."""
-    import errno
-
-    from onboard.link.address import bind_tcp_listener
-
-    try:
-        bind_tcp_listener(host, port).close()
-    except OSError as exc:
-        if exc.errno == errno.EADDRINUSE:
-            return (
-                f"argument --port: port {port} on {host} is in use (another ground "
-                "station?); pick another with --port N, or --port 0 for any free port"
-            )
-        return f"argument --host: cannot listen on {host}:{port}: {exc.strerror or exc}"
-    return None
-
-
-def _cmd_serve(args: argparse.Namespace) -> int:
-    from onboard.link.px4 import LinkError, load_signing_key
-
-    from .app.server import GroundStation
-
-    problem = _port_problem(args.host, args.port)
-    if problem is not None:
-        print(f"groundstation serve: error: {problem}", file=sys.stderr)
-        return 2
-    foxglove = None
-    if args.foxglove is not None:
-        from onboard.channels.live import FoxgloveLive
-
-        try:
-            foxglove = FoxgloveLive(port=args.foxglove[1], host=args.foxglove[0])
-        except Exception as exc:  # the SDK's bind error: one clear line
-            print(
-                f"groundstation serve: error: argument --foxglove: cannot listen on "
-                f"{args.foxglove[0]}:{args.foxglove[1]}: {exc}",
-                file=sys.stderr,
-            )
-            return 2
-    try:
-        key = load_signing_key(args.signing_key) if args.signing_key else None
-        gs = GroundStation(
-            args.host,
-            args.port,
-            args.no_auth,
-            Path(args.data_dir) if args.data_dir else None,
-            log_dir=Path(args.log_dir),
-            mavlink_url=args.mavlink,
-            signing_key=key,
-            foxglove=foxglove,
-            video=args.video,
-            scene_port=args.scene_port,
-        )
-    except (ValueError, LinkError, OSError) as exc:
-        if foxglove is not None:
-            foxglove.stop()
-        print(f"groundstation: error: {exc}", file=sys.stderr)
-        return 2
-    mode = f"live on {args.mavlink}" if args.mavlink else "simulator mode"
-    print(f"Peregrine ground station ({mode}): open {gs.url()}", flush=True)
-    if foxglove is not None:
-        print(f"Foxglove live: open connection {foxglove.url()}", flush=True)
-    gs.run_forever()
-    return 0
-
-
-def _cmd_sitl(args: argparse.Namespace) -> int:
-    import signal
-
-    from onboard.link.px4 import DEFAULT_SITL_URL, LinkError, MavLink
-
-    from .sitl.autopilot import Home
-    from .sitl.camera_server import CameraServer
-    from .sitl.vehicle import SitlOptions, SitlVehicle
-
-    scenario = with_overrides(load_scenario(args.scenario), parse_overrides(args.set))
-    try:
-        home = Home()
-        if args.home:
-            lat, lon, alt = (float(c) for c in args.home.split(","))
-            home = Home(lat, lon, alt)
-    except ValueError as exc:
-        print(f"groundstation: error: --home {args.home}: {exc}", file=sys.stderr)
-        return 2
-    if not 0.0 <= args.offboard_loss <= 60.0:  # PX4's COM_OF_LOSS_T range
-        print(f"groundstation: error: --offboard-loss {args.offboard_loss}: expected 0 to 60 s",
-              file=sys.stderr)  # fmt: skip
-        return 2
-    try:
-        link = MavLink(args.mavlink or DEFAULT_SITL_URL, 1, 1)
-        camera = CameraServer("127.0.0.1", args.camera_port)
-    except (LinkError, OSError) as exc:
-        print(f"groundstation: error: {exc}", file=sys.stderr)
-        return 2
-    vehicle = SitlVehicle(
-        scenario,
-        link,
-        camera,
-        SitlOptions(
-            args.offboard_loss, args.camera_blackout_after, args.seed, home, args.on_ground
-        ),
-    )
-    signal.signal(signal.SIGTERM, lambda *_: vehicle.stop())
-    try:
-        vehicle.run(args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        camera.close()
-        link.close()
-    return 0
-
-
 def _cmd_scenarios(_: argparse.Namespace) -> int:
     for path in shipped_scenarios():
         s = load_scenario(path)
@@ -468,11 +239,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "scenarios":
             return _cmd_scenarios(args)
         if args.command == "serve":
-            return _cmd_serve(args)
+            return run_serve(args)
         if args.command == "replay":
             return _cmd_replay(args)
         if args.command == "sitl":
-            return _cmd_sitl(args)
+            return run_sitl(args)
         if args.command == "campaign":
             from .campaigns.definitions import CampaignError
             from .campaigns.driver import main_campaign

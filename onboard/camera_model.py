@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .datatypes import Detection
 from .geometry import camera_mount_rotation
 from .jit import kernel
 
@@ -124,6 +125,31 @@ class CameraModel:
             -margin_px <= u_px < self.width_px + margin_px
             and -margin_px <= v_px < self.height_px + margin_px
         )
+
+    @property
+    def fov_edges_rad(self) -> tuple[float, float]:
+        """The image's top and bottom edges above body x (rad; upright: a portrait camera's
+        long side)."""
+        roll = math.radians(self.mount_roll_deg)
+        half_v = math.atan(
+            (abs(math.cos(roll)) * self.height_px + abs(math.sin(roll)) * self.width_px)
+            / (2.0 * self.f_px)
+        )
+        pitch = math.radians(self.mount_pitch_deg)
+        return (pitch + half_v, pitch - half_v)
+
+    def undistorted(self, detection: Detection) -> Detection:
+        """``detection`` (the lens's pixels) with its centre undistorted (NaN where it cannot
+        be: the DKF refuses it); a clipped blob's box is left as the detector saw it (the DKF
+        reads it only to know whether the blob is whole)."""
+        if not self.distorted:
+            return detection
+        d = detection
+        try:
+            u, v = self.undistort_px(float(d.center_px[0]), float(d.center_px[1]))
+        except (TypeError, ValueError, IndexError):
+            u = v = math.nan
+        return Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
 
 
 @kernel("UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64)")

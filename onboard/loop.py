@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections import deque
 
 import numpy as np
 
@@ -31,10 +30,7 @@ from .control.guidance import (
     png_law,
 )
 from .control.reacquire import (
-    Candidate,
-    DetectionScreen,
     floor_guard_accel,
-    horizontal_unit,
     reacquire_accel,
     search_accel,
     search_yaw_rate,
@@ -57,24 +53,17 @@ from .estimation.self_calibration import SelfCalEstimate, SelfCalibration
 from .gains import Gains
 from .geometry import (
     as_quat,
-    attitude_jump_rad,
     body_and_camera_attitude,
     mat3_mul,
     propagate_rotation,
     rotmat_of_quat,
 )
+from .gyro_turn import GyroTurn
+from .track_loss import TrackLossLadder
 
 _NAN2 = (math.nan, math.nan)
 _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's LOS change yet
-_ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
-# an attitude that moved this much more (rad) than the gyro turned it since an on-time last tick
-# was a stale one replaced (counted for the diagnostics; docs/core.md)
-ATTITUDE_JUMP_RAD = 0.005
-# beyond this many periods since the last tick (a stall) the gyro's turn is no better a guess
-ATTITUDE_JUMP_MAX_PERIODS = 2.0
-# an attitude not carried to the tick (older than fc_state's limit: a stalled stream) is stale
-ATTITUDE_STALE_S = 1e-6
 
 
 def brake_accel(
@@ -135,32 +124,17 @@ class InterceptionLoop:
         self.self_cal = SelfCalibration(camera.f_px, camera.R_BC, self.dkf.config.target_diameter_m)
         self._self_cal_est: SelfCalEstimate = self.self_cal.estimate()
         self._los_prev: np.ndarray | None = None  # the last tick's estimated LOS (ENU, unit)
-        self._gyro_sum = (0.0, 0.0, 0.0)  # floats: the sum of the rates since the last tick
-        self._gyro_n = 0
+        self.gyro_turn = GyroTurn(self.nominal_dt_s)  # the body's turn between ticks
         self._detections: list[Detection] = []
         self._prev_time_s: float | None = None
         self._prev_R_WC: np.ndarray | None = None
-        self._prev_R_WB: np.ndarray | None = None
-        self.attitude_jumps = 0  # ticks whose attitude jumped beyond the gyro's turn
-        self.stale_attitude_ticks = 0  # ticks with an attitude not carried to them (likewise)
         self.last_fusion: list[FusionResult] = []
         self._fused_early: list[FusionResult] = []  # by fuse_detections() since the last tick
         self.guard_trips = 0
         self.speed_cap_m_s = math.inf  # the last tick's approach speed limit (clearance.py)
         self._target_low_m = -math.inf  # the target's lowest height held over the track
-        self.acquired = False
-        # track loss and search (onboard/control/reacquire.py)
-        self.screen = DetectionScreen()
-        self._R_hist: deque[tuple[float, np.ndarray]] = deque()
-        self._first_tick_s: float | None = None
-        self._live_s = -math.inf  # last tick with a live (not stale) track
-        self._coast_over = False  # the prediction's uncertainty ended this coast
-        self._search_start_s: float | None = None
-        self._search_cue: np.ndarray | None = None
-        self._search_dir = 1.0
-        self._launch_cue: np.ndarray | None = None
+        self.ladder = TrackLossLadder(camera, self.dkf)  # track loss, re-acquisition, search
         self.mode = LoopMode.WAITING
-        self._last_velocity = np.zeros(3)
         self.disturbance = DisturbanceObserver(
             DisturbanceObserverConfig(
                 self.gains.k_dob,
@@ -173,14 +147,7 @@ class InterceptionLoop:
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
         self._dq_flown = _NO_FLOWN  # the last command's (dq_y, dq_z, hold_s) (los_terms)
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
-        # the image's top/bottom edges above body x (upright: a portrait camera's long side)
-        roll = math.radians(camera.mount_roll_deg)
-        half_v = math.atan(
-            (abs(math.cos(roll)) * camera.height_px + abs(math.sin(roll)) * camera.width_px)
-            / (2.0 * camera.f_px)
-        )
-        pitch = math.radians(camera.mount_pitch_deg)
-        self.fov_edges_rad = (pitch + half_v, pitch - half_v)
+        self.fov_edges_rad = camera.fov_edges_rad  # the image's top and bottom above body x
 
     @property
     def last_tick_time_s(self) -> float | None:
@@ -203,25 +170,12 @@ class InterceptionLoop:
         self._use_size(self.gains)
 
     def on_gyro(self, sample: GyroSample) -> None:
-        s0, s1, s2 = self._gyro_sum
-        r = sample.rates_flu_rad_s
-        r0, r1, r2 = r.tolist() if type(r) is np.ndarray else (float(c) for c in r)
-        self._gyro_sum = (s0 + r0, s1 + r1, s2 + r2)
-        self._gyro_n += 1
+        self.gyro_turn.add(sample.rates_flu_rad_s)
 
     def on_detection(self, detection: Detection) -> None:
-        """Queue a detection (the lens's pixels) for the next tick: undistorted with the
-        camera calibration the loop believes (a clipped blob's box is left as the detector saw
-        it: the DKF reads it only to know whether the blob is whole)."""
-        cam = self.camera
-        if cam.distorted:
-            d = detection
-            try:
-                u, v = cam.undistort_px(float(d.center_px[0]), float(d.center_px[1]))
-            except (TypeError, ValueError, IndexError):
-                u = v = math.nan  # the DKF refuses it
-            detection = Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
-        self._detections.append(detection)
+        """Queue a detection (the lens's pixels) for the next tick, undistorted with the
+        camera calibration the loop believes (:meth:`.CameraModel.undistorted`)."""
+        self._detections.append(self.camera.undistorted(detection))
 
     def _track_motion(
         self,
@@ -250,88 +204,6 @@ class InterceptionLoop:
         )
         return motion.update(t, p, cov, dv[1], camera_enu_m)
 
-    # ------------------------------------------------------------------ track loss
-    def _screening(self, t: float) -> bool:
-        """Do detections go through the screen before the DKF? Not while its track is live
-        (its own gate protects it), nor while waiting for the first one after the start (the
-        operator started with the target in view: the first detection starts the track)."""
-        if not self.acquired:
-            return self._search_start_s is not None
-        return self.dkf.lost(t)
-
-    def _R_WC_at(self, time_s: float, R_now: np.ndarray) -> np.ndarray:
-        """The camera attitude at the last tick at or before ``time_s`` (the oldest held if
-        none; the current one if the history is empty)."""
-        best = None
-        for t_k, R in self._R_hist:
-            if t_k > time_s + 1e-9:
-                break
-            best = R
-        if best is None:
-            return self._R_hist[0][1] if self._R_hist else R_now
-        return best
-
-    def _screened(self, dets: list[Detection], R_WC: np.ndarray) -> list[Detection]:
-        """The detections (capture order) the screen lets through to the DKF now."""
-        est = self.dkf.estimate()
-        f = self.camera.f_px
-        pred, sigma = None, 0.0
-        if est is not None:
-            pred = line_of_sight(est.e_px[0] / f, est.e_px[1] / f, R_WC)
-            std = self.dkf.image_std_px()
-            sigma = 0.0 if std is None else max(std) / f
-        sharp = self.gains.coast_std  # px: a vaguer prediction confirms nothing alone
-        out: list[Detection] = []
-        for det in dets:
-            try:
-                ex, ey = self.camera.error_px(*(float(c) for c in det.center_px))
-                t_c = float(det.capture_time_s)
-            except (TypeError, ValueError):
-                continue
-            if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(t_c)):
-                continue
-            los = line_of_sight(ex / f, ey / f, self._R_WC_at(t_c, R_WC))
-            cand = Candidate(t_c, los)
-            out.extend(self.screen.offer(det, cand, pred, sigma, self.gains, sharp / f))
-        return out
-
-    def _next_mode(self, t: float, est: ImageEstimate | None) -> LoopMode:
-        """The loop's mode at this tick from the track's state and the phase timers (see
-        onboard/control/reacquire.py); updates the timers."""
-        g = self.gains
-        if est is not None and not est.lost:
-            self.acquired = True
-            self._live_s = t
-            self._coast_over = False
-            self._search_start_s = None
-            self._search_cue = None
-            self.screen.clear()  # a later loss starts its confirmations afresh
-            return LoopMode.TRACKING
-        if est is not None:
-            self._search_dir = -1.0 if self.camera.upright(*est.e_px)[0] > 0.0 else 1.0
-        if not self.acquired and self._search_start_s is None:
-            if t - self._first_tick_s < g.t_wait:
-                return LoopMode.WAITING
-        elif self.acquired and self._search_start_s is None:
-            stale_s = t - self._live_s
-            if est is not None:
-                if not self._coast_over and stale_s < g.t_coast:
-                    std = self.dkf.image_std_px()
-                    if std is not None and max(std) <= g.coast_std:
-                        return LoopMode.COAST
-                    self._coast_over = True
-                if stale_s < g.t_coast + g.t_reacq:
-                    return LoopMode.REACQUIRE
-        if self._search_start_s is None:
-            self._search_start_s = t
-            v = self._last_velocity
-            moving = math.sqrt(float(v @ v)) >= g.v_min if not self.acquired else False
-            cue = self._launch_cue if self._launch_cue is not None else horizontal_unit(v)
-            self._search_cue = cue if moving else None
-        if t - self._search_start_s < g.t_search:
-            return LoopMode.SEARCH
-        return LoopMode.LOST
-
     def fuse_detections(self) -> list[FusionResult]:
         """Fuse the detections handed in so far into the DKF now, against its last prediction,
         instead of in the next tick (the runtime calls this on the camera thread as a detection
@@ -340,8 +212,9 @@ class InterceptionLoop:
         ``last_fusion``. Call it from one thread at a time with :meth:`tick`."""
         dets = sorted(self._detections, key=lambda d: d.capture_time_s)
         self._detections.clear()
-        if dets and self._R_hist and self._screening(self._prev_time_s):
-            dets = self._screened(dets, self._R_hist[-1][1])
+        ladder = self.ladder
+        if dets and ladder.attitudes and ladder.screening(self._prev_time_s):
+            dets = ladder.screened(dets, ladder.attitudes[-1][1], self.gains)
         out = [self._fuse(det) for det in dets]
         self._fused_early.extend(out)
         return out
@@ -378,32 +251,6 @@ class InterceptionLoop:
         if abs(d / c.target_diameter_m - 1.0) > 0.02:
             self.dkf.config = dataclasses.replace(c, target_diameter_m=d)
 
-    def _turn_through_gyro(
-        self, state: VehicleState, R_WB: np.ndarray, gyro: np.ndarray, dt: float
-    ) -> bool:
-        """Take the previous LOS through this tick's attitude turned back by the gyro (rad/s
-        FLU, the mean since the last tick) over ``dt`` (s), not through the last tick's
-        attitude estimate? Yes, except after a late tick (a stall: two fresh attitudes are
-        then a better guess than the mean rate times the interval) or with non-finite rates.
-
-        The difference of two attitude estimates carries the estimator's corrections between
-        them (a heading fused from the magnetometer wanders by tenths of a degree within a
-        second), which PNG would turn K times; the gyro measures the turn itself. Stale
-        attitudes (not carried to the tick) and jumps (more than ATTITUDE_JUMP_RAD beyond the
-        gyro's turn: a stale one replaced by a fresh one) are counted for the diagnostics."""
-        R0 = self._prev_R_WB
-        if R0 is None or dt > ATTITUDE_JUMP_MAX_PERIODS * self.nominal_dt_s:
-            return False
-        g0, g1, g2 = gyro.tolist()
-        if not (math.isfinite(g0) and math.isfinite(g1) and math.isfinite(g2)):
-            return False  # no turn to take back (propagate_rotation ignores such rates)
-        q_at = state.attitude_time_s
-        if q_at is not None and state.time_s - q_at > ATTITUDE_STALE_S:
-            self.stale_attitude_ticks += 1
-        elif attitude_jump_rad(R0, R_WB, g0, g1, g2, dt) > ATTITUDE_JUMP_RAD:
-            self.attitude_jumps += 1
-        return True
-
     # ------------------------------------------------------------------ the tick
     def tick(
         self, state: VehicleState, brake: bool = False, hold_s: float | None = None
@@ -435,14 +282,7 @@ class InterceptionLoop:
             dt = self.nominal_dt_s
         hold = dt if hold_s is None or not hold_s > 0.0 else hold_s
 
-        n_gyro = self._gyro_n
-        if n_gyro:
-            g0, g1, g2 = self._gyro_sum
-            gyro = np.array((g0 / n_gyro, g1 / n_gyro, g2 / n_gyro))
-            self._gyro_sum = (0.0, 0.0, 0.0)
-            self._gyro_n = 0
-        else:
-            gyro = state.body_rates_flu_rad_s
+        gyro = self.gyro_turn.mean_rate(state.body_rates_flu_rad_s)
         q = as_quat(state.attitude_wxyz)
         if gains.t_att_lag > 0.0:
             R_WB = propagate_rotation(rotmat_of_quat(q), gyro, gains.t_att_lag)
@@ -466,11 +306,8 @@ class InterceptionLoop:
                 a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
             vf = (v0 + lag * a0, v1 + lag * a1, v2 + lag * a2)
             v = np.array(vf)
-        self._last_velocity = v
-        if self._first_tick_s is None:
-            self._first_tick_s = t
-            # the launch cue: where the operator pointed the camera (horizontal heading)
-            self._launch_cue = horizontal_unit(R_WC[:, 2])
+        ladder = self.ladder
+        ladder.on_tick(t, R_WC)
         ox, oy, oz = self._offset_b_m
         if ox or oy or oz:
             # the camera's own velocity: the body's plus omega x the believed mount offset
@@ -481,16 +318,12 @@ class InterceptionLoop:
             v_cam = v
         self.dkf.predict(t, gyro, v_cam, R_WC)
         self.self_cal.on_tick(t, gyro, v_cam, self._los_prev)
-        hist = self._R_hist
-        hist.append((t, R_WC))
-        while len(hist) > 2 and hist[1][0] <= t - _ATTITUDE_HISTORY_S:
-            hist.popleft()
         self.last_fusion, self._fused_early = self._fused_early, []
         if self._detections:
             dets = sorted(self._detections, key=lambda d: d.capture_time_s)
             self._detections.clear()
-            if self._screening(t):
-                dets = self._screened(dets, R_WC)
+            if ladder.screening(t):
+                dets = ladder.screened(dets, R_WC, gains)
             for det in dets:
                 self.last_fusion.append(self._fuse(det))
 
@@ -512,7 +345,7 @@ class InterceptionLoop:
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0
-        mode = self._next_mode(t, est)
+        mode = ladder.next_mode(t, est, v, gains)
         self.mode = mode
         a_up = upward_accel_m_s2(self.vehicle.hover_thrust_normalised, gains.k_up)
         alt = float(state.position_enu_m[2])
@@ -533,9 +366,9 @@ class InterceptionLoop:
             e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
         elif mode is LoopMode.SEARCH:
-            a_d = search_accel(self._search_cue, v, gains)
+            a_d = search_accel(ladder.search_cue, v, gains)
             yaw_rate = search_yaw_rate(
-                self._search_cue, R_WC[:, 2], self._search_dir, gains, t - self._search_start_s
+                ladder.search_cue, R_WC[:, 2], ladder.search_dir, gains, t - ladder.search_start_s
             )
         elif mode is not LoopMode.TRACKING and mode is not LoopMode.COAST:
             a_d = brake_accel(v, gains, a_up)  # brake and hold
@@ -551,7 +384,7 @@ class InterceptionLoop:
             has_prev = prev is not None and R_prev is not None
             if not has_prev:
                 prev, R_prev = (0.0, 0.0), R_WC
-            elif self._turn_through_gyro(state, R_WB, gyro, dt):
+            elif self.gyro_turn.through_gyro(state, R_WB, gyro, dt):
                 # the body's turn since the last tick is the gyro's, not the difference of
                 # two attitude estimates (their corrections, a stale attitude replaced), which
                 # PNG would turn K times within one command
@@ -643,7 +476,7 @@ class InterceptionLoop:
         self._thrust_n = thrust * veh.max_thrust_n
         self._prev_time_s = t
         self._prev_R_WC = R_WC
-        self._prev_R_WB = R_WB
+        self.gyro_turn.prev_R_WB = R_WB
         return ControlTelemetry(
             time_s=t,
             mode=mode,

@@ -57,7 +57,8 @@ def pytest_collection_modifyitems(config, items) -> None:
     order). The tests that fly the SITL rig form one group, so two real-time rigs never share
     the two cores. Tests that share a module-scoped fixture (a ground station, a browser, a
     flown log) form one group per module: the fixture is made once, and a test that expects
-    the state the previous ones left (the browser modules) finds it."""
+    the state the previous ones left (the browser modules) finds it. Tests marked ``early``
+    come first."""
     for item in items:
         if item.get_closest_marker("xdist_group") is not None:
             continue
@@ -74,6 +75,9 @@ def pytest_collection_modifyitems(config, items) -> None:
         )
         if shared:
             item.add_marker(pytest.mark.xdist_group(item.module.__name__))
+    # Longest first: xdist hands out the groups with the most tests first, then the rest in
+    # this order; a long test left to the end would keep one worker busy while the other idles.
+    items.sort(key=lambda item: item.get_closest_marker("early") is None)
 
 
 def pytest_terminal_summary(terminalreporter) -> None:

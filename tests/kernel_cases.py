@@ -40,10 +40,12 @@ COVERED = {
     "onboard.control.los._min": "Python's min(a, b); covered by png_floats, fov_guard_floats",
     "onboard.control.los._max": "Python's max(a, b); covered by png_floats, fov_guard_floats",
     "onboard.control.los._exact_square": "Dekker's exact square; covered by hypot2 (math.hypot)",
-    "groundstation.sim.estimate.gauss_markov_factors": "a = exp(-dt/tau), b = sigma sqrt(1-a^2); "
+    "groundstation.sim.random_processes.gauss_markov_factors": "a = exp(-dt/tau), "
+    "b = sigma sqrt(1-a^2); covered by advance_errors",
+    "groundstation.sim.random_processes.gauss_markov_step": "x <- a x + b n; "
     "covered by advance_errors",
-    "groundstation.sim.estimate.gauss_markov_step": "x <- a x + b n; covered by advance_errors",
-    "groundstation.sim.estimate.random_walk_step": "x <- x + s n; covered by advance_errors",
+    "groundstation.sim.random_processes.random_walk_step": "x <- x + s n; "
+    "covered by advance_errors",
 }
 
 

@@ -4,8 +4,6 @@ sortie lifecycle, gain sets, telemetry, and a clean stop."""
 import json
 import shutil
 import socket
-import subprocess
-import sys
 import time
 
 import pytest
@@ -14,7 +12,10 @@ from starlette.websockets import WebSocketDisconnect
 
 from groundstation.app.gainsets import GainSetStore
 from groundstation.app.server import GroundStation
+from groundstation.cli import main
 from onboard.gains import Gains
+
+from .cli_support import run_cli
 
 
 def _wait(client, pred, timeout_s=20.0):
@@ -66,16 +67,11 @@ def test_token_in_url_sets_a_cookie_that_opens_everything(gs):
             assert ws.receive_json()["type"] == "telemetry"
 
 
-def test_no_auth_refused_off_loopback(tmp_path):
+def test_no_auth_refused_off_loopback(tmp_path, capsys):
     with pytest.raises(ValueError, match="--no-auth is refused"):
         GroundStation(host="0.0.0.0", port=0, no_auth=True, data_dir=tmp_path)
-    r = subprocess.run(
-        [sys.executable, "-m", "groundstation", "serve", "--host", "0.0.0.0", "--no-auth"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 2 and "--no-auth is refused" in r.stderr
+    code, _, err = run_cli(main, ["serve", "--host", "0.0.0.0", "--no-auth"], capsys)
+    assert code == 2 and "--no-auth is refused" in err
 
 
 def test_no_auth_on_loopback_serves_without_token(tmp_path):

@@ -25,14 +25,11 @@ from groundstation.scenario import (
     with_overrides,
 )
 
+from .cli_support import run_cli
+
 
 def _run(capsys, *argv) -> tuple[int, str, str]:
-    try:
-        code = main(list(argv))
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
+    return run_cli(main, argv, capsys)
 
 
 # ----------------------------------------------------------------------------- command line
@@ -89,19 +86,18 @@ def test_paths_must_exist_and_be_of_the_right_kind(capsys, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.txt"]  # nothing was created
 
 
-def test_a_port_in_use_names_the_port_and_prints_no_url(tmp_path):
+def test_a_port_in_use_names_the_port_and_prints_no_url(tmp_path, capsys):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        r = subprocess.run(
-            [sys.executable, "-m", "groundstation", "serve", "--port", str(port),
-             "--data-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs")],
-            capture_output=True, text=True, timeout=60,
+        code, out, err = _run(
+            capsys, "serve", "--port", str(port), "--data-dir", str(tmp_path),
+            "--log-dir", str(tmp_path / "logs"),
         )  # fmt: skip
-    assert r.returncode == 2 and r.stdout == ""  # no URL
-    assert f"argument --port: port {port} on 127.0.0.1 is in use" in r.stderr
-    assert "--port 0 for any free port" in r.stderr and "Traceback" not in r.stderr
+    assert code == 2 and out == ""  # no URL
+    assert f"argument --port: port {port} on 127.0.0.1 is in use" in err
+    assert "--port 0 for any free port" in err and "Traceback" not in err
 
 
 def test_port_0_prints_the_port_the_server_took_and_it_answers(tmp_path):

@@ -1,10 +1,11 @@
 import math
-import subprocess
-import sys
 
 import pytest
 
+from onboard.cli import main
 from onboard.gains import GAIN_NAMES, GAIN_SPECS, GainError, Gains
+
+from .cli_support import run_cli
 
 
 def test_defaults_are_the_papers_flight_values():
@@ -41,22 +42,14 @@ def test_from_mapping_names_the_source():
     assert set(Gains().to_dict()) == set(GAIN_NAMES)
 
 
-def test_onboard_gains_cli(tmp_path):
+def test_onboard_gains_cli(tmp_path, capsys):
     good = tmp_path / "good.toml"
     good.write_text("k_p = 0.05\nK_y = 4\n")
-    out = subprocess.run(
-        [sys.executable, "-m", "onboard", "gains", "--check", str(good)],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    code, out, err = run_cli(main, ["gains", "--check", str(good)], capsys)
+    assert code == 0, err
     assert "k_p" in out and "0.05" in out
     bad = tmp_path / "bad.toml"
     bad.write_text("k_p = 5\n")
-    r = subprocess.run(
-        [sys.executable, "-m", "onboard", "gains", "--check", str(bad)],
-        capture_output=True,
-        text=True,
-    )
-    assert r.returncode == 2
-    assert "gain k_p = 5 is outside its range" in r.stderr and "Traceback" not in r.stderr
+    code, _, err = run_cli(main, ["gains", "--check", str(bad)], capsys)
+    assert code == 2
+    assert "gain k_p = 5 is outside its range" in err and "Traceback" not in err

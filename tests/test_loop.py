@@ -252,9 +252,9 @@ def _yawing_pass(
     much per tick (a random walk, seeded), as a magnetometer-fused heading does. The
     commanded accelerations (m/s^2 ENU), tick by tick, then the loop's counts of jumped and
     stale attitudes."""
-    import onboard.loop as loop_module
+    import onboard.gyro_turn as gyro_turn_module
 
-    monkeypatch.setattr(loop_module, "ATTITUDE_JUMP_RAD", jump_rad)
+    monkeypatch.setattr(gyro_turn_module, "ATTITUDE_JUMP_RAD", jump_rad)
     cam = CameraModel()
     loop = _loop()
     target = np.array([0.0, 20.0, 10.0])
@@ -276,7 +276,7 @@ def _yawing_pass(
         tel = loop.tick(VehicleState(t, p, vel, handed, w, handed_t if stamped else None))
         assert tel.mode is LoopMode.TRACKING or k == 0
         out.append(np.array(tel.accel_desired_enu_m_s2))
-    out.append((loop.attitude_jumps, loop.stale_attitude_ticks))
+    out.append((loop.gyro_turn.attitude_jumps, loop.gyro_turn.stale_attitude_ticks))
     return out
 
 
@@ -333,9 +333,9 @@ def test_the_attitude_is_not_judged_after_a_stall_or_with_non_finite_rates():
     dt = loop.nominal_dt_s
     now, stale = _state(dt), _state(dt)
     stale.attitude_time_s = 0.0  # not carried to the tick
-    turn = loop._turn_through_gyro
+    turn = loop.gyro_turn.through_gyro
     assert turn(now, R, np.zeros(3), dt)  # a jump (counted)
-    assert turn(stale, loop._prev_R_WB, np.zeros(3), dt)  # stale (counted)
+    assert turn(stale, loop.gyro_turn.prev_R_WB, np.zeros(3), dt)  # stale (counted)
     # the gyro saw the turn: no jump, and still through the gyro
     assert turn(now, R, np.array([0.0, 0.0, 0.02 / dt]), dt)
     # a late tick (a stall): the mean rate times the interval is no better than two attitudes
@@ -345,4 +345,4 @@ def test_the_attitude_is_not_judged_after_a_stall_or_with_non_finite_rates():
     for bad in (math.inf, math.nan):
         assert not turn(now, R, np.array([bad, 0.0, 0.0]), dt)
         assert not turn(stale, R, np.array([bad, 0.0, 0.0]), dt)
-    assert (loop.attitude_jumps, loop.stale_attitude_ticks) == (1, 1)
+    assert (loop.gyro_turn.attitude_jumps, loop.gyro_turn.stale_attitude_ticks) == (1, 1)

@@ -115,7 +115,7 @@ def test_false_detections_far_from_the_prediction_do_not_hijack_the_track():
                 fused_in_gap += [r.value for r in sim.loop.last_fusion]
     res = sim.result()
     assert fused_in_gap == []
-    assert sim.loop.screen.rejected >= 40  # about 2 s of false blobs at 30 Hz, all held back
+    assert sim.loop.ladder.screen.rejected >= 40  # about 2 s of false blobs at 30 Hz, all held back
     assert _modes(ticks)[1:] == [
         LoopMode.TRACKING,
         LoopMode.COAST,

@@ -12,7 +12,8 @@ import pytest
 from groundstation.scenario import ScenarioError, load_scenario, parse_scenario, with_changes
 from groundstation.sim.beliefs import loop_configuration
 from groundstation.sim.camera import centre_noise_px, visible_disc
-from groundstation.sim.simulation import CLEARANCE_FLOOR_M, Simulation, run_sortie
+from groundstation.sim.outcome import CLEARANCE_FLOOR_M
+from groundstation.sim.simulation import Simulation, run_sortie
 from onboard.camera_model import CameraModel
 from onboard.datatypes import Detection, VehicleParams
 from onboard.gains import Gains

@@ -11,11 +11,14 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from groundstation.cli import main
 from groundstation.recording.reader import LogError, LogIndex, inspect_log, iter_messages
 from groundstation.recording.writer import SortieRecorder, open_new_log
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
 from onboard.channels.schemas import CHANNELS
+
+from .cli_support import run_cli
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +115,7 @@ def test_truncated_and_garbled_files_have_a_status_and_replay_up_to_the_damage(r
     assert listed == {"truncated.mcap": "truncated", "garbage.mcap": "damaged"}
 
 
-def test_non_mcap_refused_and_names_cannot_leave_the_folder(tmp_path):
+def test_non_mcap_refused_and_names_cannot_leave_the_folder(tmp_path, capsys):
     (tmp_path / "notes.mcap").write_text("not a log")
     with pytest.raises(LogError, match="not an MCAP file"):
         inspect_log(tmp_path / "notes.mcap")
@@ -133,12 +136,8 @@ def test_non_mcap_refused_and_names_cannot_leave_the_folder(tmp_path):
     # a campaign's folder inside the log folder is fine: names are paths in it
     root = (tmp_path / "logs").resolve()
     assert index.resolve("static-n2/a.mcap") == root / "static-n2" / "a.mcap"
-    r = subprocess.run(
-        [sys.executable, "-m", "groundstation", "replay", str(tmp_path / "notes.mcap")],
-        capture_output=True,
-        text=True,
-    )
-    assert r.returncode == 2 and "not an MCAP file" in r.stderr and "Traceback" not in r.stderr
+    code, _, err = run_cli(main, ["replay", str(tmp_path / "notes.mcap")], capsys)
+    assert code == 2 and "not an MCAP file" in err and "Traceback" not in err
 
 
 def test_never_overwrites(tmp_path):
@@ -218,35 +217,19 @@ def test_a_crashed_sortie_leaves_a_complete_file(tmp_path):
     assert sum(1 for t, _, _ in iter_messages(path) if t == "/control") >= 30
 
 
-def test_replay_cli_json(recorded):
+def test_replay_cli_json(recorded, capsys):
     path, result = recorded
-    out = subprocess.run(
-        [sys.executable, "-m", "groundstation", "replay", str(path), "--json"],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    code, out, err = run_cli(main, ["replay", str(path), "--json"], capsys)
+    assert code == 0, err
     d = json.loads(out)
     assert d["status"] == "ok" and d["outcome"] == result.outcome
     assert d["topics"]["/control"] > 50 and d["events"][-1]["message"].startswith("outcome")
 
 
-def test_sortie_cli_log_flag(tmp_path):
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "groundstation",
-            "sortie",
-            "static-ahead-20m",
-            "--log",
-            str(tmp_path),
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+def test_sortie_cli_log_flag(tmp_path, capsys):
+    argv = ["sortie", "static-ahead-20m", "--log", str(tmp_path), "--json"]
+    code, out, err = run_cli(main, argv, capsys)
+    assert code == 0, err
     log = Path(json.loads(out)["log"])
     assert log.parent == tmp_path and inspect_log(log).status == "ok"
 

@@ -1,11 +1,11 @@
 """Scenario files: strict loading, clear errors, exit status 2 without a traceback."""
 
-import subprocess
-import sys
-
 import pytest
 
+from groundstation.cli import main
 from groundstation.scenario import ScenarioError, load_scenario, parse_scenario, shipped_scenarios
+
+from .cli_support import run_cli
 
 GOOD = """
 name = "cv-top-to-bottom"
@@ -60,23 +60,15 @@ def test_errors_name_the_key_and_the_file(edit, message):
     assert message in str(exc.value)
 
 
-def test_cli_bad_file_exits_2_without_traceback(tmp_path):
+def test_cli_bad_file_exits_2_without_traceback(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(GOOD.replace("[target]", "[target]\nspeed = 3"))
-    r = subprocess.run(
-        [sys.executable, "-m", "groundstation", "sortie", str(bad), "--json"],
-        capture_output=True,
-        text=True,
-    )
-    assert r.returncode == 2
-    assert "unknown key 'target.speed'" in r.stderr and str(bad) in r.stderr
-    assert "Traceback" not in r.stderr and r.stdout == ""
-    missing = subprocess.run(
-        [sys.executable, "-m", "groundstation", "sortie", str(tmp_path / "nope.toml")],
-        capture_output=True,
-        text=True,
-    )
-    assert missing.returncode == 2 and "no such file or shipped scenario" in missing.stderr
+    code, out, err = run_cli(main, ["sortie", str(bad), "--json"], capsys)
+    assert code == 2
+    assert "unknown key 'target.speed'" in err and str(bad) in err
+    assert "Traceback" not in err and out == ""
+    code, _, err = run_cli(main, ["sortie", str(tmp_path / "nope.toml")], capsys)
+    assert code == 2 and "no such file or shipped scenario" in err
 
 
 def test_every_shipped_scenario_loads_and_names_match_files():

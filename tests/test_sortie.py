@@ -7,12 +7,15 @@ import sys
 
 import pytest
 
+from groundstation.cli import main
 from groundstation.scenario import load_scenario, shipped_scenarios
-from groundstation.sim.simulation import RECOVERY_TIMEOUT_S, Outcome, Simulation, run_sortie
+from groundstation.sim.outcome import RECOVERY_TIMEOUT_S
+from groundstation.sim.simulation import Outcome, Simulation, run_sortie
 from onboard.datatypes import LoopMode
 from onboard.gains import Gains
 
 from .as_written import load_as_written  # the conditions these tests were written for
+from .cli_support import run_cli
 
 STATIC_SETUPS = [p.stem for p in shipped_scenarios() if load_scenario(p).target.motion == "static"]
 STATIC_MISS_TOLERANCE_M = 0.10  # centimetre-level static interception
@@ -80,20 +83,26 @@ def test_unseen_target_is_lost():
     assert r.sim_time_s == pytest.approx(0.5 + 5.0, abs=0.011)  # t_wait + t_search
 
 
-def _cli_json(*args):
-    out = subprocess.run(
+def _cli_json(capsys, *args) -> str:
+    """``groundstation sortie ARGS --json`` run in this process: what it printed."""
+    code, out, err = run_cli(main, ["sortie", *args, "--json"], capsys)
+    assert code == 0, err
+    return out
+
+
+@pytest.mark.early
+@pytest.mark.parametrize("camera", ["projected", "rendered"])
+def test_same_scenario_and_seed_give_identical_json(camera, capsys):
+    args = ("sm-tailgate", "--seed", "7", "--camera", camera)
+    # one run in a process of its own (the installed entry point), one in this process after
+    # whatever it ran before
+    a = subprocess.run(
         [sys.executable, "-m", "groundstation", "sortie", *args, "--json"],
         capture_output=True,
         text=True,
         check=True,
     ).stdout
-    return out
-
-
-@pytest.mark.parametrize("camera", ["projected", "rendered"])
-def test_same_scenario_and_seed_give_identical_json(camera):
-    args = ("sm-tailgate", "--seed", "7", "--camera", camera)
-    a, b = _cli_json(*args), _cli_json(*args)
+    b = _cli_json(capsys, *args)
     assert a == b
     d = json.loads(a)
     for key in (
@@ -108,7 +117,7 @@ def test_same_scenario_and_seed_give_identical_json(camera):
     ):
         assert key in d
     assert d["seed"] == 7 and d["law"] == "png" and d["scenario"] == "sm-tailgate"
-    other = json.loads(_cli_json("sm-tailgate", "--seed", "8", "--camera", camera))
+    other = json.loads(_cli_json(capsys, "sm-tailgate", "--seed", "8", "--camera", camera))
     assert other["miss_m"] != d["miss_m"]  # the seed really drives the noise
 
 
@@ -122,33 +131,21 @@ def test_human_summary():
     assert "HIT" in out and "miss" in out and "terminal speed" in out
 
 
-def test_scenario_override_on_the_command_line():
+def test_scenario_override_on_the_command_line(capsys):
     # docs/paper.md's k_v figures: the perfect state, without the velocity-latency prediction (with
     # it, predicting the true velocity 20 ms ahead is a phase lead that rescues k_v = 100:
     # 0.009 m here against 0.087 m)
     ideal = ("--set", "estimate.enabled=false", "--set", "gains.t_vel_lag=0")
-    default = json.loads(_cli_json("static-ahead-20m", "--law", "pg", *ideal))
+    default = json.loads(_cli_json(capsys, "static-ahead-20m", "--law", "pg", *ideal))
     literal = json.loads(
-        _cli_json("static-ahead-20m", "--law", "pg", "--set", "gains.k_v=100", *ideal)
+        _cli_json(capsys, "static-ahead-20m", "--law", "pg", "--set", "gains.k_v=100", *ideal)
     )
     # PG aims the camera, 3 cm above the centre of mass and imperfectly calibrated, at the
     # target: about 5 cm of bias at the default k_v (it was under 0.02 m with a perfect camera
     # at the centre of mass); k_v = 100 flies a worse pass
     assert default["miss_m"] < 0.06 and literal["miss_m"] > default["miss_m"] + 0.01
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "groundstation",
-            "sortie",
-            "static-ahead-20m",
-            "--set",
-            "gains.k_a=99",
-        ],
-        capture_output=True,
-        text=True,
-    )
-    assert r.returncode == 2 and "k_a = 99.0 is outside its range" in r.stderr
+    code, _, err = run_cli(main, ["sortie", "static-ahead-20m", "--set", "gains.k_a=99"], capsys)
+    assert code == 2 and "k_a = 99.0 is outside its range" in err
 
 
 def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
@@ -156,7 +153,7 @@ def test_losing_the_balloon_from_the_image_while_on_it_is_a_hit():
     tick before the pass completes; the vehicle is on it (a balloon bursts on contact), so the
     sortie is a hit. Out of contact the same loss ends the sortie as TARGET_LOST."""
     sim = Simulation(load_scenario("static-ahead-20m"), law="png", seed=0)
-    sim.loop.acquired = True
+    sim.loop.ladder.acquired = True
     sim.loop.mode = LoopMode.LOST  # the loop's failsafe: its search is over
     sim.miss_m = 0.02  # closest approach so far: inside the hit radius
     assert not sim._check_loop_outcome(1.0) and sim.outcome is None

@@ -12,7 +12,7 @@ from typing import Any
 from onboard.frames import Frame, SortieEvent, SortieStart
 
 from ..recording.writer import SortieRecorder
-from ..sim.simulation import closest_in_step
+from ..sim.outcome import closest_in_step
 
 
 class LiveRecording:

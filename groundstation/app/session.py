@@ -369,7 +369,7 @@ class SimSession:
                 if self._last_mode is not None:
                     self._event(round(sim.time_s, 3), "state", f"{self._last_mode} → {mode}")
                 self._last_mode = mode
-            if tel.dkf_lost != self._last_lost and sim.loop.acquired:
+            if tel.dkf_lost != self._last_lost and sim.loop.ladder.acquired:
                 text = "detection lost" if tel.dkf_lost else "detection regained"
                 self._event(round(sim.time_s, 3), "detection", text)
                 self._last_lost = tel.dkf_lost

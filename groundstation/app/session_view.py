@@ -231,7 +231,7 @@ class SessionView:
             dkf = sim.loop.dkf
             est = dkf.estimate()
             out["dkf"] = {
-                "acquired": sim.loop.acquired,
+                "acquired": sim.loop.ladder.acquired,
                 "lost": dkf.lost(sim.time_s),
                 "time_since_detection_s": None
                 if est is None

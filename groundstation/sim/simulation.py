@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -29,7 +28,13 @@ from onboard.runtime.state_machine import intercept_over
 from ..scenario import Scenario, scenario_toml
 from .beliefs import loop_configuration, true_camera
 from .camera import SimCamera
-from .estimate import Normals, StateEstimateModel
+from .estimate import StateEstimateModel
+from .outcome import (
+    OUTCOME_OF_CODE,
+    RECOVERY_TIMEOUT_S,
+    SortieResult,
+    has_recovered,
+)
 from .physics import (
     C_CLOSE_REL,
     C_CLOSE_VEL,
@@ -44,77 +49,19 @@ from .physics import (
     C_SPEED,
     C_TIME,
     C_TWO,
-    OUTCOME_CRASHED,
-    OUTCOME_DIVERGED,
-    OUTCOME_HIT,
-    OUTCOME_MISS,
     S_CMD,
     S_CS,
-    closest_approach,
     normal_accel,
     physics_steps,
     sortie_buffer,
 )
 from .profiles import profile_of, sortie_estimate
+from .random_processes import Normals
 from .targets import Target, TrackTarget
 from .vehicle import Multicopter
 from .wind import Wind
 
-_OUTCOMES = {
-    OUTCOME_HIT: Outcome.HIT,
-    OUTCOME_MISS: Outcome.MISS,
-    OUTCOME_DIVERGED: Outcome.DIVERGED,
-    OUTCOME_CRASHED: Outcome.CRASHED,
-}
 _STALE_MODES = (LoopMode.COAST, LoopMode.REACQUIRE, LoopMode.SEARCH)
-
-# After the pass the sortie goes on until the vehicle has recovered: slower than this, its
-# thrust axis within this of vertical, at least this high, checked at each control tick; or
-# until this long after the pass (not recovered: the outcome stands, ``recovered`` false).
-RECOVERED_SPEED_M_S = 0.5
-RECOVERED_TILT_DEG = 10.0
-CLEARANCE_FLOOR_M = 0.3
-RECOVERY_TIMEOUT_S = 6.0
-_LEVEL_COS = math.cos(math.radians(RECOVERED_TILT_DEG))
-
-
-@dataclass(frozen=True)
-class SortieResult:
-    outcome: str
-    miss_m: float
-    intercept_time_s: float
-    terminal_speed_m_s: float
-    max_normal_accel_m_s2: float
-    law: str
-    seed: int
-    scenario: str
-    camera: str
-    sim_time_s: float
-    hit_radius_m: float
-    detections_fused: int
-    detections_rejected: int
-    guard_trips: int
-    profile: str = ""  # the state-estimate error profile flown ("ideal": ideal sensors)
-    recovered: bool = False  # braked, level and above the clearance floor after the pass
-    min_alt_after_pass_m: float = math.nan  # lowest altitude after the pass (NaN: no pass)
-
-    def to_json_dict(self) -> dict:
-        d = asdict(self)
-        for k, v in d.items():
-            if isinstance(v, float):
-                d[k] = round(v, 6) if math.isfinite(v) else None
-        return d
-
-
-def closest_in_step(r0, r1) -> tuple[float, float, tuple[float, float, float], bool, bool, bool]:
-    """Closest approach within one physics step, the relative position moving linearly from
-    ``r0`` to ``r1`` (target minus vehicle, m): distance, fraction of the step, the relative
-    position there, whether the range was closing at the start, is opening at the end, and is
-    still closing at the end (:func:`.physics.closest_approach`, the kernel's own checks)."""
-    dist, s, c0, c1, c2, r0d, r1d = closest_approach(
-        float(r0[0]), float(r0[1]), float(r0[2]), float(r1[0]), float(r1[1]), float(r1[2])
-    )
-    return dist, s, (c0, c1, c2), r0d < 0.0, r1d > 0.0, r1d < 0.0
 
 
 class Simulation:
@@ -293,7 +240,7 @@ class Simulation:
             detection=self.last_detection,
             dkf_state_px=None if state is None else tuple(state[0].tolist()),
             dkf_cov_diag=None if state is None else tuple(state[1].tolist()),
-            acquired=loop.acquired,
+            acquired=loop.ladder.acquired,
             gains=loop.gains,
             guard_trips=loop.guard_trips,
         )
@@ -360,7 +307,7 @@ class Simulation:
             k += taken
             code = buf[S_CS + C_OUTCOME]
             if code != 0.0:
-                self.outcome = _OUTCOMES[int(code)]
+                self.outcome = OUTCOME_OF_CODE[int(code)]
                 break
             if k >= end:
                 break
@@ -442,26 +389,15 @@ class Simulation:
         """Has the pass happened (the sortie now waits for the recovery)?"""
         return self.closest[C_PASS] != 0.0
 
-    def _has_recovered(self) -> bool:
-        """Braked, level and above the clearance floor (the true state)."""
-        veh = self.vehicle
-        v0, v1, v2 = veh.v
-        _w, x, y, _z = veh.q
-        level = 1.0 - 2.0 * (x * x + y * y)  # body z's vertical component
-        return (
-            v0 * v0 + v1 * v1 + v2 * v2 <= RECOVERED_SPEED_M_S**2
-            and level >= _LEVEL_COS
-            and veh.p[2] >= CLEARANCE_FLOOR_M
-        )
-
     def _check_loop_outcome(self, t: float) -> bool:
         """Outcomes that can only change at a control tick: after the pass, recovered (or
         out of recovery time); before it, target lost, never acquired, out of time."""
         cs = self.closest
         if cs[C_PASS] != 0.0:
-            self.recovered = self._has_recovered()
+            veh = self.vehicle
+            self.recovered = has_recovered(veh.p, veh.v, veh.q)
             if self.recovered or t - cs[C_PASS_TIME] >= RECOVERY_TIMEOUT_S - 1e-9:
-                self.outcome = _OUTCOMES[int(cs[C_PASS])]
+                self.outcome = OUTCOME_OF_CODE[int(cs[C_PASS])]
             return self.outcome is not None
         # a balloon bursts on contact: losing it from the image with the vehicle already on
         # it ends a hit (the pass completes in the physics), not a lost target

@@ -67,9 +67,9 @@ from onboard.link.px4 import MODE_HOLD, MODE_OFFBOARD, MavLink, mavlink, px4_mod
 from ..scenario import EstimateSpec, Scenario
 from ..sim.camera import DetectorFaults, sphere_in_view
 from ..sim.estimate import StateEstimateModel
+from ..sim.outcome import closest_in_step
 from ..sim.physics import PASS_RADIUS_M
 from ..sim.render import FrameRenderer
-from ..sim.simulation import closest_in_step
 from ..sim.targets import Target
 from ..sim.vehicle import Multicopter
 from ..sim.wind import Wind

@@ -484,8 +484,8 @@ class OnboardRuntime:
             "commands_sent": self.fc.commands_sent,
             # ticks whose LOS change was re-based through the gyro: the attitude jumped beyond
             # the gyro's turn (a stale one replaced), or was not of the tick (stale)
-            "attitude_jumps": None if loop is None else loop.attitude_jumps,
-            "stale_attitude_ticks": None if loop is None else loop.stale_attitude_ticks,
+            "attitude_jumps": None if loop is None else loop.gyro_turn.attitude_jumps,
+            "stale_attitude_ticks": None if loop is None else loop.gyro_turn.stale_attitude_ticks,
             "guard_trips": None if loop is None else loop.guard_trips,
             "bad_frames_fc": self.fc.link.bad_frames,
             "bad_frames_gcs": None if self.ground.link is None else self.ground.link.bad_frames,
