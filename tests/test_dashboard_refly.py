@@ -42,9 +42,11 @@ def test_refly_runs_at_1x_with_the_old_sortie_overlaid_and_a_legend(station, pag
     assert st["compare"]["file"] == name and st["compare"]["law"] == "png"
     assert st["law"] == "pg" and st["speed"] == "1" and st["state"] == "running"
     t0, w0 = status(station)["time_s"], time.monotonic()
-    time.sleep(1.0)
+    time.sleep(2.0)
     rate = (status(station)["time_s"] - t0) / (time.monotonic() - w0)
-    assert 0.5 < rate < 1.3, rate  # at 1x it can be watched (main: max, over at once)
+    # at 1x it can be watched; at the maximum speed it runs tens of times faster than the
+    # wall clock (the bounds leave room for a busy machine's scheduling and the stepped clock)
+    assert 0.3 < rate < 3.0, rate
     page.wait_for_selector("#cmp-legend:not([hidden])")
     # B's gains are told against A's, which the page reads from /api/gains
     page.wait_for_function(
