@@ -227,17 +227,24 @@ def _build_outdoor(n, laws, camera, seed):
     return build_grid([("scenario", s, s) for s in OUTDOOR_SCENARIOS], n, laws, camera, seed)
 
 
-def _summarize_outdoor(outcomes):
+def _summarize_scenarios(outcomes, paper: dict[str, str] | None = None) -> dict[str, Any]:
+    """Per scenario and law: the miss, HIT rate and outcomes, terminal speed and intercept
+    time; ``paper``: the paper's word on each scenario, beside the proposed law's cell."""
     cells = {}
     for (scenario, law), outs in group(outcomes, "scenario", "law").items():
         cells.setdefault(scenario, {})[law] = {
             **miss_stats([o.result["miss_m"] for o in outs]),
             "success_rate": success_rate([o.result["outcome"] for o in outs]),
+            "outcomes": sorted({o.result["outcome"] for o in outs}),
             "terminal_speed_mean_m_s": terminal_speed(outs),
             "intercept_time_mean_s": float(np.mean([o.result["intercept_time_s"] for o in outs])),
-            "paper": PAPER["outdoor"][scenario] if law == "png" else None,
+            "paper": paper[scenario] if paper is not None and law == "png" else None,
         }
     return {"cells": cells}
+
+
+def _summarize_outdoor(outcomes):
+    return _summarize_scenarios(outcomes, PAPER["outdoor"])
 
 
 # ------------------------------------------------------------------------- drag
@@ -256,17 +263,7 @@ def _build_drag(n, laws, camera, seed):
 
 
 def _summarize_drag(outcomes):
-    cells = {}
-    for (scenario, law), outs in group(outcomes, "scenario", "law").items():
-        cells.setdefault(scenario, {})[law] = {
-            **miss_stats([o.result["miss_m"] for o in outs]),
-            "success_rate": success_rate([o.result["outcome"] for o in outs]),
-            "outcomes": sorted({o.result["outcome"] for o in outs}),
-            "terminal_speed_mean_m_s": terminal_speed(outs),
-            "intercept_time_mean_s": float(np.mean([o.result["intercept_time_s"] for o in outs])),
-            "paper": None,
-        }
-    return {"cells": cells, "drag_range_n_s_m": DRAG_RANGE_N_S_M}
+    return {**_summarize_scenarios(outcomes), "drag_range_n_s_m": DRAG_RANGE_N_S_M}
 
 
 CAMPAIGNS: dict[str, Campaign] = {
