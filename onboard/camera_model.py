@@ -140,8 +140,11 @@ class CameraModel:
 
     def undistorted(self, detection: Detection) -> Detection:
         """``detection`` (the lens's pixels) with its centre undistorted (NaN where it cannot
-        be: the DKF refuses it); a clipped blob's box is left as the detector saw it (the DKF
-        reads it only to know whether the blob is whole)."""
+        be: the DKF refuses it) and its area divided by the square of the lens's local
+        magnification there (:meth:`disc_through_lens`): a barrel lens shrinks an off-axis
+        blob (about 3 % at 20 deg with k1 = -0.1), which the DKF's size model would read as a
+        longer range. A clipped blob's box is left as the detector saw it (the DKF reads it
+        only to know whether the blob is whole)."""
         if not self.distorted:
             return detection
         d = detection
@@ -149,7 +152,17 @@ class CameraModel:
             u, v = self.undistort_px(float(d.center_px[0]), float(d.center_px[1]))
         except (TypeError, ValueError, IndexError):
             u = v = math.nan
-        return Detection(d.capture_time_s, (u, v), d.bbox_px, d.area_px, d.score)
+        area = d.area_px
+        try:
+            a = float(area)
+        except (TypeError, ValueError):
+            a = math.nan
+        if a > 0.0 and math.isfinite(a) and math.isfinite(u) and math.isfinite(v):
+            r = math.sqrt(a / math.pi)
+            m = self.disc_through_lens(u, v, r)[2] / r
+            if m > 0.0:
+                area = a / (m * m)
+        return Detection(d.capture_time_s, (u, v), d.bbox_px, area, d.score)
 
 
 @kernel("UniTuple(float64, 3)(float64, float64, float64, float64, float64, float64)")

@@ -169,6 +169,25 @@ def test_lens_distortion_round_trip_and_the_loop_undistorts_with_its_belief():
     assert loop._detections[0].center_px == pytest.approx((600.0, 50.0), abs=1e-6)
 
 
+def test_the_loop_undoes_the_lens_magnification_of_a_blobs_size():
+    # a barrel lens shrinks an off-axis blob; the loop's undistorted detection has the area
+    # of the ideal pinhole disc again, so the DKF's size model does not read a longer range
+    cam = CameraModel(640, 480, 90.0, distortion=(-0.1, 0.01, 0.0, 0.0))
+    for u, v, r in ((320.0, 240.0, 6.0), (320.0, 120.0, 4.0), (560.0, 60.0, 8.0)):
+        ud, vd, rd = cam.disc_through_lens(u, v, r)
+        det = cam.undistorted(
+            Detection(0.0, (ud, vd), (ud - rd, vd - rd, 2 * rd, 2 * rd), math.pi * rd**2)
+        )
+        assert det.center_px == pytest.approx((u, v), abs=1e-6)
+        assert math.sqrt(det.area_px / math.pi) == pytest.approx(r, rel=2e-3)
+    # 120 px above the centre (about 20 deg) the lens alone takes about 3 % off the radius
+    rd = cam.disc_through_lens(320.0, 120.0, 4.0)[2]
+    assert 0.95 < rd / 4.0 < 0.985
+    # a detection without an area passes unchanged but for its centre
+    det = cam.undistorted(Detection(0.0, (300.0, 200.0), None, None))
+    assert det.area_px is None and det.center_px == pytest.approx(cam.undistort_px(300.0, 200.0))
+
+
 def test_detector_faults_are_on_by_default():
     c = load_scenario("static-ahead-20m").camera
     assert c.min_blob_px >= 3.0 and c.false_probability > 0 and c.burst_probability > 0
