@@ -183,6 +183,9 @@ class BeliefSpec:
     camera_p2: float = 0.0
     camera_offset_m: Vec3 = (0.08, 0.0, 0.03)  # measured camera offset from the CoM, FLU
     hover_thrust: float = 1.0 / 3.0  # PRG_HOVER_THR: normalised thrust that hovers
+    # PRG_TGT_ACC: the DKF's random walk of the target's velocity (m/s^2 per sqrt(Hz)), which
+    # also carries the vehicle's velocity-estimate errors: 6 on GNSS, 1 on motion capture
+    target_accel_noise_m_s2: float = 6.0
 
 
 @dataclass(frozen=True)

@@ -216,6 +216,11 @@ def validate_belief(s: Scenario, problems: Problems) -> None:
         "must be in [-180, 180]",
     )
     check(0.05 <= b.hover_thrust <= 0.95, "belief.hover_thrust", "must be in [0.05, 0.95]")
+    check(
+        0.1 <= b.target_accel_noise_m_s2 <= 30.0,
+        "belief.target_accel_noise_m_s2",
+        "must be in [0.1, 30] m/s^2",
+    )
     for side, spec, prefix in (("belief", b, "camera_"), ("camera", c, "")):
         for name in ("principal_offset_u_px", "principal_offset_v_px"):
             v = getattr(spec, prefix + name)

@@ -73,5 +73,8 @@ def loop_configuration(
         gains=gains if gains is not None else scenario.gains_obj(),
         law=law,
         control_rate_hz=float(scenario.sim.control_rate_hz),
-        dkf=DkfConfig(target_diameter_m=b.target_diameter_m),
+        dkf=DkfConfig(
+            target_diameter_m=b.target_diameter_m,
+            target_accel_noise_m_s2=b.target_accel_noise_m_s2,
+        ),
     )

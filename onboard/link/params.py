@@ -50,6 +50,14 @@ class RuntimeParams:
     TGT_DIAM_M: float = ranged(
         0.3, "m", 0.02, 3.0, "target (balloon) diameter: the DKF's range from apparent size"
     )
+    TGT_ACC: float = ranged(
+        6.0,
+        "m/s^2",
+        0.1,
+        30.0,
+        "DKF: random walk of the target's velocity per sqrt(Hz), its manoeuvres and the "
+        "vehicle's velocity-estimate errors (GNSS 6, motion capture 1)",
+    )
     DONE_SIZE: float = ranged(
         0.2,
         "-",
@@ -71,8 +79,13 @@ class RuntimeParams:
         return LAW_CODES[int(self.LAW)]
 
     def dkf_config(self) -> DkfConfig:
-        """The DKF settings these parameters carry (target lost timeout, target diameter)."""
-        return DkfConfig(lost_timeout_s=self.TGT_LOST_S, target_diameter_m=self.TGT_DIAM_M)
+        """The DKF settings these parameters carry (target lost timeout, target diameter,
+        the random walk of its velocity)."""
+        return DkfConfig(
+            lost_timeout_s=self.TGT_LOST_S,
+            target_diameter_m=self.TGT_DIAM_M,
+            target_accel_noise_m_s2=self.TGT_ACC,
+        )
 
 
 PARAM_PREFIX = "PRG_"  # the component's parameter group, as PX4's MPC_, COM_, EKF2_
