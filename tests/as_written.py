@@ -29,6 +29,7 @@ AS_WRITTEN = {  # --set keys
     "belief.camera_k1": 0.0,
     "belief.camera_k2": 0.0,
     "belief.camera_offset_m": [0.0, 0.0, 0.0],
+    "belief.target_accel_noise_m_s2": 1.0,  # the DKF tuned for a motion-capture estimate
 }
 
 
