@@ -45,7 +45,7 @@ from .datatypes import (
     VehicleParams,
     VehicleState,
 )
-from .enums import GuidanceLaw
+from .enums import DEFAULT_LAW, GuidanceLaw
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .estimation.dkf_values import measurement
 from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
@@ -95,7 +95,7 @@ class InterceptionLoop:
         camera: CameraModel,
         vehicle: VehicleParams,
         gains: Gains | None = None,
-        law: str = "png",
+        law: str = DEFAULT_LAW.value,
         control_rate_hz: float = 100.0,
         dkf_config: DkfConfig | None = None,
         estimate_motion: bool = False,

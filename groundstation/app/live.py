@@ -27,7 +27,7 @@ from onboard.enums import LoopMode, RuntimeState
 from onboard.frames import Frame, SortieStart
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
-from onboard.link.params import PARAM_IDS, PARAM_SPECS
+from onboard.link.params import PARAM_IDS, PARAM_SPECS, RuntimeParams
 from onboard.link.px4 import (
     CMD_ABORT,
     CMD_START,
@@ -301,7 +301,7 @@ class LiveSession:
             foxglove=self.foxglove,
             start=SortieStart(
                 scenario="live",
-                law=tm.LAW_CODES[int(self.vehicle.params.get("LAW", 0))],
+                law=tm.LAW_CODES[int(self.vehicle.params.get("LAW", RuntimeParams.LAW))],
                 seed=0,
                 camera="live",
                 camera_model=self.vehicle.camera_model(),
@@ -403,7 +403,7 @@ class LiveSession:
             return {
                 "state": "live",
                 "scenario": "live",
-                "law": tm.LAW_CODES[int(v.params.get("LAW", 0))],
+                "law": tm.LAW_CODES[int(v.params.get("LAW", RuntimeParams.LAW))],
                 "seed": "—",
                 "camera": "onboard",
                 "speed": "1",

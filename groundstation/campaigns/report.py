@@ -13,6 +13,8 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
+from onboard.enums import GuidanceLaw
+
 from . import agility
 from .plots import (
     LAW_COLOURS,
@@ -134,7 +136,7 @@ def _md_wind(summary) -> str:
         ]
         paper = summary["paper"][w]["success"] * 100
         lines.append(f"| {w} m/s | " + " | ".join(rates) + f" | {paper:.0f} % (5) |")
-    law = "png" if "png" in laws else laws[0]
+    law = GuidanceLaw.PNG.value if GuidanceLaw.PNG.value in laws else laws[0]  # the paper's law
     lines += [
         "",
         f"Image plane, {LAW_NAMES.get(law, law)}: normalised (u, v), ours | paper",

@@ -23,7 +23,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..enums import GuidanceLaw, describe_codes
+from ..enums import DEFAULT_LAW, GuidanceLaw, describe_codes
 from ..estimation.dkf import DkfConfig
 from ..gains import GAIN_SPECS, GainError, Gains, check_ranges, ranged
 from .telemetry import LAW_CODES
@@ -37,7 +37,11 @@ else:  # pragma: no cover
 @dataclass(frozen=True)
 class RuntimeParams:
     LAW: float = ranged(
-        0, "-", 0, len(LAW_CODES) - 1, "guidance law: " + describe_codes(GuidanceLaw)
+        LAW_CODES.index(DEFAULT_LAW.value),
+        "-",
+        0,
+        len(LAW_CODES) - 1,
+        "guidance law: " + describe_codes(GuidanceLaw),
     )
     CAM_HFOV_DEG: float = ranged(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
     CAM_PITCH_DEG: float = ranged(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
