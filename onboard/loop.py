@@ -14,6 +14,7 @@ from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, tim
 from .control.attitude import command_floats
 from .control.clearance import (
     clearance_guard_accel,
+    range_interval_m,
     track_speed_cap_m_s,
     upward_accel_m_s2,
 )
@@ -411,8 +412,7 @@ class InterceptionLoop:
                 # the range the DKF is confident of: its inverse depth one sigma high
                 # (a poorly known depth must not switch the midcourse term on)
                 rng, v_t, P = dv
-                rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
-                range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                range_m = range_interval_m(rng, e_n, float(P[2, 2]), sigmas=1.0)[0]
                 var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(

@@ -69,15 +69,18 @@ def stoppable_descent_m_s(height_m: float, a_up_m_s2: float, lag_s: float) -> fl
 
 
 def range_interval_m(
-    range_m: float, e_norm: tuple[float, float], inv_depth_var: float
+    range_m: float,
+    e_norm: tuple[float, float],
+    inv_depth_var: float,
+    sigmas: float = RANGE_SIGMAS,
 ) -> tuple[float, float]:
     """(low, high) range along the LOS (m) with the DKF's inverse depth rho = sqrt(1 + |e_n|^2)
-    / range moved ``RANGE_SIGMAS`` sigma up and down (variance ``inv_depth_var``, 1/m^2); the
-    high end is inf when rho is within that of zero."""
+    / range moved ``sigmas`` sigma up and down (variance ``inv_depth_var``, 1/m^2); the high
+    end is inf when rho is within that of zero."""
     if not (math.isfinite(range_m) and range_m > 0.0):
         return 0.0, math.inf
     rho = math.sqrt(1.0 + e_norm[0] ** 2 + e_norm[1] ** 2) / range_m
-    d = RANGE_SIGMAS * math.sqrt(max(inv_depth_var, 0.0)) if math.isfinite(inv_depth_var) else rho
+    d = sigmas * math.sqrt(max(inv_depth_var, 0.0)) if math.isfinite(inv_depth_var) else rho
     low = range_m * rho / (rho + d)
     high = range_m * rho / (rho - d) if rho > d else math.inf
     return low, high
