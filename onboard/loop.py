@@ -13,6 +13,7 @@ from .camera_model import CameraModel
 from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, time_to_go_s
 from .control.attitude import command_floats
 from .control.clearance import (
+    brake_accel,
     clearance_guard_accel,
     range_interval_m,
     track_speed_cap_m_s,
@@ -65,26 +66,6 @@ from .track_loss import TrackLossLadder
 _NAN2 = (math.nan, math.nan)
 _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's LOS change yet
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
-
-
-def brake_accel(
-    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
-) -> np.ndarray:
-    """Brake and hold (after the pass, on an abort, with the target lost): the vertical
-    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
-    the believed airframe's upward capability, :func:`.control.clearance.upward_accel_m_s2`;
-    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
-    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
-    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
-    a_max = gains.a_max
-    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
-    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
-    room = math.sqrt(max(a_max * a_max - az * az, 0.0))
-    ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
-    n = math.hypot(ax, ay)
-    if n > room:
-        ax, ay = ax * room / n, ay * room / n
-    return np.array((ax, ay, az))
 
 
 class InterceptionLoop:
@@ -357,6 +338,7 @@ class InterceptionLoop:
             self._dq_flown = _NO_FLOWN
             self._los_prev = None  # no line of sight for the size estimate's displacement
             self._target_low_m = -math.inf
+            self.speed_cap_m_s = math.inf
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -497,4 +479,5 @@ class InterceptionLoop:
             self_cal=self._self_cal_est,
             target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
             motion_model_probs=None if motion is None else motion.probabilities,
+            speed_cap_m_s=self.speed_cap_m_s,
         )

@@ -175,3 +175,23 @@ def track_speed_cap_m_s(
     held = held_height_low_m(prev_low_m, dt_s, now, gains.v_tgt_sink)
     cap = approach_speed_cap_m_s(held, los_up, velocity_enu_m_s, low, a_up_m_s2, gains)
     return cap, held
+
+
+def brake_accel(
+    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
+) -> np.ndarray:
+    """Brake and hold (after the pass, on an abort, with the target lost): the vertical
+    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
+    the believed airframe's upward capability, :func:`upward_accel_m_s2`;
+    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
+    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
+    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
+    a_max = gains.a_max
+    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
+    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
+    room = math.sqrt(max(a_max * a_max - az * az, 0.0))
+    ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
+    n = math.hypot(ax, ay)
+    if n > room:
+        ax, ay = ax * room / n, ay * room / n
+    return np.array((ax, ay, az))
