@@ -93,7 +93,8 @@ def _build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument(
         "name",
-        help="static | moving | wind | outdoor | drag | size | envelope | range | agility | heldout",
+        help="static | moving | wind | outdoor | drag | size | envelope | range | agility"
+        " | heldout",
     )
     c.add_argument(
         "--n", type=COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"

@@ -315,9 +315,7 @@ CAMPAIGNS: dict[str, Campaign] = {
     "agility": Campaign(
         "agility", 20, "tries per acceleration / jink range", agility.build, agility.summarize
     ),
-    "heldout": Campaign(
-        "heldout", 20, "seeds per scenario", _build_heldout, _summarize_heldout
-    ),
+    "heldout": Campaign("heldout", 20, "seeds per scenario", _build_heldout, _summarize_heldout),
 }
 
 

@@ -164,7 +164,8 @@ def _md_outdoor(summary) -> str:
         for law, c in by_law.items():
             lines.append(
                 f"| {sc} | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
-                f"{c['cep_m']:.3f} m | {c['mean_m']:.3f} m | {c['terminal_speed_mean_m_s']:.2f} m/s | "
+                f"{c['cep_m']:.3f} m | {c['mean_m']:.3f} m | "
+                f"{c['terminal_speed_mean_m_s']:.2f} m/s | "
                 f"{c['intercept_time_mean_s']:.2f} s | {c['paper'] or ''} |"
             )
     return "\n".join(lines)
