@@ -41,6 +41,7 @@ def test_codes_and_tables_derive_from_the_enums():
     assert State is enums.RuntimeState and DatatypesLoopMode is enums.LoopMode
     assert SimOutcome is enums.Outcome
     assert prm.RuntimeParams(LAW=2).law == "ibvs"
+    assert prm.law_name(0.0) == "png" and prm.law_name(3.0) == "apn"  # a code said is kept
     # the field help and the parameter help state the codes as the enums number them
     assert tm.FIELDS[tm.INDEX["law"]][2].endswith("0 png, 1 pg, 2 ibvs, 3 apn")
     assert "3 brake" in tm.FIELDS[tm.INDEX["loop_mode"]][2]
@@ -137,6 +138,8 @@ def law_defaults() -> dict[str, object]:
         "sortie --law": build_parser().parse_args(["sortie", "cv-top-to-bottom"]).law,
         "tune --law": build_parser().parse_args(["tune", "cv-top-to-bottom", "--gains", "K_y"]).law,
         "parameter LAW": prm.RuntimeParams().law,
+        "a live vehicle that has not said": prm.law_name(None),
+        "a live vehicle that sent NaN": prm.law_name(float("nan")),
     }
 
 

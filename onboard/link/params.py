@@ -17,6 +17,7 @@ next change.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 import sys
@@ -77,6 +78,12 @@ class RuntimeParams:
     def dkf_config(self) -> DkfConfig:
         """The DKF settings these parameters carry (target lost timeout, target diameter)."""
         return DkfConfig(lost_timeout_s=self.TGT_LOST_S, target_diameter_m=self.TGT_DIAM_M)
+
+
+def law_name(code: float | None) -> str:
+    """The guidance law a ``LAW`` code names; missing (None, NaN): the parameter's default."""
+    ok = code is not None and math.isfinite(code)
+    return LAW_CODES[int(code if ok else RuntimeParams.LAW)]
 
 
 PARAM_PREFIX = "PRG_"  # the component's parameter group, as PX4's MPC_, COM_, EKF2_
