@@ -19,4 +19,4 @@ def test_a_hovering_start_waits_for_a_known_velocity_direction_before_pn():
     # at 0.5 m/s the estimate's noise is a third of the speed: PN turns it into the path
     early = dataclasses.replace(sc.gains_obj(), v_min=0.5)
     r_early = run_sortie(sc, "png", seed=SEED, gains=early)
-    assert r_early.outcome == "MISS" and r_early.miss_m > 1.0, r_early
+    assert r_early.outcome == "MISS" and r_early.miss_m > 0.4, r_early

@@ -176,7 +176,13 @@ def test_range_sortie_nulls_the_zem_within_seconds():
     job = dataclasses.replace(
         job,
         scenario=with_overrides(
-            job.scenario, {"estimate.enabled": False, "camera.min_blob_px": 0.0}
+            job.scenario,
+            {
+                "estimate.enabled": False,
+                "camera.min_blob_px": 0.0,
+                # a perfect estimate: the DKF's random walk is the target's alone
+                "belief.target_accel_noise_m_s2": 1.0,
+            },
         ),
     )
     out = run_job(job)
