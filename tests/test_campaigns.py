@@ -19,7 +19,11 @@ from .cli_support import run_cli
 
 # the closed-loop figures below are docs/paper.md's perfect-state ones; the state-estimate model's
 # own checks and its closed-loop figures are in tests/test_estimate.py
-IDEAL = {"estimate.enabled": False, "gains.t_vel_lag": 0.0}  # docs/paper.md's perfect-state column
+IDEAL = {  # docs/paper.md's perfect-state column, the DKF's random walk for a perfect estimate
+    "estimate.enabled": False,
+    "gains.t_vel_lag": 0.0,
+    "belief.target_accel_noise_m_s2": 1.0,
+}
 
 
 def test_cep_and_spread_of_known_misses():
