@@ -63,8 +63,8 @@ class ImmConfig:
     # and gyro carry (CarriedPose): the integrated velocity error's drift, and the attitude's,
     # which moves the target across the line of sight by the range times the angle (the
     # estimate's own GNSS and magnetometer wander, decimetres and degrees, is not in it)
-    pose_position_sigma_m: float = 0.1
-    pose_attitude_sigma_deg: float = 0.3
+    pose_position_sigma_m: float = 0.2
+    pose_attitude_sigma_deg: float = 0.6
 
 
 @dataclass(frozen=True)
