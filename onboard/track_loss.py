@@ -31,7 +31,8 @@ class TrackLossLadder:
         self.camera = camera
         self.dkf = dkf
         self.screen = DetectionScreen()
-        self.acquired = False  # a confirmed track has been live since the start
+        self.acquired = False  # a track has been live since the start
+        self.confirmed = False  # a track with n_confirm detections has been live since the start
         self.first_tick_s: float | None = None
         self.live_s = -math.inf  # last tick with a live (not stale) track
         self.coast_over = False  # the prediction's uncertainty ended this coast
@@ -56,7 +57,7 @@ class TrackLossLadder:
         """Do detections go through the screen before the DKF? Not while its track is live
         (its own gate protects it), nor while waiting for the first one after the start (the
         operator started with the target in view: the first detection starts the track)."""
-        if not self.acquired:
+        if not self.confirmed:
             return self.search_start_s is not None
         return self.dkf.lost(t)
 
@@ -107,8 +108,9 @@ class TrackLossLadder:
             # the first track is the loop's only once n_confirm detections are in it: the loss
             # of a lone false blob seen at the start then returns to the launch behaviour
             # (wait, then search along the launch heading) instead of re-acquiring nothing
+            self.acquired = True
             if self.dkf.track_fused >= g.n_confirm:
-                self.acquired = True
+                self.confirmed = True
             self.live_s = t
             self.coast_over = False
             self.search_start_s = None
@@ -117,10 +119,10 @@ class TrackLossLadder:
             return LoopMode.TRACKING
         if est is not None:
             self.search_dir = -1.0 if self.camera.upright(*est.e_px)[0] > 0.0 else 1.0
-        if not self.acquired and self.search_start_s is None:
+        if not self.confirmed and self.search_start_s is None:
             if t - self.first_tick_s < g.t_wait:
                 return LoopMode.WAITING
-        elif self.acquired and self.search_start_s is None:
+        elif self.confirmed and self.search_start_s is None:
             stale_s = t - self.live_s
             if est is not None:
                 if not self.coast_over and stale_s < g.t_coast:
@@ -133,7 +135,7 @@ class TrackLossLadder:
         if self.search_start_s is None:
             self.search_start_s = t
             v = velocity_enu_m_s
-            moving = math.sqrt(float(v @ v)) >= g.v_min if not self.acquired else False
+            moving = math.sqrt(float(v @ v)) >= g.v_min if not self.confirmed else False
             cue = self.launch_cue if self.launch_cue is not None else horizontal_unit(v)
             self.search_cue = cue if moving else None
         if t - self.search_start_s < g.t_search:
