@@ -11,7 +11,7 @@ from pathlib import Path
 
 # Only light modules here: `groundstation --help` and `scenarios` must not pay for numpy,
 # filterpy/scipy, OpenCV or viser; each command imports what it needs when it runs.
-from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
+from onboard.enums import DEFAULT_LAW, PAPER_LAWS, GuidanceLaw, codes
 from onboard.gains import GainError
 
 from .campaigns.tune_options import add_tune_arguments
@@ -72,7 +72,7 @@ def _build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "scenario", type=scenario_arg, help="scenario TOML file, or the name of a shipped scenario"
     )
-    s.add_argument("--law", default=GuidanceLaw.PNG.value, choices=codes(GuidanceLaw))
+    s.add_argument("--law", default=DEFAULT_LAW.value, choices=codes(GuidanceLaw))
     s.add_argument("--seed", type=SEED, default=0)
     s.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     s.add_argument("--json", action="store_true", help="print one JSON object")
@@ -92,7 +92,9 @@ def _build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("campaign", help="reproduce one of the paper's experiments")
     c.add_argument(
-        "name", help="static | moving | wind | outdoor | drag | size | envelope | range | agility"
+        "name",
+        help="static | moving | wind | outdoor | drag | size | envelope | range | agility"
+        " | heldout",
     )
     c.add_argument(
         "--n", type=COUNT, default=None, help="targets / seeds / tries per cell (docs/paper.md)"

@@ -6,6 +6,7 @@ one clock: simulated time in the simulator, vehicle time in flight.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -104,3 +105,5 @@ class ControlTelemetry:
     # its acceleration (m/s^2 ENU) and the model probabilities (cv, ca, ct)
     target_accel_enu_m_s2: tuple[float, float, float] | None = None
     motion_model_probs: tuple[float, float, float] | None = None
+    # the approach's speed limit near the ground (onboard/control/clearance.py), m/s; inf: none
+    speed_cap_m_s: float = math.inf

@@ -17,6 +17,9 @@ class GuidanceLaw(str, enum.Enum):
     APN = "apn"  # augmented PN: the proposed law plus the target's acceleration (docs/agility.md)
 
 
+# the law flown wherever none is named (simulator, dashboard, tuning, the vehicle's LAW parameter)
+DEFAULT_LAW: GuidanceLaw = GuidanceLaw.PNG
+
 # the paper's comparison: what a campaign flies unless told which laws
 PAPER_LAWS: tuple[GuidanceLaw, ...] = (GuidanceLaw.PNG, GuidanceLaw.PG, GuidanceLaw.IBVS)
 

@@ -243,7 +243,7 @@ class Gains:
         "-",
         1.0,
         20.0,
-        "consecutive consistent detections that confirm one off the prediction",
+        "detections that confirm a track: the first, or one off the prediction",
         "track loss",
     )
     conf_deg: float = _gain(

@@ -13,7 +13,9 @@ from .camera_model import CameraModel
 from .control.apn import available_lateral_accel_m_s2, manoeuvre_accel_m_s2, time_to_go_s
 from .control.attitude import command_floats
 from .control.clearance import (
+    brake_accel,
     clearance_guard_accel,
+    range_interval_m,
     track_speed_cap_m_s,
     upward_accel_m_s2,
 )
@@ -45,7 +47,7 @@ from .datatypes import (
     VehicleParams,
     VehicleState,
 )
-from .enums import GuidanceLaw
+from .enums import DEFAULT_LAW, GuidanceLaw
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .estimation.dkf_values import measurement
 from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
@@ -66,26 +68,6 @@ _NO_FLOWN = (math.nan, math.nan, math.nan)  # (dq_y, dq_z, hold): no command's L
 MAX_LATE_CARRY = 1.0  # a late tick takes back at most this many of the last command's turns
 
 
-def brake_accel(
-    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
-) -> np.ndarray:
-    """Brake and hold (after the pass, on an abort, with the target lost): the vertical
-    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
-    the believed airframe's upward capability, :func:`.control.clearance.upward_accel_m_s2`;
-    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
-    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
-    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
-    a_max = gains.a_max
-    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
-    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
-    room = math.sqrt(max(a_max * a_max - az * az, 0.0))
-    ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
-    n = math.hypot(ax, ay)
-    if n > room:
-        ax, ay = ax * room / n, ay * room / n
-    return np.array((ax, ay, az))
-
-
 class InterceptionLoop:
     """Call :meth:`on_gyro` and :meth:`on_detection` as samples arrive, and :meth:`tick` at
     the control rate; each tick returns the command and what was computed for it."""
@@ -95,7 +77,7 @@ class InterceptionLoop:
         camera: CameraModel,
         vehicle: VehicleParams,
         gains: Gains | None = None,
-        law: str = "png",
+        law: str = DEFAULT_LAW.value,
         control_rate_hz: float = 100.0,
         dkf_config: DkfConfig | None = None,
         estimate_motion: bool = False,
@@ -356,6 +338,7 @@ class InterceptionLoop:
             self._dq_flown = _NO_FLOWN
             self._los_prev = None  # no line of sight for the size estimate's displacement
             self._target_low_m = -math.inf
+            self.speed_cap_m_s = math.inf
         if mode is LoopMode.REACQUIRE:
             e_est, e_rate = est.e_px, est.e_rate_px_s
             f = self.camera.f_px
@@ -411,8 +394,7 @@ class InterceptionLoop:
                 # the range the DKF is confident of: its inverse depth one sigma high
                 # (a poorly known depth must not switch the midcourse term on)
                 rng, v_t, P = dv
-                rho = math.sqrt(1.0 + e_n[0] ** 2 + e_n[1] ** 2) / rng
-                range_m = rng * rho / (rho + math.sqrt(max(float(P[2, 2]), 0.0)))
+                range_m = range_interval_m(rng, e_n, float(P[2, 2]), sigmas=1.0)[0]
                 var_v = float(P[3, 3] + P[4, 4] + P[5, 5])
             if self._law is png_law:  # the proposed law from the floats at hand (its own code)
                 a0, a1, a2, s_y, s_z, _ = png_command(
@@ -497,4 +479,5 @@ class InterceptionLoop:
             self_cal=self._self_cal_est,
             target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
             motion_model_probs=None if motion is None else motion.probabilities,
+            speed_cap_m_s=self.speed_cap_m_s,
         )

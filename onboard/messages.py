@@ -76,6 +76,9 @@ CONTROL: tuple[MessageField, ...] = (
        wire=("e_raw_u_px", "e_raw_v_px"), parts=_UV),
     _f("raw_capture_t_s", "number", "s", "that detection's capture time",
        wire=("raw_capture_t_s",)),
+    _f("speed_cap_m_s", "number", "m/s",
+       "approach speed limit near the ground (control/clearance.py; null: none)",
+       wire=("speed_cap_m_s",)),
 )  # fmt: skip
 
 DKF: tuple[MessageField, ...] = (
@@ -152,7 +155,7 @@ TELEMETRY: tuple[MessageField, ...] = (
     _L["params_version"], _L["pos_m"], _C["vel_m_s"], _L["q_wxyz"], _L["image_w_px"],
     _L["image_h_px"], _L["f_px"], _L["detections"], _L["frames"], _L["commands_sent"],
     _L["target_size_frac"], _D["state"], _D["cov_diag"], _D["target_diameter_m"],
-    _D["camera_offset_s"],
+    _D["camera_offset_s"], _C["speed_cap_m_s"],
 )  # fmt: skip
 """The fields the MAVLink telemetry carries, in order (their ``wire`` floats; an element
 already carried by an earlier field is not sent twice)."""

@@ -31,7 +31,7 @@ class TrackLossLadder:
         self.camera = camera
         self.dkf = dkf
         self.screen = DetectionScreen()
-        self.acquired = False  # a track has been live since the start
+        self.acquired = False  # a confirmed track has been live since the start
         self.first_tick_s: float | None = None
         self.live_s = -math.inf  # last tick with a live (not stale) track
         self.coast_over = False  # the prediction's uncertainty ended this coast
@@ -104,7 +104,11 @@ class TrackLossLadder:
         begun while moving flies when there is no launch cue."""
         g = gains
         if est is not None and not est.lost:
-            self.acquired = True
+            # the first track is the loop's only once n_confirm detections are in it: the loss
+            # of a lone false blob seen at the start then returns to the launch behaviour
+            # (wait, then search along the launch heading) instead of re-acquiring nothing
+            if self.dkf.track_fused >= g.n_confirm:
+                self.acquired = True
             self.live_s = t
             self.coast_over = False
             self.search_start_s = None

@@ -8,6 +8,7 @@ import urllib.request
 import pytest
 
 from groundstation.app.server import GroundStation
+from onboard.enums import DEFAULT_LAW
 from onboard.link.params import PARAM_SPECS
 
 from .browser_support import needs_chromium
@@ -372,7 +373,9 @@ def test_option_lists_come_from_the_api_and_the_chosen_law_flies(station, browse
     for sel, key in (("#law", "laws"), ("#camera", "camera_modes"), ("#speed", "speeds")):
         shown = page.eval_on_selector(sel, "s => [...s.options].map(o => o.value)")
         assert shown == meta[key], (sel, shown)
-    assert page.eval_on_selector("#speed", "s => s.value") == "1"  # the first speed, as before
+    for sel, key in (("#law", "laws"), ("#camera", "camera_modes"), ("#speed", "speeds")):
+        assert page.eval_on_selector(sel, "s => s.value") == meta["defaults"][key], sel
+    assert meta["defaults"]["laws"] == DEFAULT_LAW.value  # the page starts on the flown default
     page.select_option("#scenario", "static-ahead-20m")
     page.select_option("#law", "pg")
     page.select_option("#speed", "max")

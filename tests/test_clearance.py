@@ -14,6 +14,7 @@ from onboard.control.clearance import (
     CAP_FLOOR_M_S,
     CAP_FRACTION,
     approach_speed_cap_m_s,
+    brake_accel,
     clearance_guard_accel,
     held_height_low_m,
     range_interval_m,
@@ -24,7 +25,6 @@ from onboard.control.clearance import (
 )
 from onboard.datatypes import GRAVITY_M_S2
 from onboard.gains import Gains
-from onboard.loop import brake_accel
 
 G = Gains()
 
@@ -155,7 +155,7 @@ def test_k_up_zero_switches_both_parts_off():
     assert cap == math.inf and low == 2.0
 
 
-def _low_static_sortie(gains: Gains):
+def _low_static_sortie(gains: Gains, keep_records: bool = False):
     """A balloon 1.4 m above the ground 25 m ahead and 40 deg down-range of a vehicle at 10 m
     (the static campaign's target 12 at seed 0), realistic defaults (outdoor-gnss)."""
     import dataclasses
@@ -166,18 +166,27 @@ def _low_static_sortie(gains: Gains):
     base = load_scenario("static-ahead-20m")
     target = dataclasses.replace(base.target, position_m=(10.9, 22.7, 1.43))
     sc = with_changes(base, name="static-low", target=target)
-    return Simulation(sc, "png", 12, gains=gains, keep_records=False).run()
+    sim = Simulation(sc, "png", 12, gains=gains, keep_records=keep_records)
+    return sim.run(), sim.records
 
 
 def test_a_low_target_is_hit_and_the_vehicle_recovers_above_the_ground():
     """Without the limit (k_up = 0) the vehicle passes the target at over 10 m/s, diving at
     over 6 m/s, and hits the ground; with it the approach slows to about 2 m/s, hits, and the
     recovery stops the descent above h_clear (1 m; the target is at 1.43 m)."""
-    off = _low_static_sortie(Gains(k_up=0.0))
+    off, _ = _low_static_sortie(Gains(k_up=0.0))
     assert off.outcome == "CRASHED" and off.miss_m < off.hit_radius_m
-    on = _low_static_sortie(Gains())
+    on, frames = _low_static_sortie(Gains(), keep_records=True)
     assert on.outcome == "HIT" and on.recovered
     assert on.miss_m < 0.1
     assert 1.5 < on.terminal_speed_m_s < 3.0
     assert off.terminal_speed_m_s > 10.0
     assert on.min_alt_after_pass_m > 1.0
+    # the operator sees the limit: on the control message, on the link (NaN: none)
+    from onboard.link.telemetry import loop_values
+
+    caps = [f.telemetry.speed_cap_m_s for f in frames if f.time_s < on.intercept_time_s]
+    assert min(caps) == CAP_FLOOR_M_S and max(caps) == math.inf  # none before the track
+    slow = next(f.telemetry for f in frames if f.telemetry.speed_cap_m_s < 3.0)
+    assert loop_values(slow)["speed_cap_m_s"] == slow.speed_cap_m_s
+    assert math.isnan(loop_values(frames[0].telemetry)["speed_cap_m_s"])

@@ -41,6 +41,7 @@ def test_codes_and_tables_derive_from_the_enums():
     assert State is enums.RuntimeState and DatatypesLoopMode is enums.LoopMode
     assert SimOutcome is enums.Outcome
     assert prm.RuntimeParams(LAW=2).law == "ibvs"
+    assert prm.law_name(0.0) == "png" and prm.law_name(3.0) == "apn"  # a code said is kept
     # the field help and the parameter help state the codes as the enums number them
     assert tm.FIELDS[tm.INDEX["law"]][2].endswith("0 png, 1 pg, 2 ibvs, 3 apn")
     assert "3 brake" in tm.FIELDS[tm.INDEX["loop_mode"]][2]
@@ -65,6 +66,7 @@ def test_the_api_serves_the_option_lists(tmp_path):
         "outcomes": ["HIT", "MISS", "TIMEOUT", "TARGET_LOST", "CRASHED", "DIVERGED"],
         "camera_modes": list(CAMERA_MODES),
         "speeds": list(SPEEDS),
+        "defaults": {"laws": enums.DEFAULT_LAW.value, "camera_modes": "projected", "speeds": "1"},
     }
 
 
@@ -108,3 +110,48 @@ def test_the_scan_finds_a_second_list():
     assert second_lists('state in ("ready", "waiting_target")', enums.RuntimeState)
     assert not second_lists('law = "png"  # the proposed law', law)
     assert not second_lists("LAWS = codes(GuidanceLaw)", law)
+
+
+def law_defaults() -> dict[str, object]:
+    """Every place that flies a law when none is named, and the law it would fly."""
+    import inspect
+
+    from groundstation.app.api_models import ReflyRequest, StartRequest
+    from groundstation.app.session_config import SortieConfig
+    from groundstation.campaigns.tune import TuneDefinition
+    from groundstation.sim.beliefs import loop_configuration
+    from groundstation.sim.simulation import Simulation, run_sortie
+    from onboard.loop import InterceptionLoop
+
+    def default(f):
+        return inspect.signature(f).parameters["law"].default
+
+    return {
+        "InterceptionLoop": default(InterceptionLoop),
+        "Simulation": default(Simulation),
+        "run_sortie": default(run_sortie),
+        "loop_configuration": default(loop_configuration),
+        "SortieConfig": SortieConfig.law,
+        "TuneDefinition": TuneDefinition.law,
+        "StartRequest": StartRequest.model_fields["law"].default,
+        "ReflyRequest": ReflyRequest.model_fields["law"].default,
+        "sortie --law": build_parser().parse_args(["sortie", "cv-top-to-bottom"]).law,
+        "tune --law": build_parser().parse_args(["tune", "cv-top-to-bottom", "--gains", "K_y"]).law,
+        "parameter LAW": prm.RuntimeParams().law,
+        "a live vehicle that has not said": prm.law_name(None),
+        "a live vehicle that sent NaN": prm.law_name(float("nan")),
+    }
+
+
+def test_the_default_law_is_declared_once():
+    """Every default law is onboard/enums.py's DEFAULT_LAW; no product file writes its own
+    (``law: str = "png"``, ``default="png"``)."""
+    assert law_defaults() == dict.fromkeys(law_defaults(), enums.DEFAULT_LAW.value)
+    own = re.compile(r"law\w*\s*(?::\s*\w+\s*)?=\s*[\"'](?:" + "|".join(tm.LAW_CODES) + r")[\"']")
+    texts = {p: p.read_text(encoding="utf-8") for p in SOURCES}
+    hits = [
+        f"{p.relative_to(ROOT)}:{text.count(chr(10), 0, m.start()) + 1}"
+        for p, text in texts.items()
+        for m in own.finditer(text)
+    ]
+    assert not hits, f"a default law written outside onboard/enums.py: {hits}"

@@ -26,7 +26,7 @@ def test_schemas_and_encoders_follow_the_one_definition():
         enc.control(
             1.0, "tracking", "png", 0.1, 0.2, 0.3, 0.4, (1.0, 2.0, 3.0), 1.5, 1.2,
             (0.1, 0.2, 0.3), 0.5, 0.05, (3.0, -2.0), (1.0, 1.0), 5.0, 12.0, (0.0, 5.0, 0.0),
-            (2.5, -1.5), 0.96,
+            (2.5, -1.5), 0.96, 4.0,
         )
     )  # fmt: skip
     cal = SelfCalEstimate(0.25, 0.02, -0.03, 0.002, 40, 60)
@@ -51,10 +51,12 @@ def test_schemas_and_encoders_follow_the_one_definition():
         enc.control(
             1.0, "waiting", "png", math.nan, math.nan, math.nan, math.nan, (0.0, 0.0, 0.0),
             0.0, None, (0.0, 0.0, 0.0), 0.3, 0.0, None, None, None, None, None, None, None,
+            math.inf,
         )
     )  # fmt: skip
     assert missing["los_elev_rad"] is None and missing["vel_m_s"] is None
     assert missing["speed_m_s"] is None and missing["e_raw_px"] is None
+    assert control["speed_cap_m_s"] == 4.0 and missing["speed_cap_m_s"] is None  # no limit
 
 
 # ---------------------------------------------------------------- the live telemetry's layout

@@ -1,6 +1,7 @@
 // Option lists of the page's <select data-options="..."> elements, from GET /api/meta: the
 // laws, camera modes and speeds are declared once on the server (onboard/enums.py ...), never
-// here. A select keeps the value it had if the new list still has it.
+// here. A select keeps the value it had if the new list still has it, and otherwise starts on
+// the server's default (the law flown when none is named, ...).
 "use strict";
 window.peregrineMeta = (async () => {
   const r = await fetch("/api/meta");
@@ -11,7 +12,8 @@ window.peregrineMeta = (async () => {
     const key = sel.dataset.options;
     const keep = sel.value;
     sel.replaceChildren(...(meta[key] || []).map((v) => new Option((label[key] || String)(v), v)));
-    if (keep && meta[key] && meta[key].includes(keep)) sel.value = keep;
+    const start = keep && meta[key] && meta[key].includes(keep) ? keep : (meta.defaults || {})[key];
+    if (start !== undefined) sel.value = start;
   }
   return meta;
 })();

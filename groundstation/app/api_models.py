@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from onboard.enums import GuidanceLaw, codes
 
 from ..scenario import CAMERA_MODES, ESTIMATE_PROFILES
-from .session_config import SPEEDS
+from .session_config import SPEEDS, SortieConfig
 
 LawName = Literal[codes(GuidanceLaw)]  # type: ignore[valid-type]
 CameraMode = Literal[CAMERA_MODES]  # type: ignore[valid-type]
@@ -26,15 +26,18 @@ class Meta(BaseModel):
     outcomes: list[str] = Field(description="simulated sortie outcomes")
     camera_modes: list[str]
     speeds: list[str] = Field(description="simulator speeds: multiples of real time, or max")
+    defaults: dict[str, str] = Field(
+        description="the value each list starts on, by list name (laws, camera_modes, speeds)"
+    )
 
 
 class StartRequest(BaseModel):
     scenario: str | None = Field(None, description="name of a shipped scenario")
     toml: str | None = Field(None, description="scenario file text (instead of a name)")
-    law: LawName = "png"
+    law: LawName = SortieConfig.law
     seed: int = 0
-    camera: CameraMode = "projected"
-    speed: Speed = "1"
+    camera: CameraMode = SortieConfig.camera
+    speed: Speed = SortieConfig.speed
     wind_mean_m_s: list[float] | None = Field(None, min_length=3, max_length=3)
     gust_m_s: float | None = Field(None, ge=0.0)
     profile: ProfileName | None = Field(
@@ -45,9 +48,9 @@ class StartRequest(BaseModel):
 
 
 class ReflyRequest(BaseModel):
-    law: LawName = "png"
+    law: LawName = SortieConfig.law
     seed: int | None = None
-    speed: Speed = "1"
+    speed: Speed = SortieConfig.speed
     gains: dict[str, float] | None = None
 
 

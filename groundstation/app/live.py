@@ -27,7 +27,7 @@ from onboard.enums import LoopMode, RuntimeState
 from onboard.frames import Frame, SortieStart
 from onboard.gains import GAIN_NAMES, Gains
 from onboard.link import telemetry as tm
-from onboard.link.params import PARAM_IDS, PARAM_SPECS
+from onboard.link.params import PARAM_IDS, PARAM_SPECS, law_name
 from onboard.link.px4 import (
     CMD_ABORT,
     CMD_START,
@@ -301,7 +301,7 @@ class LiveSession:
             foxglove=self.foxglove,
             start=SortieStart(
                 scenario="live",
-                law=tm.LAW_CODES[int(self.vehicle.params.get("LAW", 0))],
+                law=law_name(self.vehicle.params.get("LAW")),
                 seed=0,
                 camera="live",
                 camera_model=self.vehicle.camera_model(),
@@ -324,7 +324,7 @@ class LiveSession:
             return None
         return live_frame(
             t,
-            law=self.rec.law if self.rec is not None else tm.LAW_CODES[int(t.get("law") or 0)],
+            law=self.rec.law if self.rec is not None else law_name(t.get("law")),
             camera=v.camera_model(),
             gains=v.gains,
             vehicle_p=v.vehicle_p,
@@ -403,7 +403,7 @@ class LiveSession:
             return {
                 "state": "live",
                 "scenario": "live",
-                "law": tm.LAW_CODES[int(v.params.get("LAW", 0))],
+                "law": law_name(v.params.get("LAW")),
                 "seed": "—",
                 "camera": "onboard",
                 "speed": "1",

@@ -42,6 +42,7 @@ def loop_mode(t: Values) -> LoopMode:
 def telemetry_from_values(t: Values, law: str) -> ControlTelemetry:
     """The loop's telemetry as the onboard component sent it (NaN fields: missing)."""
     t_s = _num(_one(t, _C["t_s"]), 0.0)
+    cap = _num(_one(t, _C["speed_cap_m_s"]))
     return ControlTelemetry(
         time_s=t_s,
         mode=loop_mode(t),
@@ -66,6 +67,7 @@ def telemetry_from_values(t: Values, law: str) -> ControlTelemetry:
         dkf_lost=bool(_one(t, _D["lost"])),
         guard_tripped=False,
         self_cal=_self_cal(t),
+        speed_cap_m_s=cap if math.isfinite(cap) else math.inf,  # NaN on the link: none
     )
 
 

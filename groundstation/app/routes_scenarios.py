@@ -10,7 +10,7 @@ from onboard import enums
 
 from ..scenario import CAMERA_MODES, load_scenario, parse_scenario, scenario_toml, shipped_scenarios
 from .api_models import Meta, ScenarioCheck, ScenarioSummary, ScenarioText
-from .session_config import SPEEDS
+from .session_config import SPEEDS, SortieConfig
 
 
 def router() -> APIRouter:
@@ -20,7 +20,16 @@ def router() -> APIRouter:
     async def get_meta() -> Meta:
         """The option lists the page offers, from their one declaration (onboard/enums.py,
         the simulator's camera modes, the session's speeds)."""
-        return Meta(**enums.meta(), camera_modes=list(CAMERA_MODES), speeds=list(SPEEDS))
+        return Meta(
+            **enums.meta(),
+            camera_modes=list(CAMERA_MODES),
+            speeds=list(SPEEDS),
+            defaults={
+                "laws": SortieConfig.law,
+                "camera_modes": SortieConfig.camera,
+                "speeds": SortieConfig.speed,
+            },
+        )
 
     @r.get("/api/scenarios", tags=["scenarios"])
     async def list_scenarios() -> list[ScenarioSummary]:

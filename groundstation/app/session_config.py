@@ -7,6 +7,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from onboard.enums import DEFAULT_LAW
+
 from ..scenario import Scenario, with_changes
 
 SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}  # simulated seconds per wall second
@@ -15,7 +17,7 @@ SPEEDS = {"1": 1.0, "2": 2.0, "5": 5.0, "max": math.inf}  # simulated seconds pe
 @dataclass(frozen=True)
 class SortieConfig:
     scenario: Scenario
-    law: str = "png"
+    law: str = DEFAULT_LAW.value
     seed: int = 0
     camera: str = "projected"
     speed: str = "1"

@@ -15,7 +15,7 @@ import numpy as np
 from onboard.control.guidance import GUIDANCE_LAWS
 from onboard.enums import PAPER_LAWS, GuidanceLaw, codes
 
-from ..scenario import load_scenario, with_changes, with_overrides
+from ..scenario import SCENARIO_DIR, load_scenario, with_changes, with_overrides
 from . import agility, maps
 from .aggregate import median_iqr, miss_stats, success_rate
 from .cells import build_grid, group, terminal_speed
@@ -266,6 +266,37 @@ def _summarize_drag(outcomes):
     return {**_summarize_scenarios(outcomes), "drag_range_n_s_m": DRAG_RANGE_N_S_M}
 
 
+# ------------------------------------------------------------------------- held out
+# Scenarios written to test that the figures are not an artefact of the paper's cases: no
+# gain, default or test was chosen on them (tests/test_campaigns_heldout.py keeps every other
+# test off them). Each is set beside the paper's figure for its kind of motion.
+HELDOUT_DIR = SCENARIO_DIR / "heldout"
+PAPER_BY_MOTION = {
+    "static": f"paper static CEP {PAPER['static']['png']} m",
+    "cv": f"paper CV mean {PAPER['moving']['cv-top-to-bottom']['png']} m",
+    "ca": f"paper CA mean {PAPER['moving']['ca-flanking']['png']} m",
+    "sinusoid": f"paper SM mean {PAPER['moving']['sm-tailgate']['png']} m",
+}
+
+
+def heldout_scenarios() -> dict[str, str]:
+    """The held-out scenario files by name (groundstation/scenarios/heldout/*.toml)."""
+    return {p.stem: str(p) for p in sorted(HELDOUT_DIR.glob("*.toml"))}
+
+
+def _build_heldout(n, laws, camera, seed):
+    cells = [("scenario", name, path) for name, path in heldout_scenarios().items()]
+    return build_grid(cells, n, laws, camera, seed)
+
+
+def _summarize_heldout(outcomes):
+    paper = {
+        name: PAPER_BY_MOTION[load_scenario(path).target.motion]
+        for name, path in heldout_scenarios().items()
+    }
+    return _summarize_scenarios(outcomes, paper)
+
+
 CAMPAIGNS: dict[str, Campaign] = {
     "static": Campaign("static", 50, "targets", _build_static, _summarize_static),
     "moving": Campaign("moving", 10, "seeds per cell", _build_moving, _summarize_moving),
@@ -284,6 +315,7 @@ CAMPAIGNS: dict[str, Campaign] = {
     "agility": Campaign(
         "agility", 20, "tries per acceleration / jink range", agility.build, agility.summarize
     ),
+    "heldout": Campaign("heldout", 20, "seeds per scenario", _build_heldout, _summarize_heldout),
 }
 
 

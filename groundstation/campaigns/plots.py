@@ -277,7 +277,7 @@ def _wind_plots(outcomes, summary, out: Path) -> list[str]:
     ax.set_title("Tethered balloon in wind (paper Table 2)")
     _savefig(fig, out, "success_rate.png", plots)
 
-    law = "png" if "png" in laws else laws[0]
+    law = GuidanceLaw.PNG.value if GuidanceLaw.PNG.value in laws else laws[0]  # the paper's law
     fig, axes = plt.subplots(1, 2, figsize=(9, 4))
     for j, comp in enumerate(("u", "v")):
         data = []
@@ -416,7 +416,7 @@ def _range_plots(outcomes, summary, out: Path) -> list[str]:
     axes[0].set_title("Success and acquisition by initial range")
     palette = ("tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:olive", "tab:cyan")
     colours = {r: palette[i % len(palette)] for i, r in enumerate(ranges)}
-    law = "png" if "png" in laws else laws[0]
+    law = GuidanceLaw.PNG.value if GuidanceLaw.PNG.value in laws else laws[0]  # the paper's law
     for o in outcomes:
         if o.labels["law"] != law or not o.trace:
             continue

@@ -13,6 +13,8 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
+from onboard.enums import GuidanceLaw
+
 from . import agility
 from .plots import (
     LAW_COLOURS,
@@ -134,7 +136,7 @@ def _md_wind(summary) -> str:
         ]
         paper = summary["paper"][w]["success"] * 100
         lines.append(f"| {w} m/s | " + " | ".join(rates) + f" | {paper:.0f} % (5) |")
-    law = "png" if "png" in laws else laws[0]
+    law = GuidanceLaw.PNG.value if GuidanceLaw.PNG.value in laws else laws[0]  # the paper's law
     lines += [
         "",
         f"Image plane, {LAW_NAMES.get(law, law)}: normalised (u, v), ours | paper",
@@ -155,14 +157,15 @@ def _md_wind(summary) -> str:
 
 def _md_outdoor(summary) -> str:
     lines = [
-        "| scenario | law | HIT rate | miss mean | terminal speed | time | paper |",
-        "|---|---|---|---|---|---|---|",
+        "| scenario | law | HIT rate | CEP | miss mean | terminal speed | time | paper |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for sc, by_law in summary["cells"].items():
         for law, c in by_law.items():
             lines.append(
                 f"| {sc} | {LAW_NAMES.get(law, law)} | {100 * c['success_rate']:.0f} % | "
-                f"{c['mean_m']:.3f} m | {c['terminal_speed_mean_m_s']:.2f} m/s | "
+                f"{c['cep_m']:.3f} m | {c['mean_m']:.3f} m | "
+                f"{c['terminal_speed_mean_m_s']:.2f} m/s | "
                 f"{c['intercept_time_mean_s']:.2f} s | {c['paper'] or ''} |"
             )
     return "\n".join(lines)
@@ -279,6 +282,7 @@ def write_report(
         "wind": lambda: _wind_plots(outcomes, summary, out),
         "outdoor": lambda: _outdoor_plots(outcomes, out),
         "drag": lambda: _outdoor_plots(outcomes, out),
+        "heldout": lambda: _outdoor_plots(outcomes, out),
         "size": lambda: _static_plots(outcomes, out),
         "envelope": lambda: _envelope_plots(summary, out),
         "range": lambda: _range_plots(outcomes, summary, out),

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from onboard.enums import DEFAULT_LAW
 from onboard.gains import GAIN_NAMES, GAIN_SPECS, Gains
 
 from ..scenario import ScenarioError, load_scenario, with_overrides
@@ -102,7 +103,7 @@ class TuneDefinition:
     target: str  # a campaign name, or scenario names/files separated by commas
     space: tuple[GainRange, ...]
     n: int
-    law: str = "png"
+    law: str = DEFAULT_LAW.value
     camera: str = "projected"
     seed: int = 0
     holdout_seed: int = 1

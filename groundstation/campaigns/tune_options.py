@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from onboard.enums import GuidanceLaw, codes
+from onboard.enums import DEFAULT_LAW, GuidanceLaw, codes
 
 from ..scenario import CAMERA_MODES
 
@@ -36,7 +36,7 @@ def add_tune_arguments(
     t.add_argument(
         "--n", type=count, default=None, help=f"per cell: targets/seeds/tries (default {DEFAULT_N})"
     )
-    t.add_argument("--law", default=GuidanceLaw.PNG.value, choices=codes(GuidanceLaw))
+    t.add_argument("--law", default=DEFAULT_LAW.value, choices=codes(GuidanceLaw))
     t.add_argument("--camera", default="projected", choices=CAMERA_MODES)
     t.add_argument("--seed", type=seed, default=0, help="training seed")
     t.add_argument("--holdout-seed", type=seed, default=None, help="held-out seed (default seed+1)")

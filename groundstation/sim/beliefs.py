@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 from onboard.camera_model import CameraModel
 from onboard.datatypes import VehicleParams
+from onboard.enums import DEFAULT_LAW
 from onboard.estimation.dkf import DkfConfig
 from onboard.gains import Gains
 
@@ -61,7 +62,7 @@ def believed_camera(scenario: Scenario) -> CameraModel:
 
 
 def loop_configuration(
-    scenario: Scenario, law: str = "png", gains: Gains | None = None
+    scenario: Scenario, law: str = DEFAULT_LAW.value, gains: Gains | None = None
 ) -> LoopConfiguration:
     """Everything the loop is built with for ``scenario``: the believed camera, the believed
     hover thrust (as the onboard runtime builds it from ``PRG_HOVER_THR``), the gains (the

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from onboard.datatypes import ControlTelemetry, Detection, GyroSample, VehicleState
-from onboard.enums import LoopMode, Outcome
+from onboard.enums import DEFAULT_LAW, LoopMode, Outcome
 from onboard.estimation.dkf import FusionResult
 from onboard.frames import Frame, SortieObserver, SortieStart
 from onboard.gains import Gains
@@ -68,7 +68,7 @@ class Simulation:
     def __init__(
         self,
         scenario: Scenario,
-        law: str = "png",
+        law: str = DEFAULT_LAW.value,
         seed: int = 0,
         camera_mode: str = "projected",
         gains: Gains | None = None,
@@ -476,7 +476,7 @@ class Simulation:
 
 def run_sortie(
     scenario: Scenario,
-    law: str = "png",
+    law: str = DEFAULT_LAW.value,
     seed: int = 0,
     camera_mode: str = "projected",
     gains: Gains | None = None,

@@ -299,6 +299,7 @@ class ChannelBuilder:
                     frame.vehicle_v_enu_m_s,
                     None if det is None else self.info.camera_model.error_px(*det.center_px),
                     None if det is None else det.capture_time_s - self._t0,
+                    tel.speed_cap_m_s,
                 ),
             )
         )

@@ -24,7 +24,7 @@ _CONTROL = (
     '"accel_normal_desired_m_s2":%s,"accel_normal_m_s2":%s,'
     '"body_rates_cmd_rad_s":[%.5f,%.5f,%.5f],"thrust_cmd":%.5f,'
     '"yaw_rate_cmd_rad_s":%s,"e_px":%s,"e_rate_px_s":%s,"speed_m_s":%s,'
-    '"range_m":%s,"vel_m_s":%s,"e_raw_px":%s,"raw_capture_t_s":%s}'
+    '"range_m":%s,"vel_m_s":%s,"e_raw_px":%s,"raw_capture_t_s":%s,"speed_cap_m_s":%s}'
 )
 _DKF = (
     '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s,'
@@ -66,10 +66,10 @@ def tf(sec: int, nsec: int, x, y, z, qx, qy, qz, qw, camera_tf: str) -> bytes:
 
 def control(
     t_s, mode, law, q_y, q_z, s_y, s_z, a, an_des, an, w, thrust, yaw_rate, e, e_rate, speed,
-    range_m, vel, e_raw, raw_t,
+    range_m, vel, e_raw, raw_t, speed_cap,
 ) -> bytes:  # fmt: skip
     """peregrine.Control (``a``, ``w`` and ``vel`` are 3-tuples, ``e``, ``e_rate`` and ``e_raw``
-    pairs or None)."""
+    pairs or None; ``speed_cap`` inf or NaN: none)."""
     return (
         _CONTROL
         % (
@@ -77,6 +77,7 @@ def control(
             js(an), w[0], w[1], w[2], thrust, js(yaw_rate), js2(e), js2(e_rate),
             "null" if speed is None or not math.isfinite(speed) else "%.4f" % speed,
             js(range_m), _js3(vel), js2(e_raw), "null" if raw_t is None else "%.6f" % raw_t,
+            js(speed_cap),
         )
     ).encode()  # fmt: skip
 

@@ -69,15 +69,18 @@ def stoppable_descent_m_s(height_m: float, a_up_m_s2: float, lag_s: float) -> fl
 
 
 def range_interval_m(
-    range_m: float, e_norm: tuple[float, float], inv_depth_var: float
+    range_m: float,
+    e_norm: tuple[float, float],
+    inv_depth_var: float,
+    sigmas: float = RANGE_SIGMAS,
 ) -> tuple[float, float]:
     """(low, high) range along the LOS (m) with the DKF's inverse depth rho = sqrt(1 + |e_n|^2)
-    / range moved ``RANGE_SIGMAS`` sigma up and down (variance ``inv_depth_var``, 1/m^2); the
-    high end is inf when rho is within that of zero."""
+    / range moved ``sigmas`` sigma up and down (variance ``inv_depth_var``, 1/m^2); the high
+    end is inf when rho is within that of zero."""
     if not (math.isfinite(range_m) and range_m > 0.0):
         return 0.0, math.inf
     rho = math.sqrt(1.0 + e_norm[0] ** 2 + e_norm[1] ** 2) / range_m
-    d = RANGE_SIGMAS * math.sqrt(max(inv_depth_var, 0.0)) if math.isfinite(inv_depth_var) else rho
+    d = sigmas * math.sqrt(max(inv_depth_var, 0.0)) if math.isfinite(inv_depth_var) else rho
     low = range_m * rho / (rho + d)
     high = range_m * rho / (rho - d) if rho > d else math.inf
     return low, high
@@ -172,3 +175,23 @@ def track_speed_cap_m_s(
     held = held_height_low_m(prev_low_m, dt_s, now, gains.v_tgt_sink)
     cap = approach_speed_cap_m_s(held, los_up, velocity_enu_m_s, low, a_up_m_s2, gains)
     return cap, held
+
+
+def brake_accel(
+    velocity_enu_m_s: np.ndarray, gains: Gains, a_up_m_s2: float | None = None
+) -> np.ndarray:
+    """Brake and hold (after the pass, on an abort, with the target lost): the vertical
+    velocity nulled first (``k_brake_z``, down at most ``a_max``, up at most ``a_up_m_s2``,
+    the believed airframe's upward capability, :func:`upward_accel_m_s2`;
+    ``a_max`` when None: a vehicle diving through a low target must not reach the ground),
+    the horizontal with ``k_brake`` in what is left of ``a_max`` (m/s^2, ENU)."""
+    v0, v1, v2 = (float(c) for c in velocity_enu_m_s)
+    a_max = gains.a_max
+    a_up = a_max if a_up_m_s2 is None else max(a_up_m_s2, a_max)
+    az = min(max(-gains.k_brake_z * v2, -a_max), a_up)
+    room = math.sqrt(max(a_max * a_max - az * az, 0.0))
+    ax, ay = -gains.k_brake * v0, -gains.k_brake * v1
+    n = math.hypot(ax, ay)
+    if n > room:
+        ax, ay = ax * room / n, ay * room / n
+    return np.array((ax, ay, az))

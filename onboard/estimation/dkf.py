@@ -101,6 +101,7 @@ class DelayedKalmanFilter:
         # the last dropped track's (time, v_t, P_vv): the velocity it knew when it was dropped
         self._memory: tuple[float, np.ndarray, np.ndarray] | None = None
         self.counts: dict[FusionResult, int] = {r: 0 for r in FusionResult}
+        self.track_fused = 0  # detections fused into the current track (its first included)
 
     def _alloc(self, n: int) -> None:
         """The buffer's arrays for n rows (see the buffer layout above), empty."""
@@ -239,6 +240,10 @@ class DelayedKalmanFilter:
         result = self._fuse(det)
         self._head_cache = None
         self.counts[result] += 1
+        if result is FusionResult.INITIALISED:
+            self.track_fused = 1
+        elif result is FusionResult.ACCEPTED:
+            self.track_fused += 1
         return result
 
     def _fuse(self, det: Detection) -> FusionResult:

@@ -17,13 +17,14 @@ next change.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..enums import GuidanceLaw, describe_codes
+from ..enums import DEFAULT_LAW, GuidanceLaw, describe_codes
 from ..estimation.dkf import DkfConfig
 from ..gains import GAIN_SPECS, GainError, Gains, check_ranges, ranged
 from .telemetry import LAW_CODES
@@ -37,7 +38,11 @@ else:  # pragma: no cover
 @dataclass(frozen=True)
 class RuntimeParams:
     LAW: float = ranged(
-        0, "-", 0, len(LAW_CODES) - 1, "guidance law: " + describe_codes(GuidanceLaw)
+        LAW_CODES.index(DEFAULT_LAW.value),
+        "-",
+        0,
+        len(LAW_CODES) - 1,
+        "guidance law: " + describe_codes(GuidanceLaw),
     )
     CAM_HFOV_DEG: float = ranged(90.0, "deg", 20.0, 170.0, "camera horizontal field of view")
     CAM_PITCH_DEG: float = ranged(0.0, "deg", -90.0, 90.0, "camera mount pitch, up positive")
@@ -73,6 +78,12 @@ class RuntimeParams:
     def dkf_config(self) -> DkfConfig:
         """The DKF settings these parameters carry (target lost timeout, target diameter)."""
         return DkfConfig(lost_timeout_s=self.TGT_LOST_S, target_diameter_m=self.TGT_DIAM_M)
+
+
+def law_name(code: float | None) -> str:
+    """The guidance law a ``LAW`` code names; missing (None, NaN): the parameter's default."""
+    ok = code is not None and math.isfinite(code)
+    return LAW_CODES[int(code if ok else RuntimeParams.LAW)]
 
 
 PARAM_PREFIX = "PRG_"  # the component's parameter group, as PX4's MPC_, COM_, EKF2_

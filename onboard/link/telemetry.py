@@ -39,6 +39,7 @@ def _elements(field: messages.MessageField, values) -> dict[str, float]:
 
 def loop_values(tel: ControlTelemetry) -> dict[str, float]:
     """The fields one control tick fills (eq. numbers in FIELDS)."""
+    cap = tel.speed_cap_m_s  # no limit (inf) is sent as NaN: does not exist
     vals = {
         **_elements(_C["mode"], LOOP_MODE_CODES.index(tel.mode.value)),
         **_elements(_C["los_elev_rad"], tel.los_elev_rad),
@@ -52,6 +53,7 @@ def loop_values(tel: ControlTelemetry) -> dict[str, float]:
         **_elements(_C["yaw_rate_cmd_rad_s"], tel.yaw_rate_cmd_rad_s),
         **_elements(_D["time_since_detection_s"], min(tel.dkf_time_since_detection_s, 1e6)),
         **_elements(_D["lost"], float(tel.dkf_lost)),
+        **_elements(_C["speed_cap_m_s"], cap if math.isfinite(cap) else math.nan),
     }
     if tel.self_cal is not None:
         vals.update(_elements(_D["target_diameter_m"], tel.self_cal.target_diameter_m))
