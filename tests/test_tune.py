@@ -31,8 +31,8 @@ from .as_written import AS_WRITTEN
 from .cli_support import run_cli
 
 TARGET = "static-ahead-20m,cv-top-to-bottom"  # two short sorties per seed
-# the studies that test the machinery (resume, crash, two processes, report, gain set) fly the
-# shortest sortie: a trial's figures are not what they check
+# the processes that test a crash and two workers on one study fly the shortest sortie, once
+# per trial: a trial's figures are not what they check, and each process pays its start-up
 STUDY = "static-ahead-20m"
 
 
@@ -170,8 +170,8 @@ def test_objective_ranks_a_known_bad_gain_set_below_the_defaults():
     assert no_pn.loss > defaults.loss + 0.4
 
 
-def _args(tmp_path, *extra, trials=2, out="r", n=2):
-    args = ["tune", STUDY, "--gains", "K_y,K_z,k_p", "--n", str(n), "--workers", "1"]
+def _args(tmp_path, *extra, trials=2, out="r", target=TARGET):
+    args = ["tune", target, "--gains", "K_y,K_z,k_p", "--n", "1", "--workers", "1"]
     args += ["--data-dir", str(tmp_path / "data"), "--trials", str(trials)]
     return [*args, "--out", str(tmp_path / out), "--json", *extra]
 
@@ -187,7 +187,12 @@ def _tune(tmp_path, capsys, *extra, trials=2, out="r", check=True):
 
 def _spawn(tmp_path, trials, out):
     """``groundstation tune`` as a process of its own, one sortie per trial."""
-    args = [sys.executable, "-m", "groundstation", *_args(tmp_path, trials=trials, out=out, n=1)]
+    args = [
+        sys.executable,
+        "-m",
+        "groundstation",
+        *_args(tmp_path, trials=trials, out=out, target=STUDY),
+    ]
     return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -232,19 +237,22 @@ def test_tiny_study_end_to_end_resumes_and_saves_a_loadable_gain_set(tmp_path, c
     assert "Paired, held-out (2 sorties, same seeds)" in report
     # the gain set: the best trial's gains over the defaults, loads back as valid Gains
     loaded = GainSetStore(tmp_path / "data" / "gainsets").load(meta["gainset"])
-    assert isinstance(loaded, Gains) and meta["gainset"] == "tuned-static-ahead-20m-png"
+    assert (
+        isinstance(loaded, Gains)
+        and meta["gainset"] == "tuned-static-ahead-20m_cv-top-to-bottom-png"
+    )
     assert {k: getattr(loaded, k) for k in meta["best_gains"]} == pytest.approx(meta["best_gains"])
     assert loaded.k_R == Gains().k_R  # untuned gains keep the campaign's values
 
     _dashboard_flies(tmp_path, meta["gainset"], loaded)
 
     before = _params(tmp_path)
-    again = _tune(tmp_path, capsys, trials=3, out="r2")["meta"]
-    assert again["trials_run_now"] == 1 and again["trials_complete"] == 3
-    assert _trials(tmp_path) == [(i, "COMPLETE") for i in range(3)]
+    again = _tune(tmp_path, capsys, trials=4, out="r2")["meta"]
+    assert again["trials_run_now"] == 2 and again["trials_complete"] == 4
+    assert _trials(tmp_path) == [(i, "COMPLETE") for i in range(4)]
     assert _params(tmp_path)[: len(before)] == before  # the first trials were not flown again
-    done = _tune(tmp_path, capsys, trials=3, out="r3")["meta"]
-    assert done["trials_run_now"] == 0 and len(_trials(tmp_path)) == 3  # nothing left to do
+    done = _tune(tmp_path, capsys, trials=4, out="r3")["meta"]
+    assert done["trials_run_now"] == 0 and len(_trials(tmp_path)) == 4  # nothing left to do
     # the same study with another definition is refused, not mixed
     code, err = _tune(tmp_path, capsys, "--seed", "5", trials=5, out="r4", check=False)
     assert code == 2 and "made with a different definition (differs in holdout_seed, seed)" in err
