@@ -163,26 +163,26 @@ class InterceptionLoop:
         self,
         t: float,
         est: ImageEstimate | None,
-        p_enu: np.ndarray,
+        state: VehicleState,
         R_WB: np.ndarray,
-        R_WC: np.ndarray,
+        gyro: np.ndarray,
     ) -> MotionEstimate | None:
-        """Feed the IMM the target's world position after a fused detection: the DKF's image
-        point and inverse depth now, placed from the camera's believed pose; a lost estimate
-        ends its track."""
+        """Feed the IMM the target's position after a fused detection (the DKF's, placed from
+        the pose the velocity and gyro carry: imm.CarriedPose); a lost estimate ends its track."""
         motion = self.motion
         if est is None:
             motion.reset()
             return None
+        p_c, R_c = motion.pose.step(t, state.position_enu_m, state.velocity_enu_m_s, R_WB, gyro)
         if est.lost:  # a dropout: the IMM keeps its track (it restarts after its own max gap)
             return None
         fused = (FusionResult.ACCEPTED, FusionResult.INITIALISED)
         dv = self.dkf.depth_velocity() if any(r in fused for r in self.last_fusion) else None
         if dv is None:
             return motion.estimate
-        camera_enu_m = np.asarray(p_enu, dtype=float) + R_WB @ np.asarray(self._offset_b_m)
+        camera_enu_m = p_c + R_c @ np.asarray(self._offset_b_m)
         p, cov = position_from_estimate(
-            est.e_px, self.camera.f_px, dv[0], dv[2], R_WC, camera_enu_m
+            est.e_px, self.camera.f_px, dv[0], dv[2], R_c @ self._R_BC, camera_enu_m
         )
         return motion.update(t, p, cov, dv[1], camera_enu_m)
 
@@ -323,7 +323,7 @@ class InterceptionLoop:
         est, est_prev_e, est_range = self.dkf.view(self._prev_time_s)
         motion = None
         if self.motion is not None:
-            motion = self._track_motion(t, est, state.position_enu_m, R_WB, R_WC)
+            motion = self._track_motion(t, est, state, R_WB, gyro)
         e_est = e_rate = None
         q_y = q_z = s_y = s_z = math.nan
         yaw_rate = 0.0

@@ -8,12 +8,13 @@ models (Bar-Shalom, Li & Kirubarajan 2001, ch. 6 and 11.7):
 - CV, constant velocity: p += v T, a = 0; white acceleration noise (sigma ``q_cv_m_s2``);
 - CA, constant acceleration (Wiener acceleration): p += v T + a T^2 / 2, v += a T; white jerk
   noise (sigma ``q_ca_m_s3``);
-- CT, coordinated turn in the horizontal plane at the turn rate omega = (v x a)_z / |v_h|^2
-  of the CA model's estimate (clipped to ``max_turn_rad_s``; the combined one is shrunk toward
-  CV's a = 0, which would keep the turn rate from ever growing): v_h turns by omega T exactly,
-  p_h follows the arc, the vertical is CV, and a = omega e_z x v; white acceleration noise
-  (sigma ``q_ct_m_s2``). With omega taken from the estimate, the model is linear in the state
-  at each step (the turn rate is its linearisation point).
+- CT, coordinated turn: the horizontal acceleration turns with the velocity at the turn rate
+  omega = (v x a)_z / |v_h|^2 of the CT model's own estimate (clipped to ``max_turn_rad_s``),
+  a_h rotating by omega T, v_h and p_h its exact integrals over the step; the vertical is CA;
+  white jerk noise (sigma ``q_ct_m_s3``). A target turning at 1 rad/s turns its acceleration
+  by as much, which CA follows a phase behind; CT carries the turn over the step. With omega
+  taken from the estimate, the model is linear in the state at each step (the turn rate is
+  its linearisation point); at omega = 0 it is CA.
 
 The models mix as filterpy's :class:`~filterpy.kalman.IMMEstimator` mixes them (Kalman
 filters with Joseph-form updates; tests/test_imm.py holds the two equal), the three filters
@@ -34,6 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry import propagate_rotation
+
 MODELS = ("cv", "ca", "ct")  # the models, in the order of every probability vector
 
 
@@ -43,7 +46,7 @@ class ImmConfig:
 
     q_cv_m_s2: float = 0.3  # CV: white acceleration, 1 sigma
     q_ca_m_s3: float = 4.0  # CA: white jerk, 1 sigma
-    q_ct_m_s2: float = 0.5  # CT: white acceleration, 1 sigma
+    q_ct_m_s3: float = 2.0  # CT: white jerk, 1 sigma
     max_turn_rad_s: float = 3.0  # CT's turn rate is clipped to this
     # Markov switching per update (row: from, column: to), CV / CA / CT
     switching: tuple[tuple[float, float, float], ...] = (
@@ -56,11 +59,12 @@ class ImmConfig:
     min_position_sigma_m: float = 0.02  # the measurement's floor per axis
     max_position_sigma_m: float = 50.0  # a measurement poorer than this (RMS per axis) is unused
     max_gap_s: float = 1.0  # a gap longer than this between updates restarts the filter
-    # the vehicle's own state estimate as the measurement sees it (1 sigma): its position's
-    # error, and its attitude's, which moves the target across the line of sight by the range
-    # times the angle (GNSS and a magnetometer's heading: decimetres and degrees)
-    pose_position_sigma_m: float = 0.3
-    pose_attitude_sigma_deg: float = 1.5
+    # the vehicle's own pose as the measurement sees it (1 sigma), in the frame its velocity
+    # and gyro carry (CarriedPose): the integrated velocity error's drift, and the attitude's,
+    # which moves the target across the line of sight by the range times the angle (the
+    # estimate's own GNSS and magnetometer wander, decimetres and degrees, is not in it)
+    pose_position_sigma_m: float = 0.2
+    pose_attitude_sigma_deg: float = 0.6
 
 
 @dataclass(frozen=True)
@@ -112,6 +116,51 @@ def position_from_estimate(
     return position_from_image(xn, yn, rho, P6[:3, :3], R_WC, camera_enu_m)
 
 
+class CarriedPose:
+    """The vehicle's pose as its own velocity and gyro carry it from where a track starts: the
+    frame the IMM places the target in. The state estimate's position (a GNSS fix's
+    Gauss-Markov wander) and heading (a magnetometer's) random-walk by centimetres and tenths
+    of a degree between frames, which the IMM would read as the target's acceleration; the
+    integrated velocity and gyro drift smoothly (a velocity error of 0.1-0.2 m/s, a gyro bias
+    of milliradians a second), which a manoeuvre of m/s^2 does not resemble. The frame is
+    anchored to the estimate at the start, so it agrees with the world to the estimate's
+    error then plus that drift."""
+
+    def __init__(self) -> None:
+        self.time_s = math.nan
+        self.position_enu_m: np.ndarray | None = None
+        self.R_WB: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the anchor (the next :meth:`step` takes the estimate)."""
+        self.position_enu_m = self.R_WB = None
+
+    def step(
+        self,
+        t: float,
+        position_enu_m: np.ndarray,
+        velocity_enu_m_s: np.ndarray,
+        R_WB: np.ndarray,
+        rates_flu_rad_s: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Carry the pose to ``t`` (s) with the velocity (m/s ENU) and body rates (rad/s FLU)
+        held since the last step, or anchor it to the estimate (``position_enu_m``,
+        ``R_WB``) when there is none; a time that does not advance or an input that is not
+        finite leaves it where it is. Returns (position m ENU, R_WB)."""
+        v = np.asarray(velocity_enu_m_s, dtype=float)
+        w = np.asarray(rates_flu_rad_s, dtype=float)
+        dt = t - self.time_s
+        if self.position_enu_m is None:
+            self.position_enu_m = np.array(position_enu_m, dtype=float)
+            self.R_WB = np.array(R_WB, dtype=float)
+            self.time_s = t
+        elif dt > 0.0 and np.isfinite(v).all() and np.isfinite(w).all():
+            self.position_enu_m = self.position_enu_m + v * dt
+            self.R_WB = propagate_rotation(self.R_WB, w, dt)
+            self.time_s = t
+        return self.position_enu_m, self.R_WB
+
+
 def pose_covariance_m2(rel_enu_m: np.ndarray, config: ImmConfig) -> np.ndarray:
     """What the vehicle's own pose error adds to the target's placed position (m^2): its
     position's variance on every axis, and its attitude's, (range sigma_att)^2, across the
@@ -147,23 +196,16 @@ def _ca_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _ct_matrices(dt: float, q: float, omega: float) -> tuple[np.ndarray, np.ndarray]:
-    """The coordinated turn at ``omega`` (rad/s) about +z; vertical CV; a = omega e_z x v."""
-    F = np.zeros((9, 9))
-    wt = omega * dt
-    s, c = math.sin(wt), math.cos(wt)
+    """CA whose horizontal acceleration turns at ``omega`` (rad/s) about +z over the step:
+    a_h' = Rot(omega T) a_h, v_h' = v_h + B1 a_h, p_h' = p_h + v_h T + B2 a_h with B1, B2 the
+    integrals of Rot(omega t) once and twice over [0, T]; white jerk noise as CA."""
+    F, Q = _ca_matrices(dt, q)
     if abs(omega) > 1e-6:
-        a, b = s / omega, (1.0 - c) / omega
-    else:
-        a, b = dt, 0.0
-    F[0, 0] = F[1, 1] = F[2, 2] = 1.0
-    F[0, 3], F[0, 4], F[1, 3], F[1, 4] = a, -b, b, a
-    F[2, 5] = dt
-    F[3, 3], F[3, 4], F[4, 3], F[4, 4] = c, -s, s, c
-    F[5, 5] = 1.0
-    # a = omega e_z x v after the step: (-omega v_y, omega v_x, 0)
-    F[6, 3:6] = -omega * F[4, 3:6]
-    F[7, 3:6] = omega * F[3, 3:6]
-    Q = _cv_matrices(dt, q)[1]
+        wt = omega * dt
+        s, c = math.sin(wt), math.cos(wt)
+        F[6:8, 6:8] = ((c, -s), (s, c))
+        F[3:5, 6:8] = np.array(((s, c - 1.0), (1.0 - c, s))) / omega
+        F[0:2, 6:8] = np.array(((1.0 - c, s - wt), (wt - s, 1.0 - c))) / (omega * omega)
     return F, Q
 
 
@@ -231,11 +273,13 @@ class TargetMotionImm:
         self._imm: _ImmState | None = None
         self._time_s = math.nan
         self.estimate: MotionEstimate | None = None
+        self.pose = CarriedPose()  # the frame its measurements are placed in
 
     def reset(self) -> None:
-        """Forget the track (a new one starts at the next update)."""
+        """Forget the track and its frame (a new one starts at the next update)."""
         self._imm = None
         self.estimate = None
+        self.pose.reset()
 
     def _start(self, t: float, p: np.ndarray, R: np.ndarray, v: np.ndarray) -> None:
         cfg = self.config
@@ -320,13 +364,13 @@ class TargetMotionImm:
     def _predict(self, dt: float) -> None:
         cfg = self.config
         imm = self._imm
-        x = imm.X[1]  # CA's own estimate: its acceleration is not shrunk by CV's
+        x = imm.X[2]  # CT's own estimate: the combined one is shrunk toward CV's a = 0
         vh2 = float(x[3] * x[3] + x[4] * x[4])
         omega = float(x[3] * x[7] - x[4] * x[6]) / vh2 if vh2 > 0.25 else 0.0
         omega = min(max(omega, -cfg.max_turn_rad_s), cfg.max_turn_rad_s)
         models = (
             _cv_matrices(dt, cfg.q_cv_m_s2),
             _ca_matrices(dt, cfg.q_ca_m_s3),
-            _ct_matrices(dt, cfg.q_ct_m_s2, omega),
+            _ct_matrices(dt, cfg.q_ct_m_s3, omega),
         )
         imm.predict(np.stack([m[0] for m in models]), np.stack([m[1] for m in models]))
