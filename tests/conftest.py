@@ -80,6 +80,38 @@ def pytest_collection_modifyitems(config, items) -> None:
     items.sort(key=lambda item: item.get_closest_marker("early") is None)
 
 
+class _GroupNames:
+    """On a worker, after pytest-xdist has named each grouped test ``nodeid@group`` (the name
+    its scheduler groups by): pytest-xdist writes that name to the item's ``_nodeid``, which
+    pytest 9.2 no longer reads (a node id is the structured ``_id``), so the groups were
+    silently spread over both workers. This puts the name where the running pytest reads it,
+    and refuses to run when neither works: two SITL rigs on the two cores at once fail their
+    timing."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, config, items) -> None:
+        if not getattr(config.option, "loadgroup", False):
+            return
+        for item in items:
+            names = sorted({str(m.args[0]) for m in item.iter_markers("xdist_group") if m.args})
+            suffix = "@" + "_".join(names)
+            if not names or item.nodeid.endswith(suffix):
+                continue
+            if hasattr(item, "_id"):
+                from _pytest.nodeid import NodeId
+
+                item._id = NodeId.parse(item.nodeid + suffix)
+            if not item.nodeid.endswith(suffix):
+                raise pytest.UsageError(
+                    f"--dist loadgroup cannot group {item.nodeid} with this pytest and "
+                    "pytest-xdist; run with -n 0"
+                )
+
+
+def pytest_configure(config) -> None:
+    config.pluginmanager.register(_GroupNames(), "peregrine-xdist-group-names")
+
+
 def pytest_terminal_summary(terminalreporter) -> None:
     if not _FUZZ:
         return
