@@ -10,7 +10,7 @@ from groundstation.campaigns.definitions import (
     get_campaign,
     heldout_scenarios,
 )
-from groundstation.campaigns.report import tables_markdown
+from groundstation.campaigns.report import tables_markdown, write_report
 from groundstation.campaigns.runner import SortieOutcome
 from groundstation.cli import _build_parser as build_parser
 from groundstation.scenario import load_scenario, shipped_scenarios
@@ -46,7 +46,7 @@ def test_no_other_test_or_tuning_names_a_heldout_scenario():
     assert not found, found
 
 
-def test_heldout_campaign_flies_each_scenario_n_times_and_reports_the_papers_figure():
+def test_heldout_campaign_flies_each_scenario_n_times_and_reports_the_papers_figure(tmp_path):
     jobs = get_campaign("heldout").build(3, ("png", "apn"), "projected", 2)
     held = heldout_scenarios()
     assert len(jobs) == len(held) * 2 * 3
@@ -71,6 +71,10 @@ def test_heldout_campaign_flies_each_scenario_n_times_and_reports_the_papers_fig
     assert cell["png"]["cep_m"] == 0.02 and abs(cell["png"]["mean_m"] - 0.02) < 1e-12
     table = tables_markdown("heldout", summary, outcomes)
     assert "| heldout-sm-vertical | PNG (proposed) | 100 % | 0.020 m | 0.020 m |" in table
+    meta = {"command": "c", "sorties": len(jobs), "camera": "projected", "laws": ["png", "apn"]}
+    meta |= {"seed": 2, "n": 3, "what_n_counts": "seeds per scenario"}
+    files = write_report(tmp_path, "heldout", meta, summary, outcomes)  # eight scenarios' panels
+    assert "report.md" in files and (tmp_path / "trajectories_3d.png").stat().st_size > 0
 
 
 def test_the_campaign_command_names_every_campaign():

@@ -299,8 +299,11 @@ def _outdoor_plots(outcomes, out: Path) -> list[str]:
     plots: list[str] = []
     laws = _laws_of(outcomes)
     scenarios = list(dict.fromkeys(o.labels["scenario"] for o in outcomes))
-    _trajectory_panels(outcomes, laws, scenarios, (2, 2), (10, 8), out, plots)
-    fig, axes = plt.subplots(2, len(scenarios), figsize=(4.5 * len(scenarios), 6), squeeze=False)
+    cols = 2 if len(scenarios) <= 4 else 4
+    rows = -(-len(scenarios) // cols)
+    _trajectory_panels(outcomes, laws, scenarios, (rows, cols), (5 * cols, 4 * rows), out, plots)
+    width = (4.5 if len(scenarios) <= 4 else 3.2) * len(scenarios)
+    fig, axes = plt.subplots(2, len(scenarios), figsize=(width, 6), squeeze=False)
     for i, sc in enumerate(scenarios):
         for law in laws:
             o = _first(outcomes, scenario=sc, law=law, **{"try": 0})
