@@ -114,6 +114,30 @@ def test_turbulence_has_its_configured_intensity_and_is_seeded():
     assert again.at((5.0, 6.0, 7.0)) != Wind(GUSTY, np.random.default_rng(13)).at((5.0, 6.0, 7.0))
 
 
+def test_turbulence_sums_its_modes_in_order_as_the_compiled_kernel_does():
+    """The kernel evaluates all modes at once (numpy as plain Python) and sums them in order,
+    as its compiled form does: bit for bit the sum taken mode after mode (seeded modes, times
+    and points; none past the modes given, none without modes)."""
+    from groundstation.sim.physics import W_NMODES, W_SIZE, W_TIME, turbulence_at
+    from groundstation.sim.wind import turbulence_modes
+
+    rng = np.random.default_rng(21)
+    for i in range(50):
+        modes = turbulence_modes(rng, float(rng.uniform(1.0, 50.0)), int(rng.integers(1, 100)))
+        c = rng.normal(0.0, 2.0, W_SIZE)
+        c[W_TIME] = rng.uniform(0.0, 60.0)
+        c[W_NMODES] = [len(modes), len(modes) + 5, 1, 0][i % 4]
+        p = rng.normal(0.0, 20.0, 3)
+        q = p - c[0:3] * c[W_TIME]
+        g = [0.0, 0.0, 0.0]
+        for m in modes[: int(c[W_NMODES])]:
+            th = m[0] * q[0] + m[1] * q[1] + m[2] * q[2]
+            for k in range(3):
+                g[k] += m[3 + k] * math.cos(th) + m[6 + k] * math.sin(th)
+        want = [c[3 + k] * g[k] for k in range(3)]
+        assert [float(v) for v in turbulence_at(c, modes, *p)] == want, i
+
+
 def test_vehicle_and_target_feel_the_same_field():
     sc = load_scenario("outdoor-static")
     sim = Simulation(sc, "png", 2, keep_records=False)

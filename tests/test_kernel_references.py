@@ -7,8 +7,10 @@ balloon in a gusty fan jet): up to ``SAMPLES`` calls of each kernel, drawn at ra
 from all its calls, each also perturbed ``PERTURBED`` times (seeded: floats and small float
 vectors by 1 % relative, rotation matrices by a small rotation, unit quaternions kept unit;
 times, indices, flags and buffers untouched). Tolerance: rtol 1e-9, atol 1e-12, the same
-float64 operations done in another order (numpy's matrix products, vector norms). Runs as
-Python or compiled, as the process is (``PEREGRINE_JIT``).
+float64 operations done in another order (numpy's matrix products, vector norms; the
+turbulence's sum over about 100 modes, taken in order by the kernel, compiled or as numpy, and
+by matrix products in its reference). Runs as Python or compiled, as the process is
+(``PEREGRINE_JIT``).
 
 The helper kernels without a reference of their own are listed in
 ``kernel_cases.COVERED`` with the reference that covers them: Python's ``min``/``max``
