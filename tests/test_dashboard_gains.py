@@ -101,7 +101,11 @@ def test_apply_applies_the_valid_edits_and_names_every_refused_one(station, page
     f.write_text("K_y = -1\nfoo = 2\nk_p = 0.05\nK_z = 'x'\n")
     page.fill("#gainset-name", "")
     page.set_input_files("#gainset-upload", str(f))
-    page.wait_for_selector("#gains-msg.err")
+    # the Apply refusal above already left the message marked as an error: wait for the new one
+    page.wait_for_function(
+        "document.querySelector('#gains-msg').textContent.startsWith('gain set file')"
+    )
+    assert "err" in page.get_attribute("#gains-msg", "class")
     text = page.text_content("#gains-msg")
     assert text.startswith("gain set file 'broken' refused, nothing saved: 3 problems:")
     assert "K_y" in text and "foo" in text and "K_z" in text and "uploaded" not in text
