@@ -344,12 +344,15 @@ class InterceptionLoop:
             f = self.camera.f_px
             n_t = line_of_sight(e_est[0] / f, e_est[1] / f, R_WC)
             q_y, q_z = direction_angles(n_t)
-            a_d = reacquire_accel(n_t, v, gains)
+            a_d = reacquire_accel(n_t, v, gains, self.fov_edges_rad)
             e_lat_px = self.camera.upright(*e_est)[0]
             e_lat_rate_px_s = self.camera.upright(*e_rate)[0]
             yaw_rate = yaw_rate_command(e_lat_px, e_lat_rate_px_s, gains)
         elif mode is LoopMode.SEARCH:
-            a_d = search_accel(ladder.search_cue, v, gains)
+            a_d = search_accel(
+                ladder.search_cue, v, gains, ladder.last_los(state.position_enu_m),
+                self.fov_edges_rad,
+            )  # fmt: skip
             yaw_rate = search_yaw_rate(
                 ladder.search_cue, R_WC[:, 2], ladder.search_dir, gains, t - ladder.search_start_s
             )
@@ -380,6 +383,9 @@ class InterceptionLoop:
             )  # fmt: skip
             self._dq_filt, self._dq_flown = (fy, fz), (ly, lz, lh)
             self._los_prev = np.array((n0, n1, n2))
+            if ladder.confirmed and est_range is not None and math.isfinite(est_range):
+                # where a search after a loss looks
+                ladder.last_target_enu_m = state.position_enu_m + est_range * self._los_prev
             e_n = (e_est[0] / f, e_est[1] / f)
             range_m, v_t, var_v = math.nan, None, math.nan
             # the approach's speed near the ground (control/clearance.py)

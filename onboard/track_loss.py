@@ -40,6 +40,7 @@ class TrackLossLadder:
         self.search_cue: np.ndarray | None = None  # the heading the search flies (or None)
         self.search_dir = 1.0  # the yaw scan's first direction
         self.launch_cue: np.ndarray | None = None
+        self.last_target_enu_m: np.ndarray | None = None  # where the track last put it (m)
         self.attitudes: deque[tuple[float, np.ndarray]] = deque()  # (tick time, R_WC)
 
     def on_tick(self, t: float, R_WC: np.ndarray) -> None:
@@ -52,6 +53,16 @@ class TrackLossLadder:
         hist.append((t, R_WC))
         while len(hist) > 2 and hist[1][0] <= t - ATTITUDE_HISTORY_S:
             hist.popleft()
+
+    def last_los(self, position_enu_m: np.ndarray) -> np.ndarray | None:
+        """The unit LOS from ``position_enu_m`` to where the last track put the target (its
+        range from the DKF), or None without one (or from there)."""
+        p = self.last_target_enu_m
+        if p is None:
+            return None
+        d = p - position_enu_m
+        n = math.sqrt(float(d @ d))
+        return d / n if n > 1e-6 else None
 
     def screening(self, t: float) -> bool:
         """Do detections go through the screen before the DKF? Not while its track is live

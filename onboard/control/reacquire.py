@@ -97,12 +97,44 @@ class DetectionScreen:
         return []
 
 
+VIEW_MARGIN_RAD = math.radians(5.0)  # inside the image's edge: a blob there is clipped
+NO_VIEW_EDGES = (math.inf, -math.inf)  # every LOS counts as in view: no swing
+
+
+def view_swing_m_s(
+    los_enu: np.ndarray, fov_edges_rad: tuple[float, float], speed_m_s: float
+) -> np.ndarray | None:
+    """The velocity (m/s, ENU) that brings a LOS whose elevation lies beyond the level
+    camera's top or bottom edge (``fov_edges_rad``, above body x, less VIEW_MARGIN_RAD) back
+    into view: ``speed_m_s`` across the LOS in its vertical plane, toward the level (for a
+    target below: down and away from it). The range is kept to first order, so the swing
+    neither closes on a target it cannot see nor loses it; flying at the target's side
+    instead would steepen the LOS further out of view. None when the LOS is in view."""
+    x, y, z = (float(c) for c in los_enu)
+    h = math.hypot(x, y)
+    elev = math.atan2(z, h)
+    top, bottom = fov_edges_rad
+    if bottom + VIEW_MARGIN_RAD <= elev <= top - VIEW_MARGIN_RAD:
+        return None
+    s, c = math.sin(elev), math.cos(elev)
+    hx, hy = (x / h, y / h) if h > 1e-9 else (0.0, 0.0)
+    # d n / d elev = (-sin(elev) h, cos(elev)); moving along +-it turns the LOS by -+v/r
+    k = math.copysign(speed_m_s, elev)
+    return np.array((-k * s * hx, -k * s * hy, k * c))
+
+
 def reacquire_accel(
-    pred_los_enu: np.ndarray, velocity_enu_m_s: np.ndarray, gains: Gains
+    pred_los_enu: np.ndarray,
+    velocity_enu_m_s: np.ndarray,
+    gains: Gains,
+    fov_edges_rad: tuple[float, float] = NO_VIEW_EDGES,
 ) -> np.ndarray:
-    """Re-acquisition: the velocity loop a_d = k_brake (v_reacq n_los - v), saturated to
-    a_max, turning the flight toward the predicted LOS at a slow speed (m/s^2, ENU)."""
-    v_d = gains.v_reacq * pred_los_enu
+    """Re-acquisition: the velocity loop a_d = k_brake (v_d - v), saturated to a_max, with
+    v_d = v_reacq n_los, a slow flight toward the predicted LOS, or, when that LOS is beyond
+    the level camera's top or bottom edge, :func:`view_swing_m_s` at v_reacq (m/s^2, ENU)."""
+    v_d = view_swing_m_s(pred_los_enu, fov_edges_rad, gains.v_reacq)
+    if v_d is None:
+        v_d = gains.v_reacq * pred_los_enu
     return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
 
 
@@ -116,12 +148,26 @@ def horizontal_unit(vec: np.ndarray) -> np.ndarray | None:
 
 
 def search_accel(
-    cue_enu: np.ndarray | None, velocity_enu_m_s: np.ndarray, gains: Gains
+    cue_enu: np.ndarray | None,
+    velocity_enu_m_s: np.ndarray,
+    gains: Gains,
+    last_los_enu: np.ndarray | None = None,
+    fov_edges_rad: tuple[float, float] = NO_VIEW_EDGES,
 ) -> np.ndarray:
-    """Search: without a cue, brake to a hover (a_d = -k_brake v); with a horizontal cue,
-    hold that course at ``v_search`` and the altitude (a_d = k_brake (v_search cue - v)),
-    saturated to a_max (m/s^2, ENU)."""
-    v_d = np.zeros(3) if cue_enu is None else gains.v_search * cue_enu
+    """Search: with a horizontal cue, hold that course at ``v_search`` and the altitude
+    (a_d = k_brake (v_search cue - v)); without one, brake to a hover (a_d = -k_brake v), or,
+    when the lost track's last estimate lies beyond the level camera's top or bottom edge
+    (``last_los_enu``, the unit LOS from here to where it was), :func:`view_swing_m_s` at
+    v_reacq until it is in view, so that the yaw scan sweeps across it: a target lost off the
+    image's bottom edge is otherwise never back in view at hover; saturated to a_max (m/s^2,
+    ENU)."""
+    if cue_enu is not None:
+        v_d = gains.v_search * cue_enu
+    else:
+        swing = None
+        if last_los_enu is not None:
+            swing = view_swing_m_s(last_los_enu, fov_edges_rad, gains.v_reacq)
+        v_d = np.zeros(3) if swing is None else swing
     return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
 
 
