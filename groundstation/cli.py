@@ -111,6 +111,13 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the aggregates as JSON")
     c.add_argument("--log", metavar="DIR", type=writable_dir, help="record every sortie to DIR")
     c.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help=SET_HELP)
+    c.add_argument(
+        "--only",
+        action="append",
+        metavar="LABEL=V1,V2",
+        help="fly only the cells whose label is among the values (repeatable, all must match;"
+        " e.g. agility: --only kind=turn --only value=3,5); each sortie keeps its draw and seed",
+    )
     c.add_argument("--profile", choices=ESTIMATE_PROFILES, default=None, help=_PROFILE_HELP)
     _add_backend_args(c)
 

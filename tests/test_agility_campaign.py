@@ -8,7 +8,7 @@ import math
 import pytest
 
 from groundstation.campaigns import agility
-from groundstation.campaigns.definitions import build_jobs
+from groundstation.campaigns.definitions import build_jobs, parse_only
 from groundstation.campaigns.runner import SortieOutcome
 
 
@@ -35,6 +35,22 @@ def test_cells_and_paired_laws():
     assert build_jobs("agility", n=2, laws=("png",), seed=3)[0].scenario.target == (
         jobs[0].scenario.target
     )
+
+
+def test_only_flies_a_subset_with_the_whole_campaigns_draws_and_seeds():
+    whole = build_jobs("agility", n=3, laws=("png", "apn"), seed=5)
+    only = parse_only(["kind=turn", "value=3,7.5"])
+    assert only == {"kind": ("turn",), "value": ("3", "7.5")}
+    part = build_jobs("agility", n=3, laws=("png", "apn"), seed=5, only=only)
+    assert [j.index for j in part] == list(range(12))  # 2 values x 3 tries x 2 laws
+    same = [
+        j for j in whole if dict(j.labels)["kind"] == "turn" and dict(j.labels)["value"] in (3, 7.5)
+    ]
+    assert [(j.labels, j.scenario, j.seed, j.law) for j in part] == [
+        (j.labels, j.scenario, j.seed, j.law) for j in same
+    ]
+    jinks = build_jobs("agility", n=1, laws=("apn",), seed=5, only=parse_only(["kind=jink"]))
+    assert [dict(j.labels)["value"] for j in jinks] == list(agility.JINK_RANGES_M)
 
 
 def test_wilson_interval():

@@ -74,6 +74,10 @@ def test_results_identical_whatever_the_worker_count():
         (["campaign", "static", "--set", "camera.noise_px"], "expected SECTION.KEY=VALUE"),
         (["campaign", "static", "--set", "camera.noise_px=-1"], "must not be negative"),
         (["campaign", "static", "--set", "camera.nois_px=0"], "unknown key 'camera.nois_px'"),
+        (["campaign", "agility", "--only", "kind"], "expected KEY=VALUE[,VALUE...]"),
+        (["campaign", "agility", "--only", "speed=3"], "has no label speed; its labels: kind"),
+        (["campaign", "agility", "--only", "value=4"], "keeps no sortie; values there are"),
+        (["campaign", "agility", "--only", "kind=turn", "--only", "kind=jink"], "twice"),
     ],
 )
 def test_bad_campaign_or_law_is_a_clear_error(args, message, tmp_path, capsys):

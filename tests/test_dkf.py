@@ -287,7 +287,7 @@ def test_update_equals_filterpy_joseph_update(with_size):
         h = f * R * rho / math.sqrt(n2)
         d = f * R / n2**1.5
         hs = np.array([[-d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** 2), 0, 0, 0]])
-        var = dkf.config.size_noise_px**2 + (dkf.config.size_noise_rel * 2.3) ** 2
+        var = dkf.config.size_noise_px**2 + (dkf.config.size_noise_rel * h) ** 2
         z = np.array([2.3 - h + float((hs @ x2)[0])])
         x2, P2 = kf_update(x2, P2, z, np.array([[var]]), hs)
     assert_allclose(x1, x2, rtol=1e-10, atol=1e-12)
@@ -449,3 +449,39 @@ def test_a_gated_out_of_order_detection_is_not_kept_for_later_replays():
     (e1, s1), (e0, s0) = run(True), run(False)
     assert (e1.e_px, e1.e_rate_px_s) == (e0.e_px, e0.e_rate_px_s)
     assert np.array_equal(s1[0], s0[0]) and np.array_equal(s1[1], s0[1])
+
+
+def _stare_with_size_noise(seed, noise_px=1.0, noise_rel=0.1, range_m=10.0, duration_s=2.5):
+    """A hovering vehicle watching a static 0.3 m sphere ``range_m`` ahead with the DKF's
+    GNSS random walk (6 m/s^2/sqrt(Hz)); the blob's radius carries zero-mean noise of 1 sigma
+    hypot(noise_px, noise_rel r) as the projected camera draws it, the centre 0.3 px. Returns
+    the inverse depth's relative error (rho_hat / rho - 1) at every 10 ms after the first 1 s."""
+    rng = np.random.default_rng(seed)
+    R_WC = attitude_from_yaw_pitch_roll(math.pi / 2) @ CAM.R_BC
+    dkf = DelayedKalmanFilter(CAM, DkfConfig(target_accel_noise_m_s2=6.0))
+    rel = np.array([0.3, range_m, 0.2])
+    dist = float(np.linalg.norm(rel))
+    uv = CAM.project(R_WC.T @ rel)
+    r_true = CAM.f_px * DIAM_M / 2 / math.sqrt(dist**2 - (DIAM_M / 2) ** 2)
+    errs = []
+    for k in range(round(duration_s / 0.01)):
+        t = k * 0.01
+        dkf.predict(t, np.zeros(3), np.zeros(3), R_WC)
+        if k % 3 == 0:
+            r = r_true + math.hypot(noise_px, noise_rel * r_true) * rng.standard_normal()
+            u, v = uv + 0.3 * rng.standard_normal(2)
+            dkf.fuse(Detection(t, (u, v), (u - r, v - r, 2 * r, 2 * r), math.pi * r * r))
+        if t > 1.0:
+            errs.append(dist / dkf.depth_velocity()[0] - 1.0)
+    return np.array(errs)
+
+
+def test_zero_mean_size_noise_leaves_the_inverse_depth_unbiased():
+    """A static target 10 m ahead of a hovering vehicle, its 4.8 px blob radius measured with
+    1 px + 10 % of noise (24 seeds): the inverse depth's mean relative error stays within
+    2.5 % (the radius's variance taken at the measured radius weights the blobs measured too
+    small more and puts it 5 % low)."""
+    errs = [_stare_with_size_noise(seed) for seed in range(24)]
+    bias = float(np.mean([e.mean() for e in errs]))
+    print(f"inverse depth's mean relative error {bias:+.4f}")
+    assert abs(bias) < 0.025

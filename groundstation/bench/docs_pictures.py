@@ -17,6 +17,7 @@ Set ``PEREGRINE_JIT=0`` for a start in about a second.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import shutil
 import subprocess
@@ -67,9 +68,13 @@ def _gif(frames: list[bytes], path: Path) -> None:
 
 def _dismiss_notices(scene) -> None:
     """Close viser's notices (e.g. software WebGL) so they do not cover the 3D view."""
+    from playwright.sync_api import Error as PlaywrightError
+
     buttons = scene.locator(".mantine-Notification-closeButton")
     for i in range(buttons.count()):
-        buttons.nth(i).click()
+        # a notice already closing (hidden or sliding out) needs no click
+        with contextlib.suppress(PlaywrightError):
+            buttons.nth(i).click(timeout=2000)
 
 
 def _small_study(data_dir: Path) -> None:
@@ -196,6 +201,7 @@ def take(out: Path) -> list[Path]:
             page.select_option("#refly-speed", "max")
             row = page.locator("#logs tr", has_text="cv-top-to-bottom").last
             row.locator('button[data-act="refly"]').click()
+            page.click("#refly-go")  # the form offers the recorded gains: fly them
             page.wait_for_selector("#cmp-legend:not(:empty)", timeout=60000)
             page.wait_for_function(
                 "document.querySelector('#st-outcome').textContent.includes('miss')",

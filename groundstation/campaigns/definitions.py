@@ -337,11 +337,74 @@ def get_campaign(name: str) -> Campaign:
     return CAMPAIGNS[name]
 
 
+def parse_only(items: list[str] | None) -> dict[str, tuple[str, ...]]:
+    """``--only KEY=V1,V2`` items (repeatable) as {key: values}; a key named twice, an item
+    without ``=`` or without a value is refused."""
+    out: dict[str, tuple[str, ...]] = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        values = tuple(v.strip() for v in text.split(",") if v.strip())
+        if not sep or not key or not values:
+            raise CampaignError(f"--only {item!r}: expected KEY=VALUE[,VALUE...]")
+        if key in out:
+            raise CampaignError(f"--only names {key!r} twice")
+        out[key] = values
+    return out
+
+
+def _label_matches(label: Any, wanted: tuple[str, ...]) -> bool:
+    """Is a job's label among ``wanted``: as numbers when both read as numbers (3 = 3.0),
+    else as text."""
+    for w in wanted:
+        try:
+            if float(label) == float(w):
+                return True
+        except (TypeError, ValueError):
+            if str(label) == w:
+                return True
+    return False
+
+
+def select_jobs(jobs: list[SortieJob], only: dict[str, tuple[str, ...]]) -> list[SortieJob]:
+    """The jobs whose labels match every ``only`` key (a subset of the campaign's cells),
+    renumbered; each keeps the target draw and seed it has in the whole campaign. A key no
+    job carries, or a selection that keeps nothing, is refused with the labels there are."""
+    if not only:
+        return jobs
+    keys = sorted({k for j in jobs for k, _ in j.labels})
+    unknown = [k for k in only if k not in keys]
+    if unknown:
+        raise CampaignError(
+            f"--only: this campaign has no label {', '.join(unknown)}; "
+            f"its labels: {', '.join(keys)}"
+        )
+
+    def wanted(job: SortieJob) -> bool:
+        labels = dict(job.labels)
+        return all(k in labels and _label_matches(labels[k], v) for k, v in only.items())
+
+    kept = [j for j in jobs if wanted(j)]
+    if not kept:
+        seen = {k: sorted({str(dict(j.labels).get(k)) for j in jobs}) for k in only}
+        raise CampaignError(
+            "--only keeps no sortie; values there are: "
+            + "; ".join(f"{k}: {', '.join(v)}" for k, v in seen.items())
+        )
+    return [dataclasses.replace(j, index=i) for i, j in enumerate(kept)]
+
+
 def build_jobs(
-    name: str, n: int | None = None, laws=DEFAULT_LAWS, camera="projected", seed=0
+    name: str,
+    n: int | None = None,
+    laws=DEFAULT_LAWS,
+    camera="projected",
+    seed=0,
+    only: dict[str, tuple[str, ...]] | None = None,
 ) -> list[SortieJob]:
+    """The campaign's jobs; ``only`` (:func:`parse_only`) keeps a subset of its cells."""
     campaign = get_campaign(name)
     n = campaign.default_n if n is None else n
     if n < 1:
         raise CampaignError("--n must be at least 1")
-    return campaign.build(n, tuple(laws), camera, seed)
+    return select_jobs(campaign.build(n, tuple(laws), camera, seed), only or {})

@@ -48,14 +48,16 @@ def run_campaign(
     command: str | None = None,
     log_dir: Path | None = None,
     overrides: dict[str, Any] | None = None,
+    only: dict[str, tuple[str, ...]] | None = None,
 ) -> dict[str, Any]:
     """Run a campaign and write its report; ``overrides`` (``{"camera.delay_s": 0}``, see
-    :func:`with_overrides`) change every sortie's scenario, checked before anything runs."""
+    :func:`with_overrides`) change every sortie's scenario, checked before anything runs;
+    ``only`` ({label: values}, :func:`.definitions.parse_only`) flies a subset of its cells."""
     campaign = get_campaign(name)
     if camera not in CAMERA_MODES:
         raise CampaignError(f"unknown camera mode {camera!r}; choose one of {CAMERA_MODES}")
     n = campaign.default_n if n is None else n
-    jobs = build_jobs(name, n, laws, camera, seed)
+    jobs = build_jobs(name, n, laws, camera, seed, only)
     if overrides:
         jobs = [
             dataclasses.replace(j, scenario=with_overrides(j.scenario, overrides)) for j in jobs
@@ -82,13 +84,15 @@ def run_campaign(
         "command": command
         or f"groundstation campaign {name} --n {n} --laws {','.join(laws)} "
         f"--camera {camera} --seed {seed}"
-        + "".join(f" --set {k}={_toml_value(v)}" for k, v in (overrides or {}).items()),
+        + "".join(f" --set {k}={_toml_value(v)}" for k, v in (overrides or {}).items())
+        + "".join(f" --only {k}={','.join(v)}" for k, v in (only or {}).items()),
         "n": n,
         "what_n_counts": campaign.what_n_counts,
         "laws": list(laws),
         "camera": camera,
         "seed": seed,
         "overrides": dict(overrides or {}),
+        "only": {k: list(v) for k, v in (only or {}).items()},
         # the state-estimate model every sortie flew with (overrides apply to all of them)
         "estimate": dataclasses.asdict(jobs[0].scenario.estimate) if jobs else {},
         # the error profiles flown ("ideal": ideal sensors, analysis only)
@@ -111,12 +115,13 @@ def _toml_value(v: Any) -> str:
 
 def main_campaign(args) -> int:
     from ..sim.profiles import label
-    from .definitions import parse_laws
+    from .definitions import parse_laws, parse_only
     from .ray_runner import make_runner
 
     get_campaign(args.name)
     laws = parse_laws(args.laws)
     overrides = parse_overrides(args.set)
+    only = parse_only(args.only)
     command = "groundstation " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     with make_runner(args.backend, args.workers, args.ray_address) as runner:
         res = run_campaign(
@@ -132,6 +137,7 @@ def main_campaign(args) -> int:
             command=command,
             log_dir=Path(args.log) if args.log else None,
             overrides=overrides,
+            only=only,
         )
     meta = res["meta"]
     if args.json:

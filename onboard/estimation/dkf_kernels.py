@@ -203,8 +203,9 @@ def _update(x, P, z0, z1, r_px, prm, x_out, P_out):
         d = f * R / (n2 * math.sqrt(n2))
         hs = np.zeros(6)
         hs[0], hs[1], hs[2] = -d * rho * xn, -d * rho * yn, d * (n2 + (R * rho) ** two)
-        var_s = prm[_PRM_SIZE_VAR_PX] + (prm[_PRM_SIZE_REL] * r_px) ** two
-        ys = r_px - f * R * rho / math.sqrt(n2)
+        h = f * R * rho / math.sqrt(n2)
+        var_s = prm[_PRM_SIZE_VAR_PX] + (prm[_PRM_SIZE_REL] * h) ** two
+        ys = r_px - h
         Ph = P @ hs
         ss = hs @ Ph + var_s
         if ys * ys <= prm[_PRM_GATE2] * ss:

@@ -82,7 +82,9 @@ def update(
     """The gated EKF update with the image point z (H = [I_2 0], R = (sigma_px / f)^2 I,
     Mahalanobis gate on y^T S^-1 y), then, relinearised at the updated state, the apparent
     radius r_px (NaN: not usable) with h(x) = f R rho / sqrt(n2), n2 = 1 + x_n^2 + y_n^2 -
-    R^2 rho^2, variance sigma_s^2 + (rel r)^2, within its own gate. Joseph form
+    R^2 rho^2, variance sigma_s^2 + (rel h)^2 at the predicted radius h (a variance from the
+    measured radius would weight the blobs measured too small more, biasing rho low), within
+    its own gate. Joseph form
     P = (I - K H) P (I - K H)^T + K R K^T; rho kept in [1e-6, rho_max]; P symmetrised.
     Returns (accepted, x, P); (False, x, P) unchanged when the point is gated."""
     gate2 = c.gate_sigma**2
@@ -106,8 +108,9 @@ def update(
         d = f_px * R_m / n2**1.5
         h = np.zeros(6)
         h[:3] = -d * rho * x_n, -d * rho * y_n, d * (n2 + (R_m * rho) ** 2)
-        var_s = c.size_noise_px**2 + (c.size_noise_rel * r_px) ** 2
-        y_s = r_px - f_px * R_m * rho / math.sqrt(n2)
+        h_s = f_px * R_m * rho / math.sqrt(n2)
+        var_s = c.size_noise_px**2 + (c.size_noise_rel * h_s) ** 2
+        y_s = r_px - h_s
         s_s = h @ P @ h + var_s
         if y_s**2 <= gate2 * s_s:
             k = P @ h / s_s
