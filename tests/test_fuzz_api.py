@@ -1,6 +1,6 @@
 """The REST API under schema-driven fuzzing (schemathesis over the app's own OpenAPI
 document, with the token): no request may get a 5xx, and every response must match the
-schema the document declares. 12 requests an operation by default, valid and invalid ones
+schema the document declares. 25 requests an operation by default, valid and invalid ones
 (PEREGRINE_FUZZ_EXAMPLES=200 for a longer run)."""
 
 import os
@@ -17,7 +17,7 @@ from groundstation.app.server import GroundStation
 POSITIVE, NEGATIVE = GenerationMode.POSITIVE, GenerationMode.NEGATIVE
 
 # examples per operation; PEREGRINE_FUZZ_EXAMPLES raises it for a longer run
-EXAMPLES = int(os.environ.get("PEREGRINE_FUZZ_EXAMPLES", "12"))
+EXAMPLES = int(os.environ.get("PEREGRINE_FUZZ_EXAMPLES", "25"))
 
 
 @pytest.fixture(scope="module")
