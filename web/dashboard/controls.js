@@ -12,7 +12,6 @@ async function loadScenarios() {
   const st = await api("GET", "/api/status"); // the scenario the header names, else the default
   sel.value = !st.replay && list.some((s) => s.name === st.scenario) ? st.scenario : "cv-top-to-bottom";
   await loadToml();
-  redrawSnapshot(); // the controls follow the sortie in force once its scenario is listed
 }
 
 async function loadToml() {

@@ -106,7 +106,7 @@ function makePlot(def, parent) {
   u.def = def;
   u.over.addEventListener("dblclick", () => setXRange(null));
   u.over.addEventListener("mouseenter", () => { PV.hover = true; });
-  u.over.addEventListener("mouseleave", () => { PV.hover = false; PV.dirty = true; redrawSnapshot(); });
+  u.over.addEventListener("mouseleave", () => { PV.hover = false; PV.dirty = true; });
   u.over.addEventListener("wheel", (ev) => {
     ev.preventDefault();
     const [min, max] = currentRange(), span = max - min;
@@ -269,9 +269,8 @@ async function syncPlotSources(st) {
       PV.cmpInfo = st.compare;
     } else { PV.cmp = null; PV.cmpInfo = null; }
     buildPlots();
-  } catch (e) { msg($("sim-msg"), "plots: " + e.message, false); return; }
+  } catch (e) { msg($("sim-msg"), "plots: " + e.message, false); }
   finally { loading = false; }
-  redrawSnapshot(); // the image plane and the plots from the series loaded
 }
 
 function appendLive(s) { // a running sortie: one more point per telemetry message
@@ -295,5 +294,4 @@ $("btn-add-plot").onclick = () => {
   const unit = unitText(((PV.own && PV.own.units) || {})[key] || "-"); // from onboard/messages.py
   PV.extra.push({ title: key, unit: unit || "-", series: [{ label: key, key, color: "#2f6fe0" }] });
   buildPlots();
-  redrawSnapshot();
 };

@@ -85,7 +85,7 @@ function syncControls(st) {
   const set = (id, v) => { const el = $(id); if (v === null || v === undefined || document.activeElement === el) return; if (el.tagName !== "SELECT" || [...el.options].some((o) => o.value === String(v))) el.value = String(v); };
   set("speed", st.speed);
   if (st.epoch === controlsEpoch || st.live) return;
-  if (st.state !== "replay" && !$("scenario").options.length) return; // not listed yet: loadScenarios draws again
+  if (st.state !== "replay" && !$("scenario").options.length) return; // not listed yet: next time
   controlsEpoch = st.epoch;
   // idle too: after a Reset the header names the last sortie's settings, and Start flies them
   set("law", st.law); set("camera", st.camera); set("seed", st.seed);

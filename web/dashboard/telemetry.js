@@ -4,34 +4,14 @@
 
 // Each message is taken in at once (cheap: parse, append to the plots' data); the views are
 // redrawn at most once per animation frame, so a slow machine draws less often instead of
-// falling behind. A message identical to the one before (an idle, paused or finished session
-// sends the same snapshot 40 times a second) changes nothing and is not drawn again: what the
-// page changes itself (series loaded, scenarios listed, a plot added) asks for a redraw of the
-// snapshot in hand (redrawSnapshot). window.peregrine counts the messages received, those
-// applied to the plots' series and readouts (every one of a running sortie) and the redraws
-// that showed new data.
+// falling behind. window.peregrine counts the messages received, those applied to the plots'
+// series and readouts (every one of a running sortie) and the redraws that showed new data.
 let pending = null;
 let frameRequested = false;
 
-function requestFrame() {
-  if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); }
-}
-
-function takeEvents(s) {
-  if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
-}
-
-// The page's own state changed what the last snapshot shows: draw it again.
-function redrawSnapshot() {
-  if (!W.snap) return;
-  takeEvents(W.snap);
-  pending = pending || W.snap;
-  requestFrame();
-}
-
 function takeSnapshot(s) {
   W.received += 1; W.snap = s;
-  takeEvents(s);
+  if (s.events && s.events.length !== PV.events.length && !loading) { PV.events = s.events; PV.dirty = true; showGainEdits(); }
   if (s.t !== undefined) {
     W.lastT = s.t;
     // a replayed frame comes with its recorded time: the last decoded for the newest
@@ -45,7 +25,7 @@ function takeSnapshot(s) {
       if (ft !== undefined) img.decoding = seq;
       const done = () => {
         if (img.decoding === seq) img.decoding = 0;
-        requestFrame();
+        if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); }
       };
       im.onload = () => {
         if (seq >= img.seq) { img.seq = seq; img.frame = im; W.frameT = im.frameT; W.frameFor = at; pending = pending || W.snap; }
@@ -58,7 +38,7 @@ function takeSnapshot(s) {
     if (PV.tNow !== s.t) { PV.tNow = s.t; PV.dirty = true; }
   }
   pending = s;
-  requestFrame();
+  if (!frameRequested) { frameRequested = true; requestAnimationFrame(redraw); }
 }
 
 function redraw() {
@@ -80,11 +60,6 @@ function connect() {
   const wantFrames = () => { if (ws.readyState === 1) ws.send(JSON.stringify({ frames: document.visibilityState === "visible" })); };
   ws.onopen = () => { setBadge("st-link", "telemetry: live", "ok"); wantFrames(); };
   document.addEventListener("visibilitychange", wantFrames);
-  let lastText = null; // this connection's last message
-  ws.onmessage = (ev) => {
-    if (ev.data === lastText) { W.received += 1; return; }
-    lastText = ev.data;
-    takeSnapshot(JSON.parse(ev.data));
-  };
+  ws.onmessage = (ev) => takeSnapshot(JSON.parse(ev.data));
   ws.onclose = () => { setBadge("st-link", "telemetry: reconnecting", "bad"); setTimeout(connect, 1000); };
 }
