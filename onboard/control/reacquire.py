@@ -163,11 +163,12 @@ def search_accel(
     ENU)."""
     if cue_enu is not None:
         v_d = gains.v_search * cue_enu
+    elif last_los_enu is not None:
+        v_d = view_swing_m_s(last_los_enu, fov_edges_rad, gains.v_reacq)
     else:
-        swing = None
-        if last_los_enu is not None:
-            swing = view_swing_m_s(last_los_enu, fov_edges_rad, gains.v_reacq)
-        v_d = np.zeros(3) if swing is None else swing
+        v_d = None
+    if v_d is None:
+        v_d = np.zeros(3)
     return saturate_norm(gains.k_brake * (v_d - velocity_enu_m_s), gains.a_max)
 
 
