@@ -143,8 +143,10 @@ def test_overlay_of_sorties_picked_on_the_sorties_page(station, page):
     for n in names:
         page.locator(f'#logs tbody tr[data-name="{n}"] input[data-sel]').check()
     assert page.text_content("#ov-go") == "Overlay selected (3)"
-    page.click("#ov-go")
-    page.wait_for_function("window.peregrine.openedMs !== null", timeout=60000)
+    # the predicate may first run on the Sorties page, which has no window.peregrine
+    with page.expect_navigation(url="**/overlay?*"):
+        page.click("#ov-go")
+    page.wait_for_function("window.peregrine && window.peregrine.openedMs != null", timeout=60000)
     rows = page.locator("#ov-table tbody tr")
     assert rows.count() == 3
     # only the gains that differ: K_y (3, 4, 3), nothing else
@@ -175,7 +177,8 @@ def test_overlay_of_sorties_picked_on_the_sorties_page(station, page):
     page.wait_for_selector("#refly-form:not([hidden])")
     assert page.input_value('#refly-gains input[data-gain="K_y"]') == "4"
     page.go_back()
-    page.wait_for_function("window.peregrine.openedMs !== null", timeout=60000)
+    page.wait_for_url("**/overlay?*")
+    page.wait_for_function("window.peregrine && window.peregrine.openedMs != null", timeout=60000)
     # clicking a sortie opens it in the dashboard
     page.screenshot(path=str(station.log_dir.parent / "overlay.png"), full_page=True)
     page.locator("#ov-table tbody tr").nth(2).locator("a[data-act=open]").click()
