@@ -53,6 +53,9 @@ def test_bad_input_is_refused(capsys):
         ["--value", "4"],  # no such cell
         ["--scale", "nan"],
         ["--delay-s", "-1"],
+        ["--imm", "nope=1"],
+        ["--imm", "q_ct_m_s3=inf"],
+        ["--set", "camera.nope=1"],
     ):
         with pytest.raises(SystemExit) as e:
             main(argv)

@@ -7,8 +7,10 @@ vehicle flies it (the IMM's estimate), and with the IMM's acceleration replaced,
 true time to go is under ``--last-s``, by the target's true acceleration (ideal sensors,
 analysis only: the bound on what a perfect estimate gains), optionally scaled (``--scale``,
 an estimate that holds that share of the truth) or late (``--delay-s``, one that lags). The
-IMM's velocity (time to go) and everything else the loop sees stay as they are. Prints HIT
-count and mean miss of each.
+IMM's velocity (time to go) and everything else the loop sees stay as they are. ``--imm
+KEY=VALUE`` changes a field of the IMM's :class:`~onboard.estimation.imm.ImmConfig` and
+``--set SECTION.KEY=VALUE`` a scenario value, for both. Prints HIT count and mean miss of
+each.
 
 A measuring tool beside the product: it reads the simulator's truth, which the loop never does.
 """
@@ -16,6 +18,7 @@ A measuring tool beside the product: it reads the simulator's truth, which the l
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -62,14 +65,17 @@ def true_time_to_go_s(sim) -> float:
     return r / closing if closing > 0.0 else math.inf
 
 
-def fly(job, last_s: float | None, scale: float = 1.0, delay_s: float = 0.0):
+def fly(job, last_s: float | None, scale: float = 1.0, delay_s: float = 0.0, imm=None):
     """One sortie of ``job``; with ``last_s`` the law is handed the truth's acceleration
-    (:class:`TruthAccel`) while the true time to go is under it. Returns its SortieResult."""
-    from onboard.estimation.imm import MotionEstimate
+    (:class:`TruthAccel`) while the true time to go is under it; ``imm`` an ImmConfig for the
+    loop's IMM (None: its own). Returns its SortieResult."""
+    from onboard.estimation.imm import MotionEstimate, TargetMotionImm
 
     from ..sim.simulation import Simulation
 
     sim = Simulation(job.scenario, job.law, job.seed, job.camera, keep_records=False)
+    if imm is not None:
+        sim.loop.motion = TargetMotionImm(imm)
     if last_s is None:
         return sim.run()
     loop = sim.loop
@@ -88,15 +94,42 @@ def fly(job, last_s: float | None, scale: float = 1.0, delay_s: float = 0.0):
     return sim.run()
 
 
-def cell_jobs(kind: str, value: float, n: int, seed: int) -> list:
-    """The augmented law's jobs of one cell of the agility campaign."""
+def cell_jobs(kind: str, value: float, n: int, seed: int, overrides=None) -> list:
+    """The augmented law's jobs of one cell of the agility campaign, with the scenario
+    ``overrides`` (``{"estimate.lag_s": 0.02}``) applied."""
     from ..campaigns import agility
+    from ..scenario import with_overrides
 
     jobs = agility.build(n, ("apn",), "projected", seed)
     out = [j for j in jobs if dict(j.labels)["kind"] == kind and dict(j.labels)["value"] == value]
     if not out:
         raise ValueError(f"the agility campaign has no cell kind={kind} value={value:g}")
-    return out
+    return [
+        dataclasses.replace(j, scenario=with_overrides(j.scenario, overrides or {})) for j in out
+    ]
+
+
+def imm_config(items: list[str] | None):
+    """An ImmConfig with ``KEY=VALUE`` items (float fields) changed; None without items."""
+    from onboard.estimation.imm import ImmConfig
+
+    if not items:
+        return None
+    fields = {f.name for f in dataclasses.fields(ImmConfig) if f.type in ("float", float)}
+    changes = {}
+    for item in items:
+        key, _, text = item.partition("=")
+        if key not in fields:
+            raise ValueError(
+                f"--imm {item!r}: the IMM's float fields are {', '.join(sorted(fields))}"
+            )
+        try:
+            changes[key] = float(text)
+        except ValueError:
+            raise ValueError(f"--imm {item!r}: {text!r} is not a number") from None
+        if not math.isfinite(changes[key]):
+            raise ValueError(f"--imm {item!r}: not a finite number")
+    return ImmConfig(**changes)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -108,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--last-s", type=float, default=1.5, help="truth within this time to go")
     ap.add_argument("--scale", type=float, default=1.0, help="share of the truth handed over")
     ap.add_argument("--delay-s", type=float, default=0.0, help="the truth this late (s)")
+    ap.add_argument("--imm", action="append", metavar="KEY=VALUE", help="an ImmConfig field")
+    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a scenario value")
     args = ap.parse_args(argv)
     if args.n < 1:
         ap.error("--n must be at least 1")
@@ -115,8 +150,11 @@ def main(argv: list[str] | None = None) -> int:
         x = getattr(args, name)
         if not (math.isfinite(x) and x >= 0.0):
             ap.error(f"--{name.replace('_', '-')} must be a finite number >= 0")
+    from ..scenario import parse_overrides
+
     try:
-        jobs = cell_jobs(args.kind, args.value, args.n, args.seed)
+        imm = imm_config(args.imm)
+        jobs = cell_jobs(args.kind, args.value, args.n, args.seed, parse_overrides(args.set))
     except ValueError as e:
         ap.error(str(e))
     print(f"agility {args.kind} {args.value:g}, APN, seed {args.seed}, {len(jobs)} sorties")
@@ -129,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     for label, last_s in runs:
-        results = [fly(j, last_s, args.scale, args.delay_s) for j in jobs]
+        results = [fly(j, last_s, args.scale, args.delay_s, imm) for j in jobs]
         hits = sum(r.outcome == "HIT" for r in results)
         mean = float(np.mean([r.miss_m for r in results]))
         print(f"{label}: {hits}/{len(results)} HIT, mean miss {mean:.2f} m")
