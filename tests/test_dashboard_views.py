@@ -192,7 +192,9 @@ def test_image_plane_band_end_marker_and_recent_track_in_replay(station, page):
     clean(station)
     goto(page, station)
     page.select_option("#scenario", "cv-top-to-bottom")
-    page.select_option("#speed", "5")
+    # at 2x the page's series holds a point each 50 ms of the sortie (at 5x each 125 ms, and a
+    # simulator starved on a loaded machine publishes less: nine settled estimates were seen)
+    page.select_option("#speed", "2")
     page.click("#btn-start")
     page.wait_for_function("window.peregrine.snap.status.state === 'finished'", timeout=60000)
     page.wait_for_function(  # the estimate, or after the recovery the last one, is marked
@@ -207,6 +209,7 @@ def test_image_plane_band_end_marker_and_recent_track_in_replay(station, page):
     seen = [(tt, v) for tt, v in zip(t, ey, strict=True) if v is not None]
     t_pass = station.session.status()["intercept_time_s"]  # after it, the recovery flies on
     settled = [v for tt, v in seen if seen[0][0] + 1.0 <= tt <= t_pass]
+    assert len(settled) >= 15, len(settled)
     inside = sum(abs(v - band["centre"]) <= band["half"] for v in settled) / len(settled)
     assert inside >= 0.9, (band, inside)  # main: centred on the first, transient estimate
     marker = page.evaluate("window.peregrine.estMarker")

@@ -3,6 +3,7 @@ simulated turn, a straight flyer reports almost no acceleration, bad input chang
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -85,13 +86,16 @@ def test_a_straight_flyer_gives_almost_no_acceleration():
     assert settled[:, 1].mean() > 0.6
 
 
-def _turn_followed(lateral_m_s2: float, seed: int) -> tuple[float, float]:
-    """A target at 5 m/s, 20 m ahead, turning at ``lateral_m_s2`` from t = 2 s, placed with
-    the vehicle's pose uncertainty (camera at the origin): the share of the true acceleration
-    across the line of sight that the augmented law flies (manoeuvre_accel_m_s2) from 0.5 to
-    2.5 s into the turn, and the time (s) it takes to reach half the truth."""
+def _turn_followed(
+    lateral_m_s2: float, seed: int, r_meas: np.ndarray = R_MEAS, config: ImmConfig | None = None
+) -> tuple[float, float]:
+    """A target at 5 m/s, 20 m ahead, turning at ``lateral_m_s2`` from t = 2 s, measured with
+    covariance ``r_meas`` and placed with the vehicle's pose uncertainty (camera at the
+    origin): the share of the true acceleration across the line of sight that the augmented
+    law flies (manoeuvre_accel_m_s2) from 0.5 to 2.5 s into the turn, and the time (s) it
+    takes to reach half the truth."""
     rng = np.random.default_rng(seed)
-    imm = TargetMotionImm()
+    imm = TargetMotionImm(config)
     p, v = np.array([0.0, 20.0, 10.0]), np.array([5.0, 0.0, 0.0])
     est, true, t_half = [], [], math.nan
     for k in range(round(6.0 / DT)):
@@ -101,8 +105,8 @@ def _turn_followed(lateral_m_s2: float, seed: int) -> tuple[float, float]:
             c, s = math.cos(lateral_m_s2 / 5.0 * DT), math.sin(lateral_m_s2 / 5.0 * DT)
             v = np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], 0.0])
         p = p + v * DT
-        z = p + rng.multivariate_normal(np.zeros(3), R_MEAS)
-        flown = manoeuvre_accel_m_s2(imm.update(t, z, R_MEAS, v, np.zeros(3)), 1.0, 2.0)
+        z = p + rng.multivariate_normal(np.zeros(3), r_meas)
+        flown = manoeuvre_accel_m_s2(imm.update(t, z, r_meas, v, np.zeros(3)), 1.0, 2.0)
         a_x = -lateral_m_s2 / 5.0 * v[1] if turning else 0.0  # x: across the line of sight
         if turning and math.isnan(t_half) and flown[0] * math.copysign(1.0, a_x) > 0.5 * abs(a_x):
             t_half = t - 2.0
@@ -123,6 +127,45 @@ def test_the_lag_of_a_turn_placed_through_the_pose_uncertainty():
             share, t_half = _turn_followed(lateral, seed)
             assert 0.4 < share < 0.65, (lateral, seed, share)
             assert 1.4 < t_half < 2.0, (lateral, seed, t_half)
+
+
+def test_without_the_pose_uncertainty_the_dkfs_own_covariance_keeps_the_lag():
+    """In flight the DKF's own covariance across the line of sight is 0.2-0.3 m (its image
+    point carried over the camera's delay with its target velocity's uncertainty), as large
+    as the pose's 0.29 m. Measured to 5 cm, a turn without the pose's term is followed twice
+    as fast (half of it in 0.9-1.2 s instead of 1.6-2.0 s); measured as the DKF measures it
+    (0.25 m across, 2 m along), removing the pose's term leaves half of it 1.35-2.0 s in and
+    0.40-0.60 of it flown: the pose's uncertainty is not what holds the IMM back in flight."""
+    no_pose = ImmConfig(pose_position_sigma_m=0.0, pose_attitude_sigma_deg=0.0)
+    fine = np.diag([0.05**2, 2.0**2, 0.05**2])
+    as_flown = np.diag([0.25**2, 2.0**2, 0.25**2])
+    for lateral in (3.0, 5.0):
+        for seed in (1, 2):
+            assert 0.85 < _turn_followed(lateral, seed, fine, no_pose)[1] < 1.3
+            share, t_half = _turn_followed(lateral, seed, as_flown, no_pose)
+            assert 1.3 < t_half < 2.05, (lateral, seed, t_half)
+            assert 0.35 < share < 0.65, (lateral, seed, share)
+
+
+def test_the_carried_frames_velocity_error_as_process_noise():
+    """The coloured-noise form (ImmConfig.frame_velocity_sigma_m_s, off by default): the pose
+    term out of the measurement, the carried frame's velocity error (0.15 m/s over 1 s) in
+    every model's process noise. A hovering target seen through the wandering pose shows
+    under 0.1 m/s^2 (0.04-0.07; without the process noise 0.14-0.25), and a turn measured to
+    5 cm is followed in 1.0-1.3 s to half (1.6-1.9 s with the pose term)."""
+    coloured = ImmConfig(
+        pose_position_sigma_m=0.0, pose_attitude_sigma_deg=0.0, frame_velocity_sigma_m_s=0.15
+    )
+    white = dataclasses.replace(coloured, frame_velocity_sigma_m_s=0.0)
+    for seed in (7, 8):
+        assert _hover_with_pose_errors(True, seed, coloured) < 0.1
+    assert max(_hover_with_pose_errors(True, s, white) for s in (7, 8)) > 0.2
+    for lateral in (3.0, 5.0):
+        share, t_half = _turn_followed(lateral, 1, config=coloured)
+        assert 0.9 < t_half < 1.35 and share > 0.6, (lateral, share, t_half)
+    for bad in ({"frame_velocity_sigma_m_s": -0.1}, {"frame_velocity_time_s": 0.0}):
+        with pytest.raises(ValueError):
+            ImmConfig(**bad)
 
 
 def test_bad_input_changes_nothing_and_a_gap_restarts():
@@ -170,7 +213,7 @@ def _rot_z(yaw: float) -> np.ndarray:
     return np.array(((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)))
 
 
-def _hover_with_pose_errors(carried: bool, seed: int = 7) -> float:
+def _hover_with_pose_errors(carried: bool, seed: int = 7, config: ImmConfig | None = None) -> float:
     """A hovering target 20 m north of a hovering vehicle whose state estimate wanders as a
     GNSS/EKF2 one does (Gauss-Markov over 2 s: position 0.3 m, heading 1.5 deg; velocity 0.15
     m/s over 1 s) and whose gyro has a 3 mrad/s bias and 3 mrad/s of white noise; the image
@@ -178,7 +221,7 @@ def _hover_with_pose_errors(carried: bool, seed: int = 7) -> float:
     pose :class:`CarriedPose` carries (``carried``) or from the estimate's pose; returns the
     RMS of the estimated acceleration (m/s^2) over the last 8 s."""
     rng = np.random.default_rng(seed)
-    imm = TargetMotionImm()
+    imm = TargetMotionImm(config)
     image_cov = np.diag([0.02**2, 1.0, 0.02**2])
     err, yaw, verr, out = np.zeros(3), 0.0, np.zeros(3), []
     k, kv = math.exp(-DT / 2.0), math.exp(-DT)

@@ -5,16 +5,27 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from typing import Any
+
+# An unchanged snapshot (an idle, paused or finished session publishes the same one at the full
+# rate) goes out at most this often: a page redraws every message it receives, and an idle
+# dashboard redrawing the same snapshot 40 times a second kept a browser at about half a core.
+REPEAT_PERIOD_S = 0.2
 
 
 class TelemetryHub:
     """Fans telemetry out to websocket subscribers; a slow one loses old frames, not new.
 
     A subscriber may send ``{"frames": false}`` (a hidden browser tab does) to stop receiving
-    camera frames, the bulk of the traffic, and ``{"frames": true}`` to resume."""
+    camera frames, the bulk of the traffic, and ``{"frames": true}`` to resume. A snapshot
+    identical to the last one broadcast, without a camera frame, is broadcast again only
+    ``repeat_period_s`` after it (a new subscriber gets the last one at once)."""
 
-    def __init__(self) -> None:
+    def __init__(self, repeat_period_s: float = REPEAT_PERIOD_S) -> None:
+        self.repeat_period_s = repeat_period_s
+        self._broadcast_at = -float("inf")  # time.monotonic() of the last broadcast
+        self.repeats_held = 0  # unchanged snapshots not broadcast
         self.loop: asyncio.AbstractEventLoop | None = None
         self.queues: dict[asyncio.Queue, bool] = {}  # queue -> wants camera frames
         self.last: str | None = None
@@ -29,7 +40,12 @@ class TelemetryHub:
             lean = json.dumps(
                 {k: v for k, v in snapshot.items() if k != "frame_jpeg_b64"}, separators=(",", ":")
             )
+        now = time.monotonic()
+        if full is lean and lean == self.last and now < self._broadcast_at + self.repeat_period_s:
+            self.repeats_held += 1
+            return
         self.last = lean
+        self._broadcast_at = now
         if self.loop is not None and self.queues:
             self.loop.call_soon_threadsafe(self._broadcast, full, lean)
 

@@ -58,9 +58,12 @@ def _cpu_sample(sim_tid: int | None) -> dict[str, float]:
     return out
 
 
-def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = False) -> int:
+def run_dashboard_bench(
+    tabs: int = 5, seconds: float = 6.0, as_json: bool = False, idle_seconds: float = 4.0
+) -> int:
     """The dashboard at 1x with ``tabs`` viewers open and visible at once (headless Chromium:
-    no display needed), rendered camera, each with its 3D view, image plane and plots. Prints
+    no display needed), rendered camera, each with its 3D view, image plane and plots. First
+    the CPU the open viewers cost with no sortie (``idle_seconds``). Then it prints
     the share of real time the simulator keeps and, per viewer, the telemetry messages per
     second the server sent it (delivered), its page received, applied to the plots' series and
     readouts (applied) and showed in a redrawn frame (painted); how many snapshots the session
@@ -102,6 +105,10 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
                 page.goto(gs.url())
                 page.wait_for_selector("text=telemetry: live", timeout=120000)
             sess, hub = gs.session, gs.hub
+            time.sleep(3.0)  # the viewers' 3D views load and fit their cameras
+            idle0, idle_t0 = _cpu_sample(None), time.perf_counter()
+            time.sleep(idle_seconds)
+            idle1, idle_elapsed = _cpu_sample(None), time.perf_counter() - idle_t0
             sess.start(SortieConfig(scenario, camera="rendered"))
             start_wall = time.perf_counter()
             time.sleep(2.0)
@@ -164,6 +171,10 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
             k: round(100 * (cpu1[k] - cpu0[k]) / elapsed, 1) for k in cpu1 if k in cpu0
         },
         "load_average_before_after": [round(load_before, 2), round(load_after, 2)],
+        # the same with the viewers open and no sortie (an idle session)
+        "idle_cpu_percent_of_a_core": {
+            k: round(100 * (idle1[k] - idle0[k]) / idle_elapsed, 1) for k in idle1 if k in idle0
+        },
     }
     if as_json:
         print(json.dumps(figures, indent=2))
@@ -190,6 +201,12 @@ def run_dashboard_bench(tabs: int = 5, seconds: float = 6.0, as_json: bool = Fal
             text += f"  target >= 30 Hz in each: {'met' if ok else 'NOT MET'}"
         print(text)
 
+    idle = figures["idle_cpu_percent_of_a_core"]
+    if "browser" in idle:
+        print(
+            f"  no sortie, {tabs} viewers open: CPU browser {idle['browser']:.0f} %, station "
+            f"{idle.get('station', 0.0):.0f} % of one core"
+        )
     line("published by the session (one for all):", [figures["snapshots_published_hz"]])
     print(
         f"  {'':<44s}{figures['snapshots_published_behind']} of {pub1 - pub0} at the slower"

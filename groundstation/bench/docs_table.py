@@ -98,6 +98,10 @@ ROWS: dict[str, list[Row]] = {
             "the same: telemetry painted per viewer",
             lambda f: _span(f["painted_hz"], "frames/s"),
         ),
+        (
+            "the 5 viewers open with no sortie: browser CPU",
+            lambda f: f"{f['idle_cpu_percent_of_a_core']['browser']:.0f} % of one core",
+        ),
     ],
 }
 

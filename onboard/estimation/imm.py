@@ -65,6 +65,22 @@ class ImmConfig:
     # estimate's own GNSS and magnetometer wander, decimetres and degrees, is not in it)
     pose_position_sigma_m: float = 0.2
     pose_attitude_sigma_deg: float = 0.6
+    # the carried frame's velocity error as process noise (the coloured-noise form: a
+    # Gauss-Markov error of this sigma and correlation time, whose rate of change is white
+    # acceleration of density 2 sigma^2 / tau on every model); 0: off, the pose term above
+    # stands for it (docs/agility.md "What the estimate is worth")
+    frame_velocity_sigma_m_s: float = 0.0
+    frame_velocity_time_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (
+            math.isfinite(self.frame_velocity_sigma_m_s) and self.frame_velocity_sigma_m_s >= 0
+        ):
+            raise ValueError(
+                f"frame_velocity_sigma_m_s {self.frame_velocity_sigma_m_s} is not >= 0"
+            )
+        if not (math.isfinite(self.frame_velocity_time_s) and self.frame_velocity_time_s > 0):
+            raise ValueError(f"frame_velocity_time_s {self.frame_velocity_time_s} is not > 0")
 
 
 @dataclass(frozen=True)
@@ -171,6 +187,18 @@ def pose_covariance_m2(rel_enu_m: np.ndarray, config: ImmConfig) -> np.ndarray:
         across = np.eye(3) - np.outer(rel_enu_m, rel_enu_m) / r2
         cov += r2 * math.radians(config.pose_attitude_sigma_deg) ** 2 * across
     return cov
+
+
+def frame_noise(dt: float, config: ImmConfig) -> np.ndarray:
+    """The carried frame's velocity error over a step ``dt`` (s) as process noise (9x9,
+    SI): white acceleration of density s = 2 sigma^2 / tau (m^2/s^3) per axis, through
+    position and velocity."""
+    s = 2.0 * config.frame_velocity_sigma_m_s**2 / config.frame_velocity_time_s
+    Q = np.zeros((9, 9))
+    Q[0:3, 0:3] = s * dt**3 / 3.0 * np.eye(3)
+    Q[0:3, 3:6] = Q[3:6, 0:3] = s * dt**2 / 2.0 * np.eye(3)
+    Q[3:6, 3:6] = s * dt * np.eye(3)
+    return Q
 
 
 def _cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -373,4 +401,7 @@ class TargetMotionImm:
             _ca_matrices(dt, cfg.q_ca_m_s3),
             _ct_matrices(dt, cfg.q_ct_m_s3, omega),
         )
-        imm.predict(np.stack([m[0] for m in models]), np.stack([m[1] for m in models]))
+        Q = np.stack([m[1] for m in models])
+        if cfg.frame_velocity_sigma_m_s > 0.0:
+            Q = Q + frame_noise(dt, cfg)[None]
+        imm.predict(np.stack([m[0] for m in models]), Q)
