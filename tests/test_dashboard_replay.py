@@ -183,7 +183,8 @@ def test_overlay_of_sorties_picked_on_the_sorties_page(station, page):
     page.screenshot(path=str(station.log_dir.parent / "overlay.png"), full_page=True)
     page.locator("#ov-table tbody tr").nth(2).locator("a[data-act=open]").click()
     page.wait_for_function(
-        f"window.peregrine.snap && window.peregrine.snap.status.replay"
+        # the predicate may first run on the overlay page, whose window.peregrine has no snap
+        f"window.peregrine && window.peregrine.snap && window.peregrine.snap.status.replay"
         f" && window.peregrine.snap.status.replay.file === {names[2]!r}",
         timeout=15000,
     )
