@@ -58,6 +58,11 @@ def _cpu_sample(sim_tid: int | None) -> dict[str, float]:
     return out
 
 
+def _percent_of_a_core(before: dict, after: dict, elapsed_s: float) -> dict[str, float]:
+    """CPU used between two :func:`_cpu_sample` readings, in % of one core."""
+    return {k: round(100 * (after[k] - before[k]) / elapsed_s, 1) for k in after if k in before}
+
+
 def run_dashboard_bench(
     tabs: int = 5, seconds: float = 6.0, as_json: bool = False, idle_seconds: float = 4.0
 ) -> int:
@@ -167,14 +172,10 @@ def run_dashboard_bench(
         # CPU used in the window, in % of one core: the ground station (this process), its
         # simulator thread, the browser (Chromium's pages, 3D views, GPU and browser processes
         # and Playwright's driver), and the whole machine
-        "cpu_percent_of_a_core": {
-            k: round(100 * (cpu1[k] - cpu0[k]) / elapsed, 1) for k in cpu1 if k in cpu0
-        },
+        "cpu_percent_of_a_core": _percent_of_a_core(cpu0, cpu1, elapsed),
         "load_average_before_after": [round(load_before, 2), round(load_after, 2)],
         # the same with the viewers open and no sortie (an idle session)
-        "idle_cpu_percent_of_a_core": {
-            k: round(100 * (idle1[k] - idle0[k]) / idle_elapsed, 1) for k in idle1 if k in idle0
-        },
+        "idle_cpu_percent_of_a_core": _percent_of_a_core(idle0, idle1, idle_elapsed),
     }
     if as_json:
         print(json.dumps(figures, indent=2))
