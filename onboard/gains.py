@@ -194,6 +194,14 @@ class Gains:
         "velocity-estimate latency, predicted with the thrust model (0 = off)",
         "disturbance and latency",
     )
+    tau_vel: float = _gain(
+        3.0,
+        "s",
+        0.0,
+        10.0,
+        "own-velocity complementary filter time constant (0 = off)",
+        "disturbance and latency",
+    )
     tau_zem: float = _gain(
         1.5,
         "s",

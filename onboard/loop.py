@@ -51,6 +51,7 @@ from .enums import DEFAULT_LAW, GuidanceLaw
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .estimation.dkf_values import measurement
 from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
+from .estimation.own_velocity import OwnVelocityFilter
 from .estimation.self_calibration import SelfCalEstimate, SelfCalibration
 from .gains import Gains
 from .geometry import (
@@ -129,6 +130,7 @@ class InterceptionLoop:
         self._dq_filt = _NAN2  # low-passed LOS change (gains.tau_los)
         self._dq_flown = _NO_FLOWN  # the last command's (dq_y, dq_z, hold_s) (los_terms)
         self._thrust_n = vehicle.mass_kg * GRAVITY_M_S2  # last commanded thrust (N)
+        self.own_velocity = OwnVelocityFilter(self.gains.tau_vel)  # gains.tau_vel
         self.fov_edges_rad = camera.fov_edges_rad  # the image's top and bottom above body x
 
     @property
@@ -257,6 +259,7 @@ class InterceptionLoop:
             g = self.gains
             self.disturbance.set_bandwidth(g.k_dob, g.a_max, g.k_drag)
             self.dkf.carry_max_s = g.t_carry
+            self.own_velocity.set_time_constant(g.tau_vel)
             self._use_size(g)
         gains = self.gains
         dt = self.nominal_dt_s if self._prev_time_s is None else t - self._prev_time_s
@@ -288,6 +291,10 @@ class InterceptionLoop:
                 a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
             vf = (v0 + lag * a0, v1 + lag * a1, v2 + lag * a2)
             v = np.array(vf)
+        # the complementary-filtered velocity (estimation/own_velocity.py) for the DKF's
+        # relative motion; the guidance, the speed ramp and the observer keep the estimate's
+        v_rel = self.own_velocity.update(dt, *vf)
+        v_rel = np.array(v_rel) if gains.tau_vel > 0.0 else v
         ladder = self.ladder
         ladder.on_tick(t, R_WC)
         ox, oy, oz = self._offset_b_m
@@ -295,9 +302,9 @@ class InterceptionLoop:
             # the camera's own velocity: the body's plus omega x the believed mount offset
             w0, w1, w2 = (float(c) for c in gyro)
             c0, c1, c2 = w1 * oz - w2 * oy, w2 * ox - w0 * oz, w0 * oy - w1 * ox
-            v_cam = v + R_WB @ np.array((c0, c1, c2))
+            v_cam = v_rel + R_WB @ np.array((c0, c1, c2))
         else:
-            v_cam = v
+            v_cam = v_rel
         self.dkf.predict(t, gyro, v_cam, R_WC)
         self.self_cal.on_tick(t, gyro, v_cam, self._los_prev)
         self.last_fusion, self._fused_early = self._fused_early, []
@@ -462,6 +469,8 @@ class InterceptionLoop:
             self.guard_trips += 1
         self.disturbance.commanded(thrust)
         self._thrust_n = thrust * veh.max_thrust_n
+        k = self._thrust_n / veh.mass_kg  # the acceleration held until the next tick
+        self.own_velocity.set_accel(z0 * k + d0, z1 * k + d1, z2 * k - GRAVITY_M_S2 + d2)
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         self.gyro_turn.prev_R_WB = R_WB

@@ -63,8 +63,9 @@ def test_gain_change_applies_at_next_tick():
 
 def test_lost_target_brakes_and_holds_without_coast_or_search():
     # t_coast = t_reacq = t_search = 0: the failsafe as soon as the track goes stale; without
-    # the velocity-latency prediction (tested in test_midcourse) it brakes on v itself
-    loop = _loop(gains=Gains(t_coast=0.0, t_reacq=0.0, t_search=0.0, t_vel_lag=0.0))
+    # the velocity-latency prediction (tested in test_midcourse) and the own-velocity filter
+    # (test_own_velocity) it brakes on v itself
+    loop = _loop(gains=Gains(t_coast=0.0, t_reacq=0.0, t_search=0.0, t_vel_lag=0.0, tau_vel=0.0))
     loop.tick(_state(0.0))
     loop.on_detection(Detection(0.0, (320.0, 240.0), (310, 230, 20, 20), 314.0))
     loop.tick(_state(0.01))
