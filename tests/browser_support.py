@@ -58,7 +58,7 @@ def page(station, browser):
     pg = browser.new_page(viewport={"width": 1500, "height": 1100})
     pg.errors = []
     pg.on("pageerror", lambda e: pg.errors.append(str(e)))
-    pg.route("**/viser/**", lambda r: r.fulfill(status=200, content_type="text/html", body=_NO_SCENE))
+    pg.route("**/viser/**", lambda r: r.fulfill(content_type="text/html", body=_NO_SCENE))
     yield pg
     errors = pg.errors
     pg.close()
