@@ -60,7 +60,11 @@ def _acquired(t: dict[str, Any]) -> bool:
 
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
-ACK_TIMEOUT_S = 2.0
+# a start or abort unanswered this long is sent again, at most COMMAND_SENDS times in all (the
+# command protocol's retry: a lost COMMAND_LONG or COMMAND_ACK does not leave the operator's
+# abort undone)
+ACK_TIMEOUT_S = 1.0
+COMMAND_SENDS = 3
 # a PARAM_SET with no PARAM_VALUE back within this long is sent again, at most PARAM_SET_SENDS
 # times in all, then reported as unanswered (the parameter protocol's rule; mavros's figures)
 PARAM_SET_TIMEOUT_S = 1.0
@@ -211,24 +215,13 @@ class LiveSession:
         with v.lock:
             if not v.link_up():
                 raise SessionError(f"{label}: no link to the onboard computer")
-            sent_at = time.monotonic()
-            v.link.send(
-                v.link.mav.command_long_encode(
-                    VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, command, 0, 0, 0, 0, 0, 0, 0, 0
+            result = v.command(command, COMMAND_SENDS, ACK_TIMEOUT_S)
+            if result is None:
+                hint = " (is the signing key the same on both ends?)" if v.signed else ""
+                raise SessionError(
+                    f"{label}: no acknowledgement from the onboard computer after"
+                    f" {COMMAND_SENDS} sends{hint}"
                 )
-            )
-            while True:
-                ack = v.acks.get(command)
-                if ack is not None and ack[0] >= sent_at:
-                    break
-                left = sent_at + ACK_TIMEOUT_S - time.monotonic()
-                if left <= 0:
-                    hint = " (is the signing key the same on both ends?)" if v.signed else ""
-                    raise SessionError(
-                        f"{label}: no acknowledgement from the onboard computer{hint}"
-                    )
-                v.acked.wait(left)
-            result = ack[1]
             v.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 why = next((e["text"] for e in reversed(v.events) if label in e["text"]), "")
