@@ -263,10 +263,14 @@ def attitude_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float = 0.0, roll_ra
     return rot_z(yaw_rad) @ rot_y(-pitch_rad) @ rot_x(roll_rad)
 
 
+_I3 = np.eye(3)
+_I3.flags.writeable = False
+
+
 def rodrigues(axis_unit: np.ndarray, angle_rad: float) -> np.ndarray:
     """R = I + sin(phi) [r]x + (1 - cos(phi)) [r]x^2 (paper eq. 19)."""
     K = hat(axis_unit)
-    return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
+    return _I3 + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
 
 
 @kernel("float64(float64[:, :], float64[:, :], float64, float64, float64, float64)")

@@ -45,12 +45,20 @@ def browser():
         b.close()
 
 
+# The 3D view's page (viser, /viser/ on its own port) answered with an empty page: a test
+# of the dashboard's other parts does not draw WebGL in software, a quarter of a browser
+# test's CPU. The tests of the 3D view open their pages from ``browser`` and get it whole.
+_NO_SCENE = "<!doctype html><title>3D view not loaded by this test</title>"
+
+
 @pytest.fixture
 def page(station, browser):
-    """A new page of the module's browser; a script error on it fails the test."""
+    """A new page of the module's browser, without the 3D view; a script error on it fails
+    the test."""
     pg = browser.new_page(viewport={"width": 1500, "height": 1100})
     pg.errors = []
     pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+    pg.route("**/viser/**", lambda r: r.fulfill(content_type="text/html", body=_NO_SCENE))
     yield pg
     errors = pg.errors
     pg.close()

@@ -198,18 +198,23 @@ class Rig:
             self.check_alive()
         raise AssertionError(f"no {needle!r} within {timeout_s} s; got {self.texts}\n{self.logs()}")
 
-    def command(self, command: int, timeout_s: float = 3.0) -> int:
+    def command(self, command: int, timeout_s: float = 1.0, sends: int = 3) -> int:
+        """As a ground station sends a command: again, its confirmation counting up, when no
+        COMMAND_ACK came back within ``timeout_s`` (the command protocol)."""
         n = len(self.acks)
-        self.ground.send(
-            self.ground.mav.command_long_encode(1, 191, command, 0, 0, 0, 0, 0, 0, 0, 0)
-        )
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            self.pump(0.02)
-            for cmd, result in self.acks[n:]:
-                if cmd == command:
-                    return result
-        raise AssertionError(f"no COMMAND_ACK for {command}\n{self.logs()}")
+        for confirmation in range(sends):
+            self.ground.send(
+                self.ground.mav.command_long_encode(
+                    1, 191, command, confirmation, 0, 0, 0, 0, 0, 0, 0
+                )
+            )
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end:
+                self.pump(0.02)
+                for cmd, result in self.acks[n:]:
+                    if cmd == command:
+                        return result
+        raise AssertionError(f"no COMMAND_ACK for {command} after {sends} sends\n{self.logs()}")
 
     def start(self) -> int:
         return self.command(CMD_START)

@@ -379,3 +379,29 @@ def test_the_status_names_the_estimate_profile_and_ideal_is_opt_in(client, gs):
     client.post("/api/sortie/reset")
     bad = client.post("/api/sortie/start", json={"scenario": "sm-tailgate", "profile": "perfect"})
     assert bad.status_code == 422
+
+
+def test_a_finished_sortie_is_neither_encoded_nor_drawn_again(client, gs, monkeypatch):
+    """A finished rendered sortie: the session goes on publishing its snapshot, but its last
+    camera frame is encoded once and the 3D scene is not drawn again until something changes;
+    a page that (re)connects asks for the frame and gets it."""
+    view, scene = gs.session.view, gs.session.scene
+    encoded, drawn = [], []
+    encode, atomic = view.encode_frame, scene.server.atomic
+    monkeypatch.setattr(view, "encode_frame", lambda f: (encoded.append(f), encode(f)))
+    monkeypatch.setattr(scene.server, "atomic", lambda: (drawn.append(1), atomic())[1])
+    client.post(
+        "/api/sortie/start",
+        json={"scenario": "static-ahead-20m", "speed": "max", "camera": "rendered"},
+    )
+    _wait(client, lambda s: s["state"] == "finished")
+    time.sleep(0.5)  # the last capture encoded, the last scene drawn
+    n_enc, n_drawn, published = len(encoded), len(drawn), view.publish_count
+    time.sleep(1.0)
+    assert view.publish_count >= published + 10  # still publishing (40 Hz)
+    assert (len(encoded), len(drawn)) == (n_enc, n_drawn)  # main: 8 encodes, 40 draws a second
+    gs.session.request_frame()  # what a page that connects asks for
+    end = time.monotonic() + 2.0
+    while len(encoded) == n_enc and time.monotonic() < end:
+        time.sleep(0.02)
+    assert len(encoded) == n_enc + 1 and encoded[-1] is encoded[n_enc - 1]

@@ -60,10 +60,17 @@ def test_a_typed_gain_is_applied_by_start_and_a_bad_one_refuses_the_start(statio
     page.select_option("#scenario", "cv-top-to-bottom")
     page.select_option("#speed", "max")
     page.fill('#gains input[data-gain="K_z"]', "4")  # typed, Apply not pressed
+    # every text the message line shows: the telemetry's "started" can come before Start's
+    # answer, which names the typed value, and at max speed "finished" soon after it
+    page.evaluate(
+        "window.simMsgs = []; new MutationObserver(() => window.simMsgs.push("
+        "document.querySelector('#sim-msg').textContent)).observe("
+        "document.querySelector('#sim-msg'), {childList: true, characterData: true, subtree: true})"
+    )
     page.click("#btn-start")
-    page.wait_for_function("document.querySelector('#sim-msg').textContent.startsWith('started')")
+    shown = "started, with your typed value applied: K_z = 4"
+    page.wait_for_function(f"window.simMsgs.includes({shown!r})")
     assert station.session.sim.loop.gains.K_z == 4.0  # main: 3, the typed value discarded
-    assert page.text_content("#sim-msg") == "started, with your typed value applied: K_z = 4"
     wait_state(station, "finished")
     assert recorded_gains(station, station.session.recording["file"])["K_z"] == 4.0
     epoch = status(station)["epoch"]

@@ -13,9 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app import live_recording
 from groundstation.app.live import TARGET_DIAMETER_M, LiveSession
+from groundstation.app.live_link import LINK_TIMEOUT_S
 from groundstation.app.replay import ReplayPlayer
 from groundstation.app.snapshot import frame_snapshot
+from groundstation.recording.reader import inspect_log, iter_messages
 from groundstation.recording.writer import SortieRecorder
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
@@ -98,13 +101,49 @@ def test_replay_rebuilds_the_simulators_frames(flown):
         assert replayed.normal_accel_m_s2 == pytest.approx(sim_frame.normal_accel_m_s2, 1e-5)
 
 
+def _heard(live: LiveSession, f: Frame, k: int, cam) -> Frame:
+    """Tick ``k`` of a flown sortie as live mode hears it (the onboard component's telemetry
+    and the target's report, at ground time ``k`` s): the frame it builds. The first starts the
+    recording, as an accepted start does."""
+    tel = f.telemetry
+    vals = {
+        "t_s": f.time_s,
+        "state": 4,
+        "law": tm.LAW_CODES.index(tel.law),
+        "image_w_px": cam.width_px,
+        "image_h_px": cam.height_px,
+        "f_px": cam.f_px,
+        "guard_trips": f.guard_trips,
+        **tm.loop_values(tel),
+        **tm.detection_values(f.detection, cam),
+        **tm.dkf_values(f.dkf_state_px, f.dkf_cov_diag),
+        **tm.pose_values(f.vehicle_p_enu_m, f.vehicle_v_enu_m_s, f.vehicle_q_wxyz),
+    }
+    data = np.asarray(tm.pack(vals), dtype=np.float32)  # what DEBUG_FLOAT_ARRAY holds
+    vehicle = live.vehicle  # what the link reports
+    with vehicle.lock:
+        vehicle.gains = f.gains  # the vehicle's gain parameters
+        vehicle.target_p = [float(c) for c in np.float32(f.target_p_enu_m)]
+        vehicle.target_rx_s = float(k)  # reported with this tick
+        vehicle.onboard_rx_s = time.monotonic()  # the onboard component is heard
+        vehicle._telemetry(tm.unpack(data), float(k))
+        got = live.frame()
+        if k == 0:  # the operator's start, accepted: recording from here
+            vehicle.params["LAW"] = float(tm.LAW_CODES.index(tel.law))
+            live._start_recording()
+    return got
+
+
+def _udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
     """...and records them: the live recording replays as the simulator's frames too."""
     sim, frames, _ = flown
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    live = LiveSession(f"udpin:127.0.0.1:{port}", log_dir=tmp_path)
+    live = LiveSession(f"udpin:127.0.0.1:{_udp_port()}", log_dir=tmp_path)
     cam = sim.loop.camera  # the vehicle reports its detections with the camera it believes
     # float32 (24-bit mantissa): relative 6e-8, and what the subtractions leave
     tol = {"time": 1e-6, "pos": 1e-6, "quat": 1e-7, "px": 1e-5, "rad": 1e-7, "acc": 1e-6,
@@ -112,32 +151,7 @@ def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
     n_accel = errors = 0
     try:
         for k, f in enumerate(frames.frames):
-            tel = f.telemetry
-            vals = {
-                "t_s": f.time_s,
-                "state": 4,
-                "law": tm.LAW_CODES.index(tel.law),
-                "image_w_px": cam.width_px,
-                "image_h_px": cam.height_px,
-                "f_px": cam.f_px,
-                "guard_trips": f.guard_trips,
-                **tm.loop_values(tel),
-                **tm.detection_values(f.detection, cam),
-                **tm.dkf_values(f.dkf_state_px, f.dkf_cov_diag),
-                **tm.pose_values(f.vehicle_p_enu_m, f.vehicle_v_enu_m_s, f.vehicle_q_wxyz),
-            }
-            data = np.asarray(tm.pack(vals), dtype=np.float32)  # what DEBUG_FLOAT_ARRAY holds
-            vehicle = live.vehicle  # what the link reports
-            with vehicle.lock:
-                vehicle.gains = f.gains  # the vehicle's gain parameters
-                vehicle.target_p = [float(c) for c in np.float32(f.target_p_enu_m)]
-                vehicle.target_rx_s = float(k)  # reported with this tick
-                vehicle.onboard_rx_s = time.monotonic()  # the onboard component is heard
-                vehicle._telemetry(tm.unpack(data), float(k))
-                got = live.frame()
-                if k == 0:  # the operator's start, accepted: recording from here
-                    vehicle.params["LAW"] = float(tm.LAW_CODES.index(tel.law))
-                    live._start_recording()
+            got = _heard(live, f, k, cam)
             assert_same_frame(f, got, tol)
             if got.normal_accel_m_s2 is not None and k > 0:
                 # live differentiates the velocity between ticks: not the instantaneous value
@@ -166,6 +180,40 @@ def test_live_mode_builds_the_same_frames_from_the_telemetry(flown, tmp_path):
         replayed = player.frame(t)
         replayed = dataclasses.replace(replayed, time_s=sim_frame.time_s)  # float32 clock
         assert_same_frame(sim_frame, replayed, tol)
+
+
+def test_a_telemetry_gap_is_an_event_and_the_recording_goes_on(flown, tmp_path, monkeypatch):
+    """The ground link silent for longer than its timeout in mid-sortie (a loaded ground
+    computer, a radio fade) leaves the recording open and the ticks heard after it are
+    recorded; only a link silent for LINK_GIVE_UP_S ends it."""
+    monkeypatch.setattr(live_recording, "LINK_GIVE_UP_S", 1.0)
+    sim, frames, _ = flown
+    live = LiveSession(f"udpin:127.0.0.1:{_udp_port()}", log_dir=tmp_path)
+    v, half = live.vehicle, len(frames.frames) // 2
+    try:
+        for k, f in enumerate(frames.frames):
+            _heard(live, f, k, sim.loop.camera)
+            with v.lock:
+                if k == half:  # nothing heard for longer than the link's timeout
+                    v.onboard_rx_s = time.monotonic() - LINK_TIMEOUT_S - 0.1
+                    assert not v.link_up()
+                live._maybe_finish(time.monotonic())
+                assert live.rec is not None  # main: closed "link to the onboard lost"
+        with v.lock:  # then silent for good
+            v.onboard_rx_s = time.monotonic() - LINK_TIMEOUT_S - 0.1
+            live._maybe_finish(time.monotonic())
+            assert live.rec is not None
+            live._maybe_finish(time.monotonic() + 1.0)
+            assert live.rec is None
+    finally:
+        live.close()
+    (path,) = tmp_path.glob("*_live_png.mcap")
+    info = inspect_log(path)
+    assert info.metadata["outcome"]["reason"] == '"link to the onboard lost"'
+    assert info.duration_s == pytest.approx(frames.frames[-1].time_s, abs=1e-3)
+    events = [str(m) for topic, _, m in iter_messages(path) if topic == "/events"]
+    assert sum("telemetry link lost" in e for e in events) == 2
+    assert sum("telemetry link back after" in e for e in events) == 1
 
 
 def test_one_snapshot_builder_shows_the_three_alike(flown):

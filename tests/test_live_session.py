@@ -219,3 +219,43 @@ def test_an_unanswered_gain_edit_is_sent_again_then_reported(monkeypatch):
     finally:
         session.close()
         onboard.close()
+
+
+def test_a_lost_command_is_sent_again_with_its_confirmation_counting():
+    """The command protocol's retry: the onboard never hears the first COMMAND_LONG (a radio
+    fade), answers the second, and the operator's abort is accepted; the vehicle saw the
+    confirmations 0 then 1. An onboard that answers none is reported after every send."""
+    import threading
+
+    port = free_port()
+    session = LiveSession(f"udpin:127.0.0.1:{port}")
+    onboard = MavLink(f"udpout:127.0.0.1:{port}", 1, 191, None)
+    heard, answer, stop = [], [True], threading.Event()
+
+    def vehicle():
+        while not stop.is_set():
+            onboard.heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, 8, 0, 2, 3)
+            for m in onboard.poll():
+                if m.get_type() == "COMMAND_LONG":
+                    heard.append((m.command, m.confirmation))
+                    if answer[0] and m.confirmation > 0:  # the first one was lost
+                        ack = onboard.mav.command_ack_encode(m.command, 0, 0, 0, 255, 190)
+                        onboard.send(ack)
+            time.sleep(0.02)
+
+    th = threading.Thread(target=vehicle, daemon=True)
+    th.start()
+    try:
+        assert _wait(lambda: session.vehicle.link_up())
+        assert session.live_abort()["result"] == "accepted"  # main: no acknowledgement
+        assert heard == [(31011, 0), (31011, 1)]
+        heard.clear()
+        answer[0] = False
+        with pytest.raises(SessionError, match=r"no acknowledgement .* after 3 sends"):
+            session.live_abort()
+        assert heard == [(31011, 0), (31011, 1), (31011, 2)]
+    finally:
+        stop.set()
+        th.join()
+        session.close()
+        onboard.close()

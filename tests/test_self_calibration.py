@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from onboard.estimation.self_calibration import (
+    _MIN_DT_S,
     SelfCalConfig,
     SelfCalibration,
     TargetSizeEstimator,
@@ -179,3 +180,35 @@ def test_the_recording_carries_both_estimates(tmp_path):
     assert series["units"]["dkf.camera_offset_s"] == "s"
     std = [x for x in fields["dkf.camera_offset_std_s"] if x is not None]
     assert std[-1] < 0.6 * std[0]  # it converges over the sortie
+
+
+def test_a_detection_is_placed_as_the_whole_gyro_history_would_place_it():
+    """The rays at the candidate capture times come from the history's newest entries only;
+    they equal, bit for bit, the linear interpolation over the whole history (uneven ticks,
+    times on a tick, times outside the history: None)."""
+    rng = np.random.default_rng(4)
+    sc = SelfCalibration(400.0, rodrigues(np.array([0.0, 1.0, 0.0]), 0.3), 0.3)
+    t = 0.0
+    for _ in range(300):
+        t += 0.004 + 0.002 * rng.random()
+        sc.on_tick(t, rng.normal(0.0, 1.0, 3), np.zeros(3), None)
+    T = np.array([h[0] for h in sc._hist])
+    Rs = np.stack([h[1] for h in sc._hist])
+    placed = 0
+    for trial in range(600):
+        on_tick = trial % 3 == 0
+        stamp = T[rng.integers(len(T))] if on_tick else T[0] + rng.random() * (T[-1] - T[0])
+        times = stamp - sc.offset.grid_s
+        ray = rng.normal(0.0, 1.0, 3)
+        ray /= np.linalg.norm(ray)
+        got = sc._rays(times, ray)
+        if times.min() < T[0] or times.max() > T[-1]:
+            assert got is None
+            continue
+        k = np.clip(np.searchsorted(T, times, side="right") - 1, 0, len(T) - 2)
+        a = (times - T[k]) / np.maximum(T[k + 1] - T[k], _MIN_DT_S)
+        ray_b = sc._R_BC @ ray
+        na, nb = Rs[k] @ ray_b, Rs[k + 1] @ ray_b
+        assert np.array_equal(got, na + a[:, None] * (nb - na)), trial
+        placed += 1
+    assert placed > 300

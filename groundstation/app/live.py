@@ -7,7 +7,7 @@ when it reports one, and ``STATUSTEXT`` events.
 Gain edits go out as ``PARAM_SET`` and count as applied only when the matching
 ``PARAM_VALUE`` comes back; start and abort are ``COMMAND_LONG`` answered by
 ``COMMAND_ACK``. A sortie is recorded to MCAP from the accepted start until the onboard
-component reports it finished (or the link is lost).
+component reports it finished (or the link stays lost: live_recording.py).
 
 Each telemetry message becomes a :class:`~onboard.frames.Frame`
 (:mod:`.live_frames`): the recorder observes those frames, and the dashboard's snapshot is
@@ -60,10 +60,13 @@ def _acquired(t: dict[str, Any]) -> bool:
 
 PUBLISH_HZ = 25.0
 SCENE_EVERY = 5
-ACK_TIMEOUT_S = 2.0
-# the parameter protocol's answer to a lost PARAM_SET or PARAM_VALUE: send the PARAM_SET again
-# when no PARAM_VALUE came back within this long, at most PARAM_SET_SENDS times in all (then
-# the edit is reported as unanswered, not left waiting for ever); mavros's figures
+# a start or abort unanswered this long is sent again, at most COMMAND_SENDS times in all (the
+# command protocol's retry: a lost COMMAND_LONG or COMMAND_ACK does not leave the operator's
+# abort undone)
+ACK_TIMEOUT_S = 1.0
+COMMAND_SENDS = 3
+# a PARAM_SET with no PARAM_VALUE back within this long is sent again, at most PARAM_SET_SENDS
+# times in all, then reported as unanswered (the parameter protocol's rule; mavros's figures)
 PARAM_SET_TIMEOUT_S = 1.0
 PARAM_SET_SENDS = 4
 TARGET_DIAMETER_M = 0.3  # drawn size of a cooperative target (its telemetry has no size)
@@ -212,24 +215,13 @@ class LiveSession:
         with v.lock:
             if not v.link_up():
                 raise SessionError(f"{label}: no link to the onboard computer")
-            sent_at = time.monotonic()
-            v.link.send(
-                v.link.mav.command_long_encode(
-                    VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, command, 0, 0, 0, 0, 0, 0, 0, 0
+            result = v.command(command, COMMAND_SENDS, ACK_TIMEOUT_S)
+            if result is None:
+                hint = " (is the signing key the same on both ends?)" if v.signed else ""
+                raise SessionError(
+                    f"{label}: no acknowledgement from the onboard computer after"
+                    f" {COMMAND_SENDS} sends{hint}"
                 )
-            )
-            while True:
-                ack = v.acks.get(command)
-                if ack is not None and ack[0] >= sent_at:
-                    break
-                left = sent_at + ACK_TIMEOUT_S - time.monotonic()
-                if left <= 0:
-                    hint = " (is the signing key the same on both ends?)" if v.signed else ""
-                    raise SessionError(
-                        f"{label}: no acknowledgement from the onboard computer{hint}"
-                    )
-                v.acked.wait(left)
-            result = ack[1]
             v.last_ack = {"command": label, "result": ACK_NAMES.get(result, str(result))}
             if result != mavlink.MAV_RESULT_ACCEPTED:
                 why = next((e["text"] for e in reversed(v.events) if label in e["text"]), "")
@@ -370,15 +362,16 @@ class LiveSession:
         v = self.vehicle
         if self.rec is None:
             return
+        lost = self.rec.link_given_up(v.link_up(), now)
         if (
             v.onboard_state in FINISHED_STATES
-            or not v.link_up()
+            or lost
             or (
                 v.onboard_state in (RuntimeState.READY.value, RuntimeState.WAITING_TARGET.value)
                 and self.rec.elapsed_s > 1.0
             )
         ):
-            self._finish_recording(None if v.link_up() else "link to the onboard lost")
+            self._finish_recording("link to the onboard lost" if lost else None)
 
     def _finish_recording(self, reason: str | None) -> None:
         if self.rec is None:

@@ -90,6 +90,30 @@ class LinkState:
         self._prev_vel: tuple[float, list[float]] | None = None
         self.normal_accel_m_s2: float | None = None
 
+    def command(self, command: int, sends: int, timeout_s: float) -> int | None:
+        """``COMMAND_LONG`` to the onboard component by the command protocol: sent again, its
+        confirmation counting up, when no ``COMMAND_ACK`` came back within ``timeout_s``, at
+        most ``sends`` times. The MAV_RESULT, or None when none came back (under the lock; the
+        onboard answers a repeated start or abort as it answered the first)."""
+        first = time.monotonic()
+        for confirmation in range(sends):
+            sent_at = time.monotonic()
+            self.link.send(
+                self.link.mav.command_long_encode(
+                    VEHICLE_SYSTEM_ID, ONBOARD_COMPONENT_ID, command, confirmation, 0, 0, 0, 0,
+                    0, 0, 0,
+                )
+            )  # fmt: skip
+            while True:
+                ack = self.acks.get(command)
+                if ack is not None and ack[0] >= first:
+                    return ack[1]
+                left = sent_at + timeout_s - time.monotonic()
+                if left <= 0:
+                    break
+                self.acked.wait(left)
+        return None
+
     def link_up(self) -> bool:
         return (
             self.onboard_rx_s is not None and time.monotonic() - self.onboard_rx_s < LINK_TIMEOUT_S

@@ -1,5 +1,5 @@
 """A live sortie's recording: from the accepted start until the onboard component reports the
-sortie finished (or the link is lost). It is told the frames live mode builds and the events
+sortie finished (or the link stays lost). It is told the frames live mode builds and the events
 heard, hands them to the recorder, and keeps the closest approach."""
 
 from __future__ import annotations
@@ -14,6 +14,10 @@ from onboard.frames import Frame, SortieEvent, SortieStart
 from ..recording.writer import SortieRecorder
 from ..sim.outcome import closest_in_step
 
+# The ground link silent this long ends a recording. A shorter gap (a loaded ground computer,
+# a radio fade) is an event in it, and the sortie goes on being recorded when the link is back.
+LINK_GIVE_UP_S = 30.0
+
 
 class LiveRecording:
     def __init__(self, log_dir: Path, start: SortieStart, foxglove=None) -> None:
@@ -26,6 +30,7 @@ class LiveRecording:
         self._events: list[SortieEvent] = []  # heard since the last recorded frame
         self._last_frame: Frame | None = None
         self._rel_prev: list[float] | None = None
+        self._link_down_since: float | None = None  # the ground's monotonic clock, s
         # every tick (50 Hz) and annotation; no camera frames reach the ground
         self.recorder = SortieRecorder(
             Path(log_dir), record_every=1, annotate_every=1, frame_every=1000000
@@ -49,6 +54,20 @@ class LiveRecording:
     def event(self, level: str, message: str) -> None:
         """Recorded with the next frame, at the time of the last one."""
         self._events.append(SortieEvent(self.last_s, level, message))
+
+    def link_given_up(self, up: bool, now_s: float) -> bool:
+        """Note the ground link's state at ``now_s`` (the ground's monotonic clock, s): a loss
+        and a return are events; True once it has been down for ``LINK_GIVE_UP_S``."""
+        down = self._link_down_since
+        if up:
+            if down is not None:
+                self.event("info", f"telemetry link back after {now_s - down:.1f} s")
+                self._link_down_since = None
+            return False
+        if down is None:
+            self._link_down_since = down = now_s
+            self.event("warning", "telemetry link lost: recording goes on when it is back")
+        return now_s - down >= LINK_GIVE_UP_S
 
     def record(self, frame: Frame) -> None:
         frame = dataclasses.replace(frame, events=tuple(self._events))

@@ -108,6 +108,7 @@ class SceneView:
         self._frustum = None
         self._diameter = None
         self._trail_time_s = -1.0
+        self._shown: tuple | None = None  # the last update's state and trail lengths
         self._closest_shown = self._fitted_done = False
         self._extent_fixed = False  # a recorded sortie's whole trajectories are the extent
         self._handles: list = []  # every node a sortie added, children before parents
@@ -132,6 +133,7 @@ class SceneView:
 
         @dd.on_update
         def _(_event) -> None:
+            self._shown = None  # a moving preset is placed by the next update, paused or not
             self._apply_static_view(client, dd.value)
 
     def _apply_static_view(self, client: Any, preset: str) -> None:
@@ -182,6 +184,7 @@ class SceneView:
         self._handles = []
         self._vehicle = self._target = self._frustum = None
         self._trail_time_s = -1.0
+        self._shown = None
         self._bounds = None
         self._extent, self._extent_fixed = None, False
 
@@ -254,6 +257,10 @@ class SceneView:
     def update(self, state: SceneState, trail_vehicle, trail_target) -> None:
         if self._vehicle is None:
             return
+        shown = (state, len(trail_vehicle), len(trail_target))
+        if shown == self._shown:
+            return  # an idle, paused or finished session publishes the same scene again
+        self._shown = shown
         s = self.server.scene
         vp = np.array(state.vehicle_p)
         tp = np.array(state.target_p)

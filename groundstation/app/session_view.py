@@ -46,6 +46,7 @@ class SessionView:
         self._last_history_t = -1.0
         self._jpeg: tuple[int, Future] | None = None  # (epoch, the camera frame being encoded)
         self.force_frame = False  # the next snapshot carries the camera frame
+        self._encoded_src: Any = None  # the last camera frame encoded
         self._frame_sent_t: float | None = None  # the recorded camera frame last sent in replay
         self.publish_count = 0
         self.scene_errors = 0
@@ -267,9 +268,11 @@ class SessionView:
         if sim is None:
             return snap
         snap.update(frame_snapshot(sim.frame(), sim.camera_model, sim.scenario.target.diameter_m))
-        frame = sim.camera.last_frame
-        if frame is not None and (self.force_frame or self.publish_count % FRAME_EVERY == 0):
+        frame = sim.camera.last_frame  # a new array each capture
+        due = self.publish_count % FRAME_EVERY == 0 and frame is not self._encoded_src
+        if frame is not None and (self.force_frame or due):
             self.force_frame = False
+            self._encoded_src = frame  # a paused or finished sortie's is not encoded again
             self.encode_frame(frame)
         jpeg = self._take_frame()
         if jpeg is not None:

@@ -331,14 +331,24 @@ class SelfCalibration:
         hist = self._hist
         if len(hist) < 2:
             return None
-        T = np.fromiter((h[0] for h in hist), float, len(hist))
-        if times_s.min() < T[0] or times_s.max() > T[-1]:
+        t_lo = times_s.min()
+        if t_lo < hist[0][0] or times_s.max() > hist[-1][0]:
             return None
-        Rs = np.stack([h[1] for h in hist])
+        # the newest entries from the last at or before the earliest time: a detection is
+        # placed as soon as its candidates are in the past, so they are the history's newest
+        # tenths of a second, and the brackets below are those of the whole history
+        near = []
+        for h in reversed(hist):
+            near.append(h)
+            if h[0] <= t_lo and len(near) >= 2:
+                break
+        near.reverse()
+        T = np.fromiter((h[0] for h in near), float, len(near))
+        Rs = np.stack([h[1] for h in near])
         k = np.clip(np.searchsorted(T, times_s, side="right") - 1, 0, len(T) - 2)
         a = (times_s - T[k]) / np.maximum(T[k + 1] - T[k], _MIN_DT_S)
-        ray_b = self._R_BC @ ray  # the camera ray in the body frame (the mount is fixed)
-        na, nb = Rs[k] @ ray_b, Rs[k + 1] @ ray_b
+        n = Rs @ (self._R_BC @ ray)  # the camera ray (the mount is fixed) at each entry
+        na, nb = n[k], n[k + 1]
         return na + a[:, None] * (nb - na)
 
     def _closing_at(self, t: float) -> tuple[float, int] | None:
