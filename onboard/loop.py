@@ -50,7 +50,7 @@ from .datatypes import (
 from .enums import DEFAULT_LAW, GuidanceLaw
 from .estimation.dkf import DelayedKalmanFilter, DkfConfig, FusionResult, ImageEstimate
 from .estimation.dkf_values import measurement
-from .estimation.imm import MotionEstimate, TargetMotionImm, position_from_estimate
+from .estimation.imm import MotionEstimate, TargetMotionImm
 from .estimation.own_velocity import OwnVelocityFilter
 from .estimation.self_calibration import SelfCalEstimate, SelfCalibration
 from .gains import Gains
@@ -103,6 +103,8 @@ class InterceptionLoop:
         self.dkf.carry_max_s = self.gains.t_carry
         uses_motion = estimate_motion or law == GuidanceLaw.APN.value
         self.motion = TargetMotionImm() if uses_motion else None
+        self._fused_capture_s: list[float] = []  # capture times fused since the last tick
+        self._motion_now: MotionEstimate | None = None  # the IMM's, predicted to the tick
         self._dkf_belief = self.dkf.config  # the operator's settings (self-calibration's prior)
         self.self_cal = SelfCalibration(camera.f_px, camera.R_BC, self.dkf.config.target_diameter_m)
         self._self_cal_est: SelfCalEstimate = self.self_cal.estimate()
@@ -169,24 +171,25 @@ class InterceptionLoop:
         R_WB: np.ndarray,
         gyro: np.ndarray,
     ) -> MotionEstimate | None:
-        """Feed the IMM the target's position after a fused detection (the DKF's, placed from
-        the pose the velocity and gyro carry: imm.CarriedPose); a lost estimate ends its track."""
-        motion = self.motion
+        """Feed the IMM, for each detection fused since the last tick, the target's position
+        in the DKF's buffered state at its capture time (the measurement's information, none
+        of the camera delay's prediction), placed from the pose the velocity and gyro carried
+        then (imm.CarriedPose) and stamped with that time; the estimate is then predicted to
+        ``t``. A lost estimate ends the IMM's track."""
+        motion, times = self.motion, self._fused_capture_s
+        self._fused_capture_s = []
         if est is None:
             motion.reset()
+            self._motion_now = None
             return None
-        p_c, R_c = motion.pose.step(t, state.position_enu_m, state.velocity_enu_m_s, R_WB, gyro)
+        motion.pose.step(t, state.position_enu_m, state.velocity_enu_m_s, R_WB, gyro)
         if est.lost:  # a dropout: the IMM keeps its track (it restarts after its own max gap)
             return None
-        fused = (FusionResult.ACCEPTED, FusionResult.INITIALISED)
-        dv = self.dkf.depth_velocity() if any(r in fused for r in self.last_fusion) else None
-        if dv is None:
-            return motion.estimate
-        camera_enu_m = p_c + R_c @ np.asarray(self._offset_b_m)
-        p, cov = position_from_estimate(
-            est.e_px, self.camera.f_px, dv[0], dv[2], R_c @ self._R_BC, camera_enu_m
-        )
-        return motion.update(t, p, cov, dv[1], camera_enu_m)
+        rows = [self.dkf.state_at_capture(t_c) for t_c in sorted(times)]
+        fed = [motion.update_buffered(*r, self._R_BC, self._offset_b_m) for r in rows if r]
+        if any(fed):
+            self._motion_now = motion.predicted(t)
+        return self._motion_now
 
     def fuse_detections(self) -> list[FusionResult]:
         """Fuse the detections handed in so far into the DKF now, against its last prediction,
@@ -214,6 +217,8 @@ class InterceptionLoop:
             if t_new != t_c:
                 det = Detection(t_new, det.center_px, det.bbox_px, det.area_px, det.score)
         result = self.dkf.fuse(det)
+        if result is FusionResult.ACCEPTED or result is FusionResult.INITIALISED:
+            self._fused_capture_s.append(det.capture_time_s)  # the IMM's (_track_motion)
         if result is FusionResult.ACCEPTED:
             m = measurement(det, self.camera)
             if m is not None:
@@ -291,10 +296,9 @@ class InterceptionLoop:
                 a0, a1, a2 = a0 + d0, a1 + d1, a2 + d2
             vf = (v0 + lag * a0, v1 + lag * a1, v2 + lag * a2)
             v = np.array(vf)
-        # the complementary-filtered velocity (estimation/own_velocity.py) for the DKF's
-        # relative motion; the guidance, the speed ramp and the observer keep the estimate's
-        v_rel = self.own_velocity.update(dt, *vf)
-        v_rel = np.array(v_rel) if gains.tau_vel > 0.0 else v
+        # the DKF's own velocity, complementary-filtered (estimation/own_velocity.py)
+        v_cam = self.own_velocity.update(dt, *vf)
+        v_cam = np.array(v_cam) if gains.tau_vel > 0.0 else v
         ladder = self.ladder
         ladder.on_tick(t, R_WC)
         ox, oy, oz = self._offset_b_m
@@ -302,9 +306,7 @@ class InterceptionLoop:
             # the camera's own velocity: the body's plus omega x the believed mount offset
             w0, w1, w2 = (float(c) for c in gyro)
             c0, c1, c2 = w1 * oz - w2 * oy, w2 * ox - w0 * oz, w0 * oy - w1 * ox
-            v_cam = v_rel + R_WB @ np.array((c0, c1, c2))
-        else:
-            v_cam = v_rel
+            v_cam = v_cam + R_WB @ np.array((c0, c1, c2))
         self.dkf.predict(t, gyro, v_cam, R_WC)
         self.self_cal.on_tick(t, gyro, v_cam, self._los_prev)
         self.last_fusion, self._fused_early = self._fused_early, []
@@ -469,8 +471,7 @@ class InterceptionLoop:
             self.guard_trips += 1
         self.disturbance.commanded(thrust)
         self._thrust_n = thrust * veh.max_thrust_n
-        k = self._thrust_n / veh.mass_kg  # the acceleration held until the next tick
-        self.own_velocity.set_accel(z0 * k + d0, z1 * k + d1, z2 * k - GRAVITY_M_S2 + d2)
+        self.own_velocity.set_thrust(self._thrust_n / veh.mass_kg, z0, z1, z2, d0, d1, d2)
         self._prev_time_s = t
         self._prev_R_WC = R_WC
         self.gyro_turn.prev_R_WB = R_WB

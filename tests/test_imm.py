@@ -129,22 +129,23 @@ def test_the_lag_of_a_turn_placed_through_the_pose_uncertainty():
             assert 1.4 < t_half < 2.0, (lateral, seed, t_half)
 
 
-def test_without_the_pose_uncertainty_the_dkfs_own_covariance_keeps_the_lag():
-    """In flight the DKF's own covariance across the line of sight is 0.2-0.3 m (its image
-    point carried over the camera's delay with its target velocity's uncertainty), as large
-    as the pose's 0.29 m. Measured to 5 cm, a turn without the pose's term is followed twice
-    as fast (half of it in 0.9-1.2 s instead of 1.6-2.0 s); measured as the DKF measures it
-    (0.25 m across, 2 m along), removing the pose's term leaves half of it 1.35-2.0 s in and
-    0.40-0.60 of it flown: the pose's uncertainty is not what holds the IMM back in flight."""
+def test_at_capture_time_the_pose_term_holds_the_lag():
+    """The loop feeds the DKF's state at each detection's capture time, 0.02-0.10 m across the
+    line of sight in flight (the head, carried over the camera's delay, 0.13-0.33 m): measured
+    so (0.07 m across, 2 m along), a 3 or 5 m/s^2 turn is flown to 0.35-0.51 of it, half of it
+    1.6-2.0 s in; at the head's 0.25 m, 0.28-0.47 of it. Without the pose's term half of it
+    comes 1.0-1.4 s in and 0.62-0.75 of it is flown: the pose's uncertainty is what holds the
+    IMM back."""
     no_pose = ImmConfig(pose_position_sigma_m=0.0, pose_attitude_sigma_deg=0.0)
-    fine = np.diag([0.05**2, 2.0**2, 0.05**2])
-    as_flown = np.diag([0.25**2, 2.0**2, 0.25**2])
+    at_capture = np.diag([0.07**2, 2.0**2, 0.07**2])
+    head = np.diag([0.25**2, 2.0**2, 0.25**2])
     for lateral in (3.0, 5.0):
         for seed in (1, 2):
-            assert 0.85 < _turn_followed(lateral, seed, fine, no_pose)[1] < 1.3
-            share, t_half = _turn_followed(lateral, seed, as_flown, no_pose)
-            assert 1.3 < t_half < 2.05, (lateral, seed, t_half)
-            assert 0.35 < share < 0.65, (lateral, seed, share)
+            share, t_half = _turn_followed(lateral, seed, at_capture)
+            assert 1.5 < t_half < 2.05 and 0.3 < share < 0.6, (lateral, seed, share, t_half)
+            assert _turn_followed(lateral, seed, head)[0] < share - 0.03
+            share, t_half = _turn_followed(lateral, seed, at_capture, no_pose)
+            assert t_half < 1.45 and share > 0.6, (lateral, seed, share, t_half)
 
 
 def test_the_carried_frames_velocity_error_as_process_noise():

@@ -11,6 +11,7 @@ import pytest
 
 from groundstation.scenario import load_scenario
 from groundstation.sim.simulation import Simulation
+from onboard.constants import GRAVITY_M_S2
 from onboard.estimation.own_velocity import OwnVelocityFilter
 from onboard.gains import Gains
 
@@ -121,3 +122,18 @@ def test_the_sm_tailgate_sortie_the_velocity_error_spoils_is_closer_with_the_fil
     assert Gains().tau_vel == 3.0
     assert without.miss_m == pytest.approx(0.084, abs=0.01)
     assert with_filter.miss_m == pytest.approx(0.019, abs=0.01)
+
+
+def test_the_thrust_form_is_the_acceleration_the_loop_models():
+    # hovering thrust along the vertical with no disturbance: no acceleration, v_f holds
+    f = OwnVelocityFilter(3.0)
+    f.update(DT, 1.0, 0.0, 0.0)
+    f.set_thrust(GRAVITY_M_S2, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    assert f.update(DT, 1.0, 0.0, 0.0) == pytest.approx((1.0, 0.0, 0.0), abs=1e-12)
+    # tilted 30 deg towards +x at the thrust that holds the height, 0.5 m/s^2 of drag back
+    c, s_ = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
+    f.set_thrust(GRAVITY_M_S2 / c, s_, 0.0, c, -0.5, 0.0, 0.0)
+    ax = GRAVITY_M_S2 * s_ / c - 0.5
+    out = f.update(DT, 1.0, 0.0, 0.0)
+    assert out[0] == pytest.approx(1.0 + DT * ax * math.exp(-DT / 3.0), rel=1e-12)
+    assert out[2] == pytest.approx(0.0, abs=1e-12)

@@ -452,6 +452,17 @@ class DelayedKalmanFilter:
         P = self._P[i].tolist()
         return image_state(x, u, P, f, tr)
 
+    def state_at_capture(self, t_c: float) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """The buffered (time s, state, 6x6 covariance) at the first prediction at or after a
+        fused detection's capture time ``t_c`` (s): the detection's information and at most one
+        step's prediction. None without a track or once the buffer no longer holds ``t_c``."""
+        lo, hi = self._win.tolist()
+        if not self._initialised or hi == lo or not math.isfinite(t_c):
+            return None
+        i = _bisect_right(self._T, lo, hi, min(t_c, self._T.item(hi - 1)) - _TIME_EPS_S)
+        P = None if i in (hi, lo) or not self._HX[i] else self._covariance(i)
+        return None if P is None else (float(self._T[i]), self._X[i].copy(), P.copy())
+
     def range_m(self) -> float | None:
         """Current range along the line of sight (m) from the mean alone (no covariance), or
         None without a track."""

@@ -29,8 +29,10 @@ poor along it. Pure maths: no clock, no I/O.
 
 from __future__ import annotations
 
+import copy
 import math
 import sys
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -115,23 +117,6 @@ def position_from_image(
     return p, J @ P3 @ J.T
 
 
-def position_from_estimate(
-    e_px: tuple[float, float],
-    f_px: float,
-    range_m: float,
-    P6: np.ndarray,
-    R_WC: np.ndarray,
-    camera_enu_m: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`position_from_image` from the DKF's reads: its image error (px, over the focal
-    length ``f_px``: the normalised point), its range along the line of sight (m, to the
-    inverse depth rho = sqrt(1 + xn^2 + yn^2) / range) and its 6x6 covariance (the first three
-    rows: xn, yn, rho)."""
-    xn, yn = e_px[0] / f_px, e_px[1] / f_px
-    rho = math.sqrt(1.0 + xn * xn + yn * yn) / range_m
-    return position_from_image(xn, yn, rho, P6[:3, :3], R_WC, camera_enu_m)
-
-
 class CarriedPose:
     """The vehicle's pose as its own velocity and gyro carry it from where a track starts: the
     frame the IMM places the target in. The state estimate's position (a GNSS fix's
@@ -142,14 +127,27 @@ class CarriedPose:
     anchored to the estimate at the start, so it agrees with the world to the estimate's
     error then plus that drift."""
 
-    def __init__(self) -> None:
+    def __init__(self, history: int = 64) -> None:
         self.time_s = math.nan
         self.position_enu_m: np.ndarray | None = None
         self.R_WB: np.ndarray | None = None
+        # the last steps' (time, position, R_WB): where a detection's capture time placed it
+        self._history: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=history)
 
     def reset(self) -> None:
-        """Forget the anchor (the next :meth:`step` takes the estimate)."""
+        """Forget the anchor (the next :meth:`step` takes the estimate) and the past steps."""
         self.position_enu_m = self.R_WB = None
+        self._history.clear()
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose (position m ENU, R_WB) of the held step at ``t`` (s, within 1 us), or None
+        when none is held."""
+        for t_k, p, R in reversed(self._history):
+            if abs(t_k - t) <= 1e-6:
+                return p, R
+            if t_k < t:
+                return None
+        return None
 
     def step(
         self,
@@ -170,10 +168,12 @@ class CarriedPose:
             self.position_enu_m = np.array(position_enu_m, dtype=float)
             self.R_WB = np.array(R_WB, dtype=float)
             self.time_s = t
+            self._history.append((t, self.position_enu_m, self.R_WB))
         elif dt > 0.0 and np.isfinite(v).all() and np.isfinite(w).all():
             self.position_enu_m = self.position_enu_m + v * dt
             self.R_WB = propagate_rotation(self.R_WB, w, dt)
             self.time_s = t
+            self._history.append((t, self.position_enu_m, self.R_WB))
         return self.position_enu_m, self.R_WB
 
 
@@ -388,6 +388,42 @@ class TargetMotionImm:
         self._time_s = t
         self._publish(t)
         return self.estimate
+
+    def update_buffered(
+        self,
+        t: float,
+        x: np.ndarray,
+        P6: np.ndarray,
+        R_BC: np.ndarray,
+        offset_b_m: tuple[float, float, float],
+    ) -> bool:
+        """:meth:`update` with the DKF's buffered state at ``t`` (s; its (xn, yn, rho, target
+        velocity) ``x`` and 6x6 covariance ``P6``, DelayedKalmanFilter.state_at_capture),
+        the target placed from the carried pose of that time (the camera at ``offset_b_m``
+        in the body, attitude R_WB R_BC). Returns whether the pose of ``t`` was held."""
+        pose = self.pose.at(t)
+        if pose is None:
+            return False
+        p_b, R_WB = pose
+        camera_enu_m = p_b + R_WB @ np.asarray(offset_b_m, dtype=float)
+        p, cov = position_from_image(x[0], x[1], x[2], P6[:3, :3], R_WB @ R_BC, camera_enu_m)
+        self.update(t, p, cov, x[3:6], camera_enu_m)
+        return True
+
+    def predicted(self, t: float) -> MotionEstimate | None:
+        """The estimate predicted to ``t`` (s) by the models and their switching, the filter
+        unchanged (a time not after its last update gives :attr:`estimate`)."""
+        if self._imm is None or not t > self._time_s or t - self._time_s > self.config.max_gap_s:
+            return self.estimate
+        held, est = self._imm, self.estimate
+        self._imm = copy.deepcopy(held)
+        try:
+            self._predict(t - self._time_s)
+            self._publish(t)
+            out = self.estimate if np.isfinite(self._imm.x).all() else est
+        finally:
+            self._imm, self.estimate = held, est
+        return out
 
     def _predict(self, dt: float) -> None:
         cfg = self.config

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 
+from ..datatypes import GRAVITY_M_S2
+
 Vec3 = tuple[float, float, float]
 
 
@@ -86,6 +88,14 @@ class OwnVelocityFilter:
         k = -math.expm1(-dt_s / self.tau_s)  # 1 - exp(-dt / tau_c)
         self._v = out = (p0 + k * e0, p1 + k * e1, p2 + k * e2)
         return out
+
+    def set_thrust(
+        self, k: float, z0: float, z1: float, z2: float, d0: float, d1: float, d2: float
+    ) -> None:
+        """:meth:`set_accel` of thrust per mass ``k`` (m/s^2) along the thrust axis
+        (z0, z1, z2) (ENU, unit), gravity and the believed drag and disturbance (d0, d1, d2)
+        (m/s^2, ENU)."""
+        self.set_accel(z0 * k + d0, z1 * k + d1, z2 * k - GRAVITY_M_S2 + d2)
 
     def set_accel(self, a0: float, a1: float, a2: float) -> None:
         """The specific acceleration (m/s^2, ENU) held until the next update; a non-finite
