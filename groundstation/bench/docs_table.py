@@ -147,7 +147,8 @@ def _machine() -> str:
 
 
 def _kernels() -> str:
-    code = "import onboard.jit as j; print('compiled' if j.ENABLED else 'plain Python')"
+    """The mode the benchmark commands ran the kernels in (they call use_jit, as here)."""
+    code = "import onboard.jit as j; print('compiled' if j.use_jit() else 'plain Python')"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     return out.stdout.strip() or "unknown"
 
