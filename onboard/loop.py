@@ -217,7 +217,8 @@ class InterceptionLoop:
             if t_new != t_c:
                 det = Detection(t_new, det.center_px, det.bbox_px, det.area_px, det.score)
         result = self.dkf.fuse(det)
-        if result is FusionResult.ACCEPTED or result is FusionResult.INITIALISED:
+        fused = result is FusionResult.ACCEPTED or result is FusionResult.INITIALISED
+        if fused and self.motion is not None:
             self._fused_capture_s.append(det.capture_time_s)  # the IMM's (_track_motion)
         if result is FusionResult.ACCEPTED:
             m = measurement(det, self.camera)

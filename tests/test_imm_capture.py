@@ -138,3 +138,15 @@ def test_the_loop_feeds_the_imm_at_capture_times_and_flies_its_estimate_at_the_t
     assert len(imm_times) > 20
     np.testing.assert_allclose(imm_times[2:], 0.08, atol=0.0101)
     np.testing.assert_allclose(flown_times, 0.0, atol=1e-9)
+
+
+def test_a_loop_without_the_imm_keeps_no_capture_times():
+    """PNG, the default, flies without the IMM when nothing records it (onboard, campaigns):
+    the capture times it would be fed are not kept (they would pile up for as long as the
+    vehicle flies)."""
+    from groundstation.scenario import load_scenario
+    from groundstation.sim.simulation import Simulation
+
+    sim = Simulation(load_scenario("cv-top-to-bottom"), "png", 1, keep_records=False)
+    assert sim.run().outcome == "HIT" and sim.loop.motion is None
+    assert sim.loop._fused_capture_s == []  # main: one entry per fused detection

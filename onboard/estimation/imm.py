@@ -416,7 +416,7 @@ class TargetMotionImm:
         if self._imm is None or not t > self._time_s or t - self._time_s > self.config.max_gap_s:
             return self.estimate
         held, est = self._imm, self.estimate
-        self._imm = copy.deepcopy(held)
+        self._imm = copy.copy(held)  # predict rebinds the state's arrays, never writes into them
         try:
             self._predict(t - self._time_s)
             self._publish(t)
