@@ -132,31 +132,46 @@ def imm_config(items: list[str] | None):
     return ImmConfig(**changes)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def cell_parser(description: str) -> argparse.ArgumentParser:
+    """The options that name one cell of the agility campaign and the IMM to fly it with
+    (this bench and ``groundstation.bench.imm_lag``)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--kind", choices=("turn", "jink"), default="turn")
     ap.add_argument("--value", type=float, default=5.0, help="the cell: m/s^2 or jink range m")
     ap.add_argument("--n", type=int, default=10, help="tries of the cell (the campaign's --n)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--imm", action="append", metavar="KEY=VALUE", help="an ImmConfig field")
+    return ap
+
+
+def cell_of(ap: argparse.ArgumentParser, args: argparse.Namespace, sets=None) -> tuple:
+    """The IMM configuration and the jobs :func:`cell_parser`'s options name (``sets``:
+    ``--set SECTION.KEY=VALUE`` items); a bad one is ``ap``'s usage error."""
+    from ..scenario import parse_overrides
+
+    if args.n < 1:
+        ap.error("--n must be at least 1")
+    if not (math.isfinite(args.value) and args.value >= 0.0):
+        ap.error("--value must be a finite number >= 0")
+    try:
+        overrides = parse_overrides(sets)
+        return imm_config(args.imm), cell_jobs(args.kind, args.value, args.n, args.seed, overrides)
+    except ValueError as e:
+        ap.error(str(e))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = cell_parser(__doc__.splitlines()[0])
     ap.add_argument("--last-s", type=float, default=1.5, help="truth within this time to go")
     ap.add_argument("--scale", type=float, default=1.0, help="share of the truth handed over")
     ap.add_argument("--delay-s", type=float, default=0.0, help="the truth this late (s)")
-    ap.add_argument("--imm", action="append", metavar="KEY=VALUE", help="an ImmConfig field")
     ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a scenario value")
     args = ap.parse_args(argv)
-    if args.n < 1:
-        ap.error("--n must be at least 1")
-    for name in ("last_s", "scale", "delay_s", "value"):
+    for name in ("last_s", "scale", "delay_s"):
         x = getattr(args, name)
         if not (math.isfinite(x) and x >= 0.0):
             ap.error(f"--{name.replace('_', '-')} must be a finite number >= 0")
-    from ..scenario import parse_overrides
-
-    try:
-        imm = imm_config(args.imm)
-        jobs = cell_jobs(args.kind, args.value, args.n, args.seed, parse_overrides(args.set))
-    except ValueError as e:
-        ap.error(str(e))
+    imm, jobs = cell_of(ap, args, args.set)
     print(f"agility {args.kind} {args.value:g}, APN, seed {args.seed}, {len(jobs)} sorties")
     runs = (
         ("IMM (as flown)", None),

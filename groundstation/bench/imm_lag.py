@@ -16,12 +16,11 @@ A measuring tool beside the product: it reads the simulator's truth, which the l
 
 from __future__ import annotations
 
-import argparse
 import math
 
 import numpy as np
 
-from .agility_bound import TruthAccel, cell_jobs, imm_config, true_time_to_go_s
+from .agility_bound import TruthAccel, cell_of, cell_parser, true_time_to_go_s
 
 TGO_BANDS_S = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0))
 RANGE_BANDS_M = ((0.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 40.0))
@@ -98,22 +97,9 @@ def fly_recorded(job, imm=None) -> tuple[np.ndarray, list[tuple[float, float, fl
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--kind", choices=("turn", "jink"), default="turn")
-    ap.add_argument("--value", type=float, default=5.0, help="the cell: m/s^2 or jink range m")
-    ap.add_argument("--n", type=int, default=10, help="tries of the cell (the campaign's --n)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--imm", action="append", metavar="KEY=VALUE", help="an ImmConfig field")
+    ap = cell_parser(__doc__.splitlines()[0])
     args = ap.parse_args(argv)
-    if args.n < 1:
-        ap.error("--n must be at least 1")
-    if not (math.isfinite(args.value) and args.value >= 0.0):
-        ap.error("--value must be a finite number >= 0")
-    try:
-        imm = imm_config(args.imm)
-        jobs = cell_jobs(args.kind, args.value, args.n, args.seed)
-    except ValueError as e:
-        ap.error(str(e))
+    imm, jobs = cell_of(ap, args)
     print(f"agility {args.kind} {args.value:g}, APN, seed {args.seed}, {len(jobs)} sorties")
     runs, fed = [], []
     for job in jobs:
