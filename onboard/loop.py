@@ -173,16 +173,16 @@ class InterceptionLoop:
     ) -> MotionEstimate | None:
         """Feed the IMM, for each detection fused since the last tick, the target's position
         in the DKF's buffered state at its capture time (the measurement's information, none
-        of the camera delay's prediction), placed from the pose the velocity and gyro carried
-        then (imm.CarriedPose) and stamped with that time; the estimate is then predicted to
-        ``t``. A lost estimate ends the IMM's track."""
+        of the camera delay's prediction), placed from the pose the own velocity the DKF's
+        relative motion uses and the gyro carried then (imm.CarriedPose) and stamped with that
+        time; the estimate is then predicted to ``t``. A lost estimate ends the IMM's track."""
         motion, times = self.motion, self._fused_capture_s
         self._fused_capture_s = []
         if est is None:
             motion.reset()
             self._motion_now = None
             return None
-        motion.pose.step(t, state.position_enu_m, state.velocity_enu_m_s, R_WB, gyro)
+        motion.pose.step(t, state.position_enu_m, self.own_velocity.velocity_enu_m_s, R_WB, gyro)
         if est.lost:  # a dropout: the IMM keeps its track (it restarts after its own max gap)
             return None
         rows = [self.dkf.state_at_capture(t_c) for t_c in sorted(times)]
