@@ -11,6 +11,7 @@ import pytest
 
 from onboard.constants import GRAVITY_M_S2
 from onboard.control.apn import (
+    MIN_TURN_SPEED_M_S,
     apn_law,
     apn_term,
     available_lateral_accel_m_s2,
@@ -104,12 +105,31 @@ def _motion(accel, var, velocity=(0.0, 0.0, 0.0)):
 
 def test_an_acceleration_within_its_noise_is_not_flown():
     # sigma = sqrt(0.75 / 3) = 0.5 m/s^2: |a| = 0.4 is 0.8 sigma (off), 0.75 is 1.5 sigma
-    # (half), 3 is 6 sigma (whole)
-    assert manoeuvre_accel_m_s2(_motion((0.4, 0.0, 0.0), 0.75), 1.0, 2.0) == (0.0, 0.0, 0.0)
-    half = manoeuvre_accel_m_s2(_motion((0.0, 0.6, 0.45), 0.75), 1.0, 2.0)
+    # (half), 3 is 6 sigma (whole); all normal to the target's velocity (0, 3, -4)
+    v = (0.0, 3.0, -4.0)
+    assert manoeuvre_accel_m_s2(_motion((0.4, 0.0, 0.0), 0.75, v), 1.0, 2.0) == (0.0, 0.0, 0.0)
+    half = manoeuvre_accel_m_s2(_motion((0.0, 0.6, 0.45), 0.75, v), 1.0, 2.0)
     np.testing.assert_allclose(half, (0.0, 0.3, 0.225), rtol=1e-12)
-    assert manoeuvre_accel_m_s2(_motion((3.0, 0.0, 0.0), 0.75), 1.0, 2.0) == (3.0, 0.0, 0.0)
+    whole = manoeuvre_accel_m_s2(_motion((3.0, 0.0, 0.0), 0.75, v), 1.0, 2.0)
+    assert whole == (3.0, 0.0, 0.0)
     assert manoeuvre_accel_m_s2(None, 1.0, 2.0) is None
+
+
+def test_only_the_acceleration_normal_to_the_targets_velocity_is_flown():
+    """A speed change is bounded by the target's speed range (a jink's lasts 0.3 s), a turn's
+    normal acceleration is not: the part along the velocity is not flown, and a target at
+    rest (under MIN_TURN_SPEED_M_S) has nothing but speed change."""
+    # 3 m/s^2 across a target flying 4 m/s east plus 2 m/s^2 along it: the 3 m/s^2 is flown
+    a = manoeuvre_accel_m_s2(_motion((2.0, 3.0, 0.0), 0.01, (4.0, 0.0, 0.0)), 1.0, 2.0)
+    np.testing.assert_allclose(a, (0.0, 3.0, 0.0), atol=1e-12)
+    along = manoeuvre_accel_m_s2(_motion((0.0, 0.0, -5.0), 0.01, (0.0, 0.0, -2.0)), 1.0, 2.0)
+    np.testing.assert_allclose(along, (0.0, 0.0, 0.0), atol=1e-12)
+    # darting from rest: 8 m/s^2 at 0.4 m/s and at 2.4 m/s along its own velocity
+    assert MIN_TURN_SPEED_M_S == 0.5
+    rest = manoeuvre_accel_m_s2(_motion((0.0, 8.0, 0.0), 0.01, (0.3, 0.0, 0.0)), 1.0, 2.0)
+    assert rest == (0.0, 0.0, 0.0)
+    dart = manoeuvre_accel_m_s2(_motion((0.0, 8.0, 0.0), 0.01, (0.0, 2.4, 0.0)), 1.0, 2.0)
+    np.testing.assert_allclose(dart, (0.0, 0.0, 0.0), atol=1e-12)
 
 
 def test_time_to_go_is_range_over_closing_speed():

@@ -7,8 +7,9 @@ target accelerating at a_T normal to the LOS leaves PN a miss that grows with a_
 PN's own command rises to N/(N-2) a_T near the end. APN adds N/2 a_T,perp, the term that makes
 the commanded acceleration the zero-effort-miss solution for a constant-acceleration target
 (Zarchan, Tactical and Strategic Missile Guidance, ch. 8): a_APN = N V_c q' + N/2 a_T,perp.
-Here N is the mean of the velocity-angle gains K_y and K_z (eq. 8), and a_T comes from the
-IMM of the target's motion (onboard/estimation/imm.py).
+Here N is the mean of the velocity-angle gains K_y and K_z (eq. 8), and a_T is the part of
+the IMM's estimate of the target's acceleration (onboard/estimation/imm.py) normal to the
+target's velocity (:func:`manoeuvre_accel_m_s2`).
 
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
@@ -65,13 +66,20 @@ def time_to_go_s(
     return range_m / closing if closing > 0.0 else math.nan
 
 
+MIN_TURN_SPEED_M_S = 0.5  # slower than this, a target's acceleration is all speed change
+
+
 def manoeuvre_accel_m_s2(
     motion: MotionEstimate | None, z_off: float, z_full: float
 ) -> tuple[float, float, float] | None:
-    """The IMM's acceleration (m/s^2 ENU) as far as it stands out of its own noise: scaled by
-    w = clip((z - z_off) / (z_full - z_off), 0, 1), z = |a| / sqrt(tr P_a / 3) its size in
-    standard deviations. An acceleration within its noise is no manoeuvre: APN then flies PN
-    and does not chase the estimate's noise with its larger limit. None without an estimate."""
+    """The IMM's acceleration (m/s^2 ENU) normal to its target velocity, as far as it stands
+    out of its own noise: scaled by w = clip((z - z_off) / (z_full - z_off), 0, 1), z = |a| /
+    sqrt(tr P_a / 3) its size in standard deviations. An acceleration within its noise is no
+    manoeuvre: APN then flies PN and does not chase the estimate's noise with its larger
+    limit. The part along the velocity changes the target's speed, which its speed range
+    bounds: a jink ends within a few tenths of a second, before the estimate has seen it, so
+    flown it aims where the target no longer goes; a turn's normal part changes no speed and
+    lasts. Under MIN_TURN_SPEED_M_S all of it is speed change. None without an estimate."""
     if motion is None:
         return None
     a0, a1, a2 = motion.accel_enu_m_s2
@@ -79,6 +87,12 @@ def manoeuvre_accel_m_s2(
     sigma = math.sqrt(max(motion.accel_var_m2_s4, 0.0) / 3.0)
     z = norm / sigma if sigma > 0.0 else math.inf
     w = min(max((z - z_off) / (z_full - z_off), 0.0), 1.0) if z_full > z_off else float(z >= z_off)
+    v0, v1, v2 = motion.velocity_enu_m_s
+    speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if not speed > MIN_TURN_SPEED_M_S:
+        return 0.0, 0.0, 0.0
+    along = (a0 * v0 + a1 * v1 + a2 * v2) / (speed * speed)
+    a0, a1, a2 = a0 - along * v0, a1 - along * v1, a2 - along * v2
     return a0 * w, a1 * w, a2 * w
 
 
