@@ -22,6 +22,22 @@ from .gains import Gains
 
 ATTITUDE_HISTORY_S = 1.0  # camera attitudes kept to place a delayed detection's LOS
 
+PASS_DONE, TARGET_LOST = "pass done", "target lost"
+
+
+def intercept_over(
+    max_size_frac: float, done_size_frac: float, target_stale: bool, target_lost: bool
+) -> str | None:
+    """Why an intercept is over, or None: ``PASS_DONE`` once the target has filled
+    ``done_size_frac`` of the view's width and the track then went stale (the vehicle flew
+    past it), ``TARGET_LOST`` when the loop gave the target up. Either way the vehicle brakes
+    and holds."""
+    if target_stale and max_size_frac >= done_size_frac:
+        return PASS_DONE
+    if target_lost:
+        return PASS_DONE if max_size_frac >= done_size_frac else TARGET_LOST
+    return None
+
 
 class TrackLossLadder:
     """Call :meth:`on_tick` once a tick with the camera attitude, then :meth:`next_mode`;

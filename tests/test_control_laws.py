@@ -119,6 +119,25 @@ def test_hover_case_accelerates_along_los():
     assert math.isnan(out.vel_elev_rad)
 
 
+@pytest.mark.parametrize("v", [[0.0, -3.0, 0.0], [2.0, -0.5, 0.0], [0.3, -6.0, -1.0]])
+def test_moving_away_from_the_target_accelerates_along_los(v):
+    """Flying away from the target (v . n_t < 0) PN has no LOS rate to turn on and the speed
+    ramp would push along the velocity: the law flies the LOS, as from the hover."""
+    from onboard.control import guidance_reference
+
+    los = np.array([0.0, 1.0, -0.2]) / math.hypot(1.0, 0.2)
+    out = png_law(_inp(v, dq_y=0.01, dq_z=-0.02, los=los), G)
+    assert out.hovering and math.isnan(out.vel_azim_rad)
+    assert_allclose(out.accel_desired_enu_m_s2, G.k_a * los, atol=1e-12)
+    ref = guidance_reference.png(
+        0.01, los, math.asin(los[2]), (0.01, -0.02), np.asarray(v, float), np.eye(3)[:, 2],
+        (math.inf, -math.inf), 20.0, None, 0.0, G,
+    )  # fmt: skip
+    assert ref[3] and ref[0] @ los > 0.0
+    # closing at any angle under 90 degrees PN flies (the velocity angles are defined)
+    assert not png_law(_inp([3.0, 0.1, 0.0], los=los), G).hovering
+
+
 def test_speed_ramp_and_cap():
     # far below v_max: the full k_a (eq. 14)
     assert_allclose(ramped_speed(5.0, G, 0.01), 5.02)

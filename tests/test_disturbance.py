@@ -103,6 +103,39 @@ def test_rejects_velocity_noise_and_lag():
     assert np.abs(err.mean(axis=0)).max() < 0.01
 
 
+def _gnss_velocity_error(n: int, sigma_m_s: float, tau_s: float, seed: int) -> np.ndarray:
+    """A first-order Gauss-Markov error per tick (the simulator's outdoor velocity error)."""
+    rng = np.random.default_rng(seed)
+    a = math.exp(-DT / tau_s)
+    q = sigma_m_s * math.sqrt(1.0 - a * a)
+    e = np.zeros(n)
+    for k in range(1, n):
+        e[k] = a * e[k - 1] + q * rng.standard_normal()
+    return e
+
+
+def _d_hat_std(w: float, err: np.ndarray) -> float:
+    """The standard deviation (m/s^2) of d^ in hover with ``err`` as the velocity estimate."""
+    obs = DisturbanceObserver(DisturbanceObserverConfig(w, PARAMS.mass_kg, PARAMS.max_thrust_n))
+    out = []
+    for k, e in enumerate(err):
+        obs.commanded(PARAMS.mass_kg * GRAVITY_M_S2 / PARAMS.max_thrust_n)
+        out.append(obs.update_floats(k * DT, (float(e), 0.0, 0.0), (0.0, 0.0, 1.0))[0])
+    return float(np.std(out[1000:]))
+
+
+def test_a_gnss_velocity_error_reaches_d_hat_in_proportion_to_the_bandwidth():
+    # sigma 0.15 m/s correlated over 1 s (outdoor-gnss's middle): its changes are white at the
+    # observer's frequencies, so d^ = w^2 s / (s + w)^2 of it grows about as w (faster below
+    # the error's corner, 1 rad/s)
+    err = _gnss_velocity_error(5000, 0.15, 1.0, seed=3)
+    at_default = _d_hat_std(Gains().k_dob, err)
+    assert Gains().k_dob == 2.0
+    assert at_default == pytest.approx(0.10, abs=0.015)
+    assert _d_hat_std(1.0, err) == pytest.approx(0.5 * at_default, rel=0.15)
+    assert _d_hat_std(0.5, err) < 0.25 * at_default
+
+
 def test_manoeuvres_do_not_leak_into_the_estimate():
     ts, ds = _fly(np.zeros(3), w=2.0, duration_s=5.0, manoeuvre=True, drag=0.17)
     # the attitude and thrust lag are in the model (measured axis, lagged thrust): no leak

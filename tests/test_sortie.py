@@ -83,6 +83,20 @@ def test_unseen_target_is_lost():
     assert r.sim_time_s == pytest.approx(0.5 + 5.0, abs=0.011)  # t_wait + t_search
 
 
+@pytest.mark.parametrize("backward_m_s", [2.0, 6.0])
+def test_a_vehicle_drifting_away_from_the_target_in_view_turns_back_and_hits(backward_m_s):
+    """The camera on a balloon 20 m ahead, the vehicle drifting backward: PN alone has no
+    LOS rate to turn on and its speed ramp pushes along the velocity (it flew away, TIMEOUT
+    with the miss of the start, 20 m); flying the LOS until closing, it hits (seed 0,
+    realistic: 0.008 and 0.064 m)."""
+    from groundstation.scenario import with_changes
+
+    s = load_scenario("static-ahead-20m")
+    away = dataclasses.replace(s.interceptor, velocity_m_s=(0.0, -backward_m_s, 0.0))
+    r = run_sortie(with_changes(s, interceptor=away), "png", seed=0)
+    assert r.outcome == "HIT" and r.miss_m <= 0.15, r
+
+
 def _cli_json(capsys, *args) -> str:
     """``groundstation sortie ARGS --json`` run in this process: what it printed."""
     code, out, err = run_cli(main, ["sortie", *args, "--json"], capsys)

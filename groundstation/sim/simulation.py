@@ -23,7 +23,7 @@ from onboard.gains import Gains
 from onboard.geometry import as_quat, camera_attitude, rotmat_of_quat
 from onboard.link.params import RuntimeParams
 from onboard.loop import InterceptionLoop
-from onboard.runtime.state_machine import intercept_over
+from onboard.track_loss import intercept_over
 
 from ..scenario import Scenario, scenario_toml
 from .beliefs import loop_configuration, true_camera

@@ -21,7 +21,10 @@ From d to d^ the transfer is w^2 / (s + w)^2: a constant disturbance is recovere
 steady-state error (to 2 % within 5.8 / w s). From velocity noise to d^ it is
 w^2 s / (s + w)^2, a band-pass that peaks near w; with white velocity noise of sigma_v per
 sample at period T the standard deviation of d^ is about sigma_v w sqrt(w T) / 2 (0.007 m/s^2
-for 0.05 m/s, w = 2 1/s, 100 Hz). Using the measured attitude means a manoeuvre, which the
+for 0.05 m/s, w = 2 1/s, 100 Hz). A GNSS-aided estimate's error is correlated instead (0.1-0.2
+m/s over about 1 s): its changes are about white at the observer's frequencies, and d^'s
+standard deviation grows about as w (0.10 m/s^2 at w = 2 1/s for 0.15 m/s, 0.05 at 1); it is
+flown, as -d^ normal to the velocity. Using the measured attitude means a manoeuvre, which the
 attitude loop achieves with a lag, is in f_model as flown and does not leak into d^; the
 thrust magnitude is the only modelled actuator, through ``thrust_time_constant_s``. The
 bandwidth should stay well below the attitude loop's (k_R = 8 1/s) so that what remains of

@@ -56,7 +56,7 @@ class GuidanceOutput:
     accel_desired_enu_m_s2: np.ndarray  # a_d, saturated (eq. 17)
     vel_elev_rad: float  # sigma_y (eq. 7), nan when hovering
     vel_azim_rad: float  # sigma_z (eq. 7), nan when hovering
-    hovering: bool  # |v| < v_min: flew along the LOS
+    hovering: bool  # |v| < v_min or moving away from the target: flew along the LOS
 
 
 def _hover_start(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:

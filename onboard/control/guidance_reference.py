@@ -210,7 +210,9 @@ def png(
     gains: Gains,
     drag: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float, bool]:
-    """The proposed law. Below v_min fly along the LOS: a_d = sat(k_a n_t, a_max). Otherwise
+    """The proposed law. Below v_min, or moving away from the target (v . n_t < 0: PN has
+    no LOS rate to turn on a target behind, and the speed ramp would push along the
+    velocity), fly along the LOS: a_d = sat(k_a n_t, a_max). Otherwise
     the velocity angles (eq. 7) turned by K times the LOS change (eq. 8; faded out by the
     midcourse weight w_mid far away), the desired direction n_d (eq. 9), bent toward the LOS
     near the image's top or bottom edge (pursuit bias), the speed ramp (eq. 14), the midcourse
@@ -220,7 +222,7 @@ def png(
     Returns (a_d, sigma_y, sigma_z, hovering)."""
     top = fov_edges_rad[0]
     speed = float(np.linalg.norm(v))
-    if speed < gains.v_min:
+    if speed < gains.v_min or float(v @ n_t) < 0.0:
         a_d = saturate(gains.k_a * n_t, gains.a_max)
         return fov_guard(a_d, camera_axis, top, q_y, gains)[1], math.nan, math.nan, True
     v_hat = v / speed

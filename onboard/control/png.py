@@ -381,8 +381,10 @@ def png_floats(
     k_brake, v_max = G[GainIndex.k_brake], G[GainIndex.v_max]
     fov_margin = math.radians(G[GainIndex.fov_margin])
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    if speed < v_min:
-        # below v_min the velocity angles are undefined: accelerate along the LOS (§3.4)
+    if speed < v_min or v0 * l0 + v1 * l1 + v2 * l2 < 0.0:
+        # below v_min the velocity angles are undefined (§3.4), and flying away from the
+        # target PN has nothing to turn (a target behind has no LOS rate) while the speed
+        # ramp pushes along the velocity: accelerate along the LOS
         a0, a1, a2 = saturate3(k_a * l0, k_a * l1, k_a * l2, a_max)
         _, a0, a1, a2 = fov_guard_floats(a0, a1, a2, top, ax0, ax1, q_y, fov_margin, a_max)
         return a0, a1, a2, math.nan, math.nan, 1.0

@@ -17,6 +17,7 @@ import enum
 from dataclasses import dataclass, field
 
 from ..enums import RuntimeState
+from ..track_loss import PASS_DONE, intercept_over
 
 STREAM_BEFORE_OFFBOARD_S = 0.3
 START_TIMEOUT_S = 3.0  # PX4 has not entered offboard by then: give up, back to ready
@@ -32,23 +33,6 @@ class Output(enum.Enum):
     NONE = "none"  # send nothing to the flight controller
     LOOP = "loop"  # the interception loop's command
     BRAKE = "brake"  # the loop's brake-and-hold command
-
-
-PASS_DONE, TARGET_LOST = "pass done", "target lost"
-
-
-def intercept_over(
-    max_size_frac: float, done_size_frac: float, target_stale: bool, target_lost: bool
-) -> str | None:
-    """Why an intercept is over, or None: ``PASS_DONE`` once the target has filled
-    ``done_size_frac`` of the view's width and the track then went stale (the vehicle flew
-    past it), ``TARGET_LOST`` when the loop gave the target up. Either way the vehicle brakes
-    and holds."""
-    if target_stale and max_size_frac >= done_size_frac:
-        return PASS_DONE
-    if target_lost:
-        return PASS_DONE if max_size_frac >= done_size_frac else TARGET_LOST
-    return None
 
 
 @dataclass(frozen=True)
