@@ -7,6 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from onboard.camera_model import CameraModel
+from onboard.control import guidance_reference
 from onboard.control.attitude import attitude_command, desired_thrust_direction
 from onboard.control.fov_hold import yaw_rate_command
 from onboard.control.guidance import (
@@ -123,8 +124,6 @@ def test_hover_case_accelerates_along_los():
 def test_moving_away_from_the_target_accelerates_along_los(v):
     """Flying away from the target (v . n_t < 0) PN has no LOS rate to turn on and the speed
     ramp would push along the velocity: the law flies the LOS, as from the hover."""
-    from onboard.control import guidance_reference
-
     los = np.array([0.0, 1.0, -0.2]) / math.hypot(1.0, 0.2)
     out = png_law(_inp(v, dq_y=0.01, dq_z=-0.02, los=los), G)
     assert out.hovering and math.isnan(out.vel_azim_rad)
