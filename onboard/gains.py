@@ -399,6 +399,14 @@ class Gains:
         "APN: vertical acceleration kept in reserve from the thrust",
         "augmented PN",
     )
+    t_turn: float = _gain(
+        0.0,
+        "s",
+        0.0,
+        5.0,
+        "APN: predict the target's accel turning at its turn rate over min(t_go, this) (0=off)",
+        "augmented PN",
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

@@ -31,12 +31,7 @@ from .control.guidance import (
     png_command,
     png_law,
 )
-from .control.reacquire import (
-    floor_guard_accel,
-    reacquire_accel,
-    search_accel,
-    search_yaw_rate,
-)
+from .control.reacquire import floor_guard_accel, reacquire_accel, search_accel, search_yaw_rate
 from .datatypes import (
     GRAVITY_M_S2,
     ControlTelemetry,
@@ -430,6 +425,7 @@ class InterceptionLoop:
                         target_accel_enu_m_s2=manoeuvre_accel_m_s2(
                             motion, gains.z_off, gains.z_full
                         ),
+                        target_turn_rate_rad_s=0.0 if motion is None else motion.turn_rate_rad_s,
                         accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
                         ),

@@ -1,6 +1,7 @@
 """The augmented law (onboard/control/apn.py): its command limit from the airframe, its term,
-and a pure kinematic intercept of a target accelerating at a constant rate, where linear
-theory says APN needs at most N/2 a_T and PN up to N/(N - 2) a_T (Zarchan, ch. 8)."""
+a pure kinematic intercept of a target accelerating at a constant rate, where linear theory
+says APN needs at most N/2 a_T and PN up to N/(N - 2) a_T (Zarchan, ch. 8), and the
+prediction of a target in a coordinated turn, whose acceleration turns with it."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from onboard.control.apn import (
     available_lateral_accel_m_s2,
     manoeuvre_accel_m_s2,
     time_to_go_s,
+    turn_prediction_accel_m_s2,
 )
 from onboard.control.guidance import GuidanceInput, direction_angles
 from onboard.estimation.imm import MotionEstimate
@@ -164,3 +166,82 @@ def test_the_endgame_flies_the_endgame_limit():
     assert norms[0] == pytest.approx(lim, rel=1e-9)
     assert norms[1] == pytest.approx(end, rel=1e-9)
     assert norms[2] == pytest.approx(lim, rel=1e-9)  # unknown time to go: no endgame
+
+
+def _circling(speed_m_s: float, accel_m_s2: float, t_s: float):
+    """A target at the origin flying north at ``speed_m_s`` and turning left at ``accel_m_s2``
+    (omega = a / v): its velocity and acceleration now and its position ``t_s`` later."""
+    w = accel_m_s2 / speed_m_s
+    R = speed_m_s / w
+    v, a = np.array((0.0, speed_m_s, 0.0)), np.array((-accel_m_s2, 0.0, 0.0))
+    later = np.array((R * (math.cos(w * t_s) - 1.0), R * math.sin(w * t_s), 0.0))
+    return v, a, w, later
+
+
+@pytest.mark.parametrize("accel", [5.0, 7.5])
+@pytest.mark.parametrize("t_go", [0.5, 1.0, 1.5])
+def test_the_turn_prediction_nulls_a_coordinated_turns_zero_effort_miss(accel, t_go):
+    """An interceptor aiming at where the law predicts the target at t_go, with the target 5 m/s
+    in a coordinated turn: the turn's prediction (t^2 / 2 a_eq beyond v t) is where the target
+    is, so the law's term N/2 a_eq,perp is N / t^2 times the turn's zero-effort miss across
+    the LOS; the constant-acceleration prediction leaves R (wt - sin wt) along the target's
+    velocity (0.83 m at 5 m/s^2 and 1 s, 1.66 m at 7.5), several hit radii."""
+    v, a, w, later = _circling(5.0, accel, t_go)
+    a_eq = np.array(turn_prediction_accel_m_s2(tuple(a), w, t_go, 1.5))
+    ct_miss = float(np.linalg.norm(v * t_go + 0.5 * t_go**2 * a_eq - later))
+    ca_miss = float(np.linalg.norm(v * t_go + 0.5 * t_go**2 * a - later))
+    behind = 5.0**2 / accel * (w * t_go - math.sin(w * t_go))  # R (wt - sin wt)
+    assert ct_miss < 1e-9
+    assert ca_miss >= behind > 0.06  # the along-track part alone
+    if t_go == 1.0:
+        assert ca_miss > {5.0: 0.8, 7.5: 1.6}[accel] > 0.3  # the hit radius
+    # the term flown: N / t^2 times the turn's miss across the LOS (east here)
+    los = (1.0, 0.0, 0.0)
+    zem = later - v * t_go
+    zem_perp = zem - (zem @ np.array(los)) * np.array(los)
+    np.testing.assert_allclose(apn_term(tuple(a_eq), los, 3.0), 3.0 / t_go**2 * zem_perp, atol=1e-9)
+
+
+def test_the_turn_prediction_without_a_turn_is_the_constant_acceleration_term():
+    """omega -> 0, t_go -> 0, no t_go or no horizon (t_turn 0, the default): the prediction is
+    a (APN's N/2 a); beyond the horizon it predicts over the horizon, and the vertical part
+    stays as it is."""
+    a = (1.0, -2.0, 0.5)
+    for w in (1e-9, 1e-6, 1e-4):
+        np.testing.assert_allclose(turn_prediction_accel_m_s2(a, w, 1.0, 1.5), a, atol=w + 1e-12)
+    assert turn_prediction_accel_m_s2(a, 0.0, 1.0, 1.5) == a
+    assert turn_prediction_accel_m_s2(a, 1.0, math.nan, 1.5) == a
+    assert turn_prediction_accel_m_s2(a, 1.0, -1.0, 1.5) == a  # not closing
+    assert turn_prediction_accel_m_s2(a, 1.0, 1.0, 0.0) == a  # no horizon: off
+    np.testing.assert_allclose(turn_prediction_accel_m_s2(a, 1.0, 1e-7, 1.5), a, atol=1e-6)
+    capped = turn_prediction_accel_m_s2(a, 1.2, 1.5, 1.5)
+    assert turn_prediction_accel_m_s2(a, 1.2, 10.0, 1.5) == capped
+    assert capped[2] == 0.5
+    # both sides of the small-angle series agree (the branch at wt = 1e-4)
+    below = turn_prediction_accel_m_s2(a, 0.99e-4, 1.0, 1.5)
+    above = turn_prediction_accel_m_s2(a, 1.01e-4, 1.0, 1.5)
+    np.testing.assert_allclose(below, above, atol=1e-5)
+
+
+def test_the_law_flies_the_turn_prediction_with_its_turn_rate_and_time_to_go():
+    """apn_law with the target's turn rate, a time to go and t_turn: the command differs from
+    the one without a turn rate by exactly N/2 (a_eq - a) across the LOS (below the limit);
+    with t_turn 0 (the default) the turn rate changes nothing."""
+    gains = Gains().replace(t_turn=1.5)
+    n = np.array((0.0, 1.0, 0.0))
+    a_t = (-2.0, 0.0, 0.0)  # across the LOS (north): a target flying north turning left
+
+    def command(turn_rate: float, gains: Gains = gains) -> np.ndarray:
+        inp = GuidanceInput(
+            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 10.0, 0.0)), (0.0, 0.0), np.eye(3),
+            target_accel_enu_m_s2=a_t, accel_limit_m_s2=20.0, time_to_go_s=1.0,
+            target_turn_rate_rad_s=turn_rate,
+        )  # fmt: skip
+        return apn_law(inp, gains).accel_desired_enu_m_s2
+
+    n_gain = 0.5 * (gains.K_y + gains.K_z)  # N
+    a_eq = np.array(turn_prediction_accel_m_s2(a_t, 0.8, 1.0, 1.5))
+    expected = 0.5 * n_gain * (a_eq - np.array(a_t)) * np.array((1.0, 0.0, 1.0))
+    np.testing.assert_allclose(command(0.8) - command(0.0), expected, atol=1e-9)
+    assert abs(expected[0]) > 0.1
+    assert np.array_equal(command(0.8, Gains()), command(0.0, Gains()))

@@ -6,11 +6,12 @@ Flies the sorties of one cell of the ``agility`` campaign (the same draws and se
 vehicle flies it (the IMM's estimate), and with the IMM's acceleration replaced, whenever the
 true time to go is under ``--last-s``, by the target's true acceleration (ideal sensors,
 analysis only: the bound on what a perfect estimate gains), optionally scaled (``--scale``,
-an estimate that holds that share of the truth) or late (``--delay-s``, one that lags). The
-IMM's velocity (time to go) and everything else the loop sees stay as they are. ``--imm
-KEY=VALUE`` changes a field of the IMM's :class:`~onboard.estimation.imm.ImmConfig` and
-``--set SECTION.KEY=VALUE`` a scenario value, for both. Prints HIT count and mean miss of
-each.
+an estimate that holds that share of the truth) or late (``--delay-s``, one that lags), with
+the truth's turn rate (which the law flies with the gain ``t_turn`` > 0: ``--set
+gains.t_turn=1.5``). The IMM's velocity (time to go) and everything else the loop sees stay
+as they are. ``--imm KEY=VALUE`` changes a field of the IMM's
+:class:`~onboard.estimation.imm.ImmConfig` and ``--set SECTION.KEY=VALUE`` a scenario value
+(``gains.t_turn=1.5``), for both. Prints HIT count and mean miss of each.
 
 A measuring tool beside the product: it reads the simulator's truth, which the loop never does.
 """
@@ -67,9 +68,9 @@ def true_time_to_go_s(sim) -> float:
 
 def fly(job, last_s: float | None, scale: float = 1.0, delay_s: float = 0.0, imm=None):
     """One sortie of ``job``; with ``last_s`` the law is handed the truth's acceleration
-    (:class:`TruthAccel`) while the true time to go is under it; ``imm`` an ImmConfig for the
-    loop's IMM (None: its own). Returns its SortieResult."""
-    from onboard.estimation.imm import MotionEstimate, TargetMotionImm
+    (:class:`TruthAccel`) and turn rate while the true time to go is under it; ``imm`` an
+    ImmConfig for the loop's IMM (None: its own). Returns its SortieResult."""
+    from onboard.estimation.imm import MotionEstimate, TargetMotionImm, turn_rate_rad_s
 
     from ..sim.simulation import Simulation
 
@@ -88,7 +89,8 @@ def fly(job, last_s: float | None, scale: float = 1.0, delay_s: float = 0.0, imm
         if e is None or not true_time_to_go_s(sim) < last_s:
             return e
         a_t = (float(a[0]), float(a[1]), float(a[2]))
-        return MotionEstimate(t, a_t, e.velocity_enu_m_s, 0.0, e.probabilities)
+        omega = turn_rate_rad_s(sim.target.v, a, math.inf)
+        return MotionEstimate(t, a_t, e.velocity_enu_m_s, 0.0, e.probabilities, omega)
 
     loop._track_motion = with_truth
     return sim.run()

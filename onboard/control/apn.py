@@ -9,7 +9,15 @@ the commanded acceleration the zero-effort-miss solution for a constant-accelera
 (Zarchan, Tactical and Strategic Missile Guidance, ch. 8): a_APN = N V_c q' + N/2 a_T,perp.
 Here N is the mean of the velocity-angle gains K_y and K_z (eq. 8), and a_T is the part of
 the IMM's estimate of the target's acceleration (onboard/estimation/imm.py) normal to the
-target's velocity (:func:`manoeuvre_accel_m_s2`).
+target's velocity (:func:`manoeuvre_accel_m_s2`). N/2 a_T is the zero-effort miss of an
+acceleration fixed in direction over the time to go; a target in a coordinated turn turns its
+acceleration with its velocity, at omega = (v x a)_z / |v_h|^2 (the IMM's CT model), and over
+t_go = 1 s at 1-1.5 rad/s that prediction is off by R (omega t - sin omega t), 0.8-1.7 m,
+several hit radii. With the gain ``t_turn`` > 0 the law flies the turn's own zero-effort miss
+instead (:func:`turn_prediction_accel_m_s2`): a_APN = N V_c q' + N / t^2 (d(t) - v t)_perp,
+d(t) - v t the target's displacement beyond its velocity's over the horizon t = min(t_go,
+t_turn). It is off by default: handed the target's true acceleration and turn rate, the law
+hits no more turning targets with it than with the fixed prediction (docs/agility.md).
 
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
@@ -24,7 +32,7 @@ import math
 import numpy as np
 
 from ..datatypes import GRAVITY_M_S2
-from ..estimation.imm import MotionEstimate
+from ..estimation.imm import MotionEstimate, turn_displacement
 from ..gains import GainIndex, Gains
 from .guidance_io import GuidanceInput, GuidanceOutput
 from .los import _f3, saturate3
@@ -96,6 +104,31 @@ def manoeuvre_accel_m_s2(
     return a0 * w, a1 * w, a2 * w
 
 
+def turn_prediction_accel_m_s2(
+    target_accel_enu_m_s2: tuple[float, float, float],
+    turn_rate_rad_s: float,
+    time_to_go_s: float,
+    horizon_max_s: float,
+) -> tuple[float, float, float]:
+    """The constant acceleration (m/s^2 ENU) that displaces the target over the horizon t =
+    min(t_go, ``horizon_max_s``) as its acceleration a turning at ``turn_rate_rad_s`` (about
+    +z) does: a_eq = 2 / t^2 (d(t) - v t), d(t) - v t = (B2(omega, t) a_h, a_z t^2 / 2) with
+    B2 the turn's double integral (imm.turn_displacement). For a coordinated turn (a_h normal
+    to v_h, omega = |a_h| / |v_h|) that is ((sin wt)/w - t) v + ((1 - cos wt)/w^2) a, so N/2
+    a_eq,perp is the turn's zero-effort-miss term N / t^2 (d(t) - v t)_perp. It is a as omega
+    -> 0 or t -> 0, and a without a time to go (nan) or a horizon (0)."""
+    t = min(time_to_go_s, horizon_max_s)
+    if not (t > 0.0 and turn_rate_rad_s != 0.0 and math.isfinite(turn_rate_rad_s)):
+        return target_accel_enu_m_s2
+    a0, a1, a2 = target_accel_enu_m_s2
+    B = turn_displacement(turn_rate_rad_s, t) * (2.0 / (t * t))
+    return (
+        float(B[0, 0] * a0 + B[0, 1] * a1),
+        float(B[1, 0] * a0 + B[1, 1] * a1),
+        a2,
+    )
+
+
 def apn_term(
     target_accel_enu_m_s2: tuple[float, float, float],
     los_enu: tuple[float, float, float],
@@ -113,7 +146,8 @@ def apn_term(
 def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """APN (module docstring): PNG with the airframe's limit ``inp.accel_limit_m_s2`` (the
     gains' a_max when it is not given), plus N/2 a_T,perp when the target's acceleration is
-    known, saturated to that limit, then the FOV guard."""
+    known (turned at ``inp.target_turn_rate_rad_s`` over min(t_go, ``t_turn``),
+    :func:`turn_prediction_accel_m_s2`), saturated to that limit, then the FOV guard."""
     lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
     if inp.time_to_go_s < gains.t_end and math.isfinite(inp.endgame_accel_limit_m_s2):
         lim = max(lim, inp.endgame_accel_limit_m_s2)
@@ -135,7 +169,10 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
         return GuidanceOutput(np.array((a0, a1, a2)), math.nan, math.nan, True)
     if inp.target_accel_enu_m_s2 is not None:
         k = 0.5 * (gains.K_y + gains.K_z)
-        b0, b1, b2 = apn_term(inp.target_accel_enu_m_s2, los, k)
+        a_t = turn_prediction_accel_m_s2(
+            inp.target_accel_enu_m_s2, inp.target_turn_rate_rad_s, inp.time_to_go_s, gains.t_turn
+        )
+        b0, b1, b2 = apn_term(a_t, los, k)
         a0, a1, a2 = saturate3(a0 + b0, a1 + b1, a2 + b2, lim)
         fov_margin = math.radians(gains.fov_margin)
         _, a0, a1, a2 = fov_guard_floats(

@@ -42,6 +42,8 @@ class GuidanceInput:
     # the augmented law's inputs (onboard/control/apn.py)
     target_accel_enu_m_s2: tuple[float, float, float] | None = None
     accel_limit_m_s2: float = math.nan
+    # the rate (rad/s about +z, + left) the target's acceleration turns at (the IMM's CT model)
+    target_turn_rate_rad_s: float = 0.0
     # the time to go (s) from the DKF's range and the closing speed (nan: unknown), and the
     # airframe's limit in the endgame (m/s^2; nan: accel_limit_m_s2): the augmented law's
     time_to_go_s: float = math.nan

@@ -89,13 +89,15 @@ class ImmConfig:
 class MotionEstimate:
     """The IMM's output after an update: the combined acceleration (m/s^2 ENU) and velocity
     (m/s ENU), the trace of the acceleration's covariance (m^2/s^4) and the model
-    probabilities in :data:`MODELS` order."""
+    probabilities in :data:`MODELS` order, and the CT model's turn rate (rad/s)."""
 
     time_s: float
     accel_enu_m_s2: tuple[float, float, float]
     velocity_enu_m_s: tuple[float, float, float]
     accel_var_m2_s4: float
     probabilities: tuple[float, float, float] = field(default=(1.0, 0.0, 0.0))
+    # the CT model's turn rate (rad/s about +z, + left; :func:`turn_rate_rad_s`)
+    turn_rate_rad_s: float = 0.0
 
 
 def position_from_image(
@@ -223,17 +225,47 @@ def _ca_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     return F, Q
 
 
+def turn_rate_rad_s(
+    velocity_enu_m_s: np.ndarray | tuple[float, ...],
+    accel_enu_m_s2: np.ndarray | tuple[float, ...],
+    max_turn_rad_s: float,
+) -> float:
+    """The turn rate (rad/s about +z, + left) of a target moving at ``velocity_enu_m_s`` and
+    accelerating at ``accel_enu_m_s2``: omega = (v x a)_z / |v_h|^2, clipped to
+    +-``max_turn_rad_s``; 0 slower than 0.5 m/s horizontally (no heading to turn)."""
+    v0, v1 = float(velocity_enu_m_s[0]), float(velocity_enu_m_s[1])
+    vh2 = v0 * v0 + v1 * v1
+    omega = (
+        (v0 * float(accel_enu_m_s2[1]) - v1 * float(accel_enu_m_s2[0])) / vh2 if vh2 > 0.25 else 0.0
+    )
+    return min(max(omega, -max_turn_rad_s), max_turn_rad_s)
+
+
+def turn_displacement(omega_rad_s: float, t_s: float) -> np.ndarray:
+    """B2 (2x2, s^2): the horizontal displacement over ``t_s`` of an acceleration a_h that
+    turns at ``omega_rad_s`` about +z, beyond the velocity's v t: the double integral of
+    Rot(omega t) over [0, t], B2 = [[1 - c, s - wt], [wt - s, 1 - c]] / omega^2 (wt = omega t,
+    s, c its sine and cosine); t^2 / 2 I as omega -> 0 (constant acceleration)."""
+    wt = omega_rad_s * t_s
+    if abs(wt) < 1e-4:  # the series to wt^3: B2 = t^2 (I/2 + (wt/6) J), J the +90 deg turn
+        k = t_s * t_s * wt / 6.0
+        return np.array(((0.5 * t_s * t_s, -k), (k, 0.5 * t_s * t_s)))
+    s, c = math.sin(wt), math.cos(wt)
+    return np.array(((1.0 - c, s - wt), (wt - s, 1.0 - c))) / (omega_rad_s * omega_rad_s)
+
+
 def _ct_matrices(dt: float, q: float, omega: float) -> tuple[np.ndarray, np.ndarray]:
     """CA whose horizontal acceleration turns at ``omega`` (rad/s) about +z over the step:
     a_h' = Rot(omega T) a_h, v_h' = v_h + B1 a_h, p_h' = p_h + v_h T + B2 a_h with B1, B2 the
-    integrals of Rot(omega t) once and twice over [0, T]; white jerk noise as CA."""
+    integrals of Rot(omega t) once and twice over [0, T] (:func:`turn_displacement`); white
+    jerk noise as CA."""
     F, Q = _ca_matrices(dt, q)
     if abs(omega) > 1e-6:
         wt = omega * dt
         s, c = math.sin(wt), math.cos(wt)
         F[6:8, 6:8] = ((c, -s), (s, c))
         F[3:5, 6:8] = np.array(((s, c - 1.0), (1.0 - c, s))) / omega
-        F[0:2, 6:8] = np.array(((1.0 - c, s - wt), (wt - s, 1.0 - c))) / (omega * omega)
+        F[0:2, 6:8] = turn_displacement(omega, dt)
     return F, Q
 
 
@@ -336,7 +368,13 @@ class TargetMotionImm:
             (float(x[3]), float(x[4]), float(x[5])),
             float(P[6, 6] + P[7, 7] + P[8, 8]),
             (mu[0], mu[1], mu[2]),
+            self._turn_rate(),
         )
+
+    def _turn_rate(self) -> float:
+        """CT's own turn rate (the combined acceleration is shrunk toward CV's a = 0)."""
+        x = self._imm.X[2]
+        return turn_rate_rad_s(x[3:6], x[6:9], self.config.max_turn_rad_s)
 
     def update(
         self,
@@ -428,10 +466,7 @@ class TargetMotionImm:
     def _predict(self, dt: float) -> None:
         cfg = self.config
         imm = self._imm
-        x = imm.X[2]  # CT's own estimate: the combined one is shrunk toward CV's a = 0
-        vh2 = float(x[3] * x[3] + x[4] * x[4])
-        omega = float(x[3] * x[7] - x[4] * x[6]) / vh2 if vh2 > 0.25 else 0.0
-        omega = min(max(omega, -cfg.max_turn_rad_s), cfg.max_turn_rad_s)
+        omega = self._turn_rate()
         models = (
             _cv_matrices(dt, cfg.q_cv_m_s2),
             _ca_matrices(dt, cfg.q_ca_m_s3),
