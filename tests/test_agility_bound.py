@@ -47,6 +47,17 @@ def test_a_perfect_endgame_acceleration_hits_a_turn_the_imm_misses():
     assert fly(job, 1.5).miss_m < 0.5
 
 
+def test_the_truth_predicted_as_a_turn_hits_where_the_fixed_prediction_misses():
+    """Agility campaign seed 0, n = 20, turn at 7.5 m/s^2 (1.5 rad/s), try 8, the target's true
+    acceleration handed over for the whole flight: predicted fixed in direction (t_turn 0) it
+    passes 2.08 m from the target; turned at its true turn rate over min(t_go, 0.75 s)
+    (t_turn 0.75, apn.turn_prediction_accel_m_s2) it hits (0.26 m)."""
+    fixed = cell_jobs("turn", 7.5, 20, 0, {"gains.t_turn": 0.0})[8]
+    turned = cell_jobs("turn", 7.5, 20, 0, {"gains.t_turn": 0.75})[8]
+    assert fly(fixed, 100.0).miss_m > 1.5
+    assert fly(turned, 100.0).miss_m < 0.35
+
+
 def test_bad_input_is_refused(capsys):
     for argv in (
         ["--n", "0"],
