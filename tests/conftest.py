@@ -58,14 +58,20 @@ def pytest_collection_modifyitems(config, items) -> None:
     the two cores. Tests that share a module-scoped fixture (a ground station, a browser, a
     flown log) form one group per module: the fixture is made once, and a test that expects
     the state the previous ones left (the browser modules) finds it. Tests marked ``early``
-    come first."""
+    come first. The tiers (pyproject.toml's markers): a test that flies the rig is marked
+    ``rig``, one that drives chromium (the ``browser`` fixture) ``browser``."""
     for item in items:
+        rig = _flies_the_rig(item)
+        info = getattr(item, "_fixtureinfo", None)
+        if rig:
+            item.add_marker(pytest.mark.rig)
+        if info is not None and "browser" in info.names_closure:
+            item.add_marker(pytest.mark.browser)
         if item.get_closest_marker("xdist_group") is not None:
             continue
-        if _flies_the_rig(item):
+        if rig:
             item.add_marker(pytest.mark.xdist_group("sitl-rig"))
             continue
-        info = getattr(item, "_fixtureinfo", None)
         if info is None:
             continue
         shared = any(
