@@ -16,8 +16,9 @@ t_go = 1 s at 1-1.5 rad/s that prediction is off by R (omega t - sin omega t), 0
 several hit radii. With the gain ``t_turn`` > 0 the law flies the turn's own zero-effort miss
 instead (:func:`turn_prediction_accel_m_s2`): a_APN = N V_c q' + N / t^2 (d(t) - v t)_perp,
 d(t) - v t the target's displacement beyond its velocity's over the horizon t = min(t_go,
-t_turn). It is off by default: handed the target's true acceleration and turn rate, the law
-hits no more turning targets with it than with the fixed prediction (docs/agility.md).
+t_turn). It is off by default: flown with the IMM's estimate, which holds about half of a
+turn's acceleration, it hits no more turning targets than the fixed prediction (handed the
+true acceleration and turn rate it does, from 7.5 m/s^2 on; docs/agility.md).
 
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
