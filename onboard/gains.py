@@ -407,6 +407,14 @@ class Gains:
         "APN: predict the target's accel turning at its turn rate over min(t_go, this) (0=off)",
         "augmented PN",
     )
+    k_turn_v: float = _gain(
+        0.0,
+        "-",
+        0.0,
+        5.0,
+        "APN: speed cap, this x the speed whose tightest turn is the target's turn (0=off)",
+        "augmented PN",
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")

@@ -58,6 +58,16 @@ def test_the_truth_predicted_as_a_turn_hits_where_the_fixed_prediction_misses():
     assert fly(turned, 100.0).miss_m < 0.35
 
 
+def test_the_turns_speed_cap_hits_a_fast_turn_the_default_misses():
+    """Agility campaign seed 1000, n = 20, turn at 7.5 m/s^2, try 0, flown with the IMM as the
+    vehicle flies it: at the default speed it passes 1.46 m from the target; with the speed
+    capped to the one whose tightest turn is the target's (k_turn_v 1) it hits (0.05 m)."""
+    default = cell_jobs("turn", 7.5, 20, 1000)[0]
+    capped = cell_jobs("turn", 7.5, 20, 1000, {"gains.k_turn_v": 1.0})[0]
+    assert fly(default, None).miss_m > 1.0
+    assert fly(capped, None).miss_m < 0.2
+
+
 def test_bad_input_is_refused(capsys):
     for argv in (
         ["--n", "0"],

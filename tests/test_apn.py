@@ -19,6 +19,7 @@ from onboard.control.apn import (
     manoeuvre_accel_m_s2,
     time_to_go_s,
     turn_prediction_accel_m_s2,
+    turn_speed_cap_m_s,
 )
 from onboard.control.guidance import GuidanceInput, direction_angles
 from onboard.estimation.imm import MotionEstimate
@@ -245,3 +246,36 @@ def test_the_law_flies_the_turn_prediction_with_its_turn_rate_and_time_to_go():
     np.testing.assert_allclose(command(0.8) - command(0.0), expected, atol=1e-9)
     assert abs(expected[0]) > 0.1
     assert np.array_equal(command(0.8, Gains()), command(0.0, Gains()))
+
+
+def test_the_turns_speed_cap_matches_the_vehicles_tightest_turn_to_the_targets():
+    """A target at 5 m/s turning at 7.5 m/s^2 (1.5 rad/s, radius 3.33 m) and a limit of
+    9.81 m/s^2: the vehicle turns on that radius at sqrt(9.81 x 3.33) = 5.72 m/s; k scales
+    it; no turn, no k or a target at rest: no cap."""
+    a = (0.0, 7.5, 0.0)
+    cap = turn_speed_cap_m_s(a, 1.5, G, 1.0)
+    assert cap == pytest.approx(math.sqrt(G * 25.0 / 7.5), rel=1e-12)  # 5.72 m/s
+    assert cap**2 / G == pytest.approx(25.0 / 7.5, rel=1e-12)  # the target's radius
+    assert turn_speed_cap_m_s(a, -1.5, G, 0.5) == pytest.approx(0.5 * cap, rel=1e-12)
+    assert turn_speed_cap_m_s(a, 1.5, G, 0.0) == math.inf
+    assert turn_speed_cap_m_s(None, 1.5, G, 1.0) == math.inf
+    assert turn_speed_cap_m_s((0.0, 0.3, 0.0), 1.5, G, 1.0) == math.inf  # no turn to match
+    assert turn_speed_cap_m_s(a, 0.01, G, 1.0) == math.inf
+    assert turn_speed_cap_m_s((0.0, 0.6, 0.0), 3.0, G, 1.0) == math.inf  # 0.2 m/s: at rest
+
+
+def test_the_law_flies_no_faster_than_the_turns_speed_cap():
+    """The speed ramp's reference is capped: flying at 9 m/s toward a turning target, the
+    capped law decelerates along the LOS where the default one accelerates."""
+    n = np.array((0.0, 1.0, 0.0))
+
+    def along(gains: Gains) -> float:
+        inp = GuidanceInput(
+            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 9.0, 0.0)), (0.0, 0.0), np.eye(3),
+            target_accel_enu_m_s2=(7.5, 0.0, 0.0), accel_limit_m_s2=G,
+            target_turn_rate_rad_s=1.5, time_to_go_s=3.0,
+        )  # fmt: skip
+        return float(apn_law(inp, gains).accel_desired_enu_m_s2 @ n)
+
+    assert along(Gains()) > 0.0
+    assert along(Gains().replace(k_turn_v=1.0)) < 0.0

@@ -130,6 +130,30 @@ def turn_prediction_accel_m_s2(
     )
 
 
+MIN_TURN_ACCEL_M_S2 = 0.5  # a flown acceleration under this is no turn to match
+MIN_TURN_RATE_RAD_S = 0.05  # nor a turn rate under this (a radius over 100 m at 5 m/s)
+
+
+def turn_speed_cap_m_s(
+    target_accel_enu_m_s2: tuple[float, float, float] | None,
+    turn_rate_rad_s: float,
+    accel_limit_m_s2: float,
+    k: float,
+) -> float:
+    """k times the speed (m/s) at which the vehicle's tightest turn (radius v^2 / a_lim) is the
+    target's (|a_T| / omega^2, a_T its flown acceleration turning at omega): k sqrt(a_lim
+    |a_T|) / |omega|. A vehicle faster than that circles outside a target that turns inside
+    it. inf when k is 0, without a turn (|a_T| under MIN_TURN_ACCEL_M_S2, |omega| under
+    MIN_TURN_RATE_RAD_S, a target slower than MIN_TURN_SPEED_M_S) or without a limit."""
+    w = abs(turn_rate_rad_s)
+    if target_accel_enu_m_s2 is None or not (k > 0.0 and w >= MIN_TURN_RATE_RAD_S):
+        return math.inf
+    a = math.sqrt(sum(c * c for c in target_accel_enu_m_s2))
+    if not (a >= MIN_TURN_ACCEL_M_S2 and a / w > MIN_TURN_SPEED_M_S and accel_limit_m_s2 > 0.0):
+        return math.inf
+    return k * math.sqrt(accel_limit_m_s2 * a) / w
+
+
 def apn_term(
     target_accel_enu_m_s2: tuple[float, float, float],
     los_enu: tuple[float, float, float],
@@ -148,13 +172,18 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     """APN (module docstring): PNG with the airframe's limit ``inp.accel_limit_m_s2`` (the
     gains' a_max when it is not given), plus N/2 a_T,perp when the target's acceleration is
     known (turned at ``inp.target_turn_rate_rad_s`` over min(t_go, ``t_turn``),
-    :func:`turn_prediction_accel_m_s2`), saturated to that limit, then the FOV guard."""
-    lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
+    :func:`turn_prediction_accel_m_s2`), saturated to that limit, then the FOV guard; with
+    ``k_turn_v`` > 0 the speed ramp's cap is at most :func:`turn_speed_cap_m_s`."""
+    base_lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
+    lim = base_lim
     if inp.time_to_go_s < gains.t_end and math.isfinite(inp.endgame_accel_limit_m_s2):
         lim = max(lim, inp.endgame_accel_limit_m_s2)
     G = gains.packed.copy()
     G[GainIndex.a_max] = lim
-    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s)
+    turn_cap = turn_speed_cap_m_s(
+        inp.target_accel_enu_m_s2, inp.target_turn_rate_rad_s, base_lim, gains.k_turn_v
+    )
+    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s, turn_cap)
     vt = inp.target_vel_enu_m_s
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
     R = inp.R_WC
