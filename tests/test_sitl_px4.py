@@ -261,14 +261,19 @@ def test_arm_takeoff_rtl_and_land_from_the_ground(px4):
 
 
 def test_timesync_is_answered_on_the_vehicles_boot_clock(px4):
+    before_ms = px4.last["GLOBAL_POSITION_INT"].time_boot_ms
     for i in range(20):
         px4.link.send(px4.link.mav.timesync_encode(0, 1000 + i))
         px4.pump(0.02)
     px4.pump(0.2)
     replies = [m for _, m in px4.timesync if m.tc1 != 0]
     assert sorted(m.ts1 for m in replies) == list(range(1000, 1020))
-    boot_ms = px4.last["GLOBAL_POSITION_INT"].time_boot_ms
-    assert abs(replies[-1].tc1 / 1e6 - boot_ms) < 300  # the clock of time_boot_ms
+    after_ms = px4.last["GLOBAL_POSITION_INT"].time_boot_ms
+    # the clock of time_boot_ms: each answer's time falls between the position reports
+    # received before the first request and after the last answer (a busy machine delays the
+    # reports, not the clock), give or take one report period
+    for m in replies:
+        assert before_ms - 100 <= m.tc1 / 1e6 <= after_ms + 300, (before_ms, m.tc1, after_ms)
 
 
 def test_px4_parameter_checks():
