@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..datatypes import GRAVITY_M_S2
-from ..estimation.imm import MotionEstimate, turn_displacement
+from ..estimation.imm import MIN_TURN_SPEED_M_S, MotionEstimate, turn_displacement
 from ..gains import GainIndex, Gains
 from .guidance_io import GuidanceInput, GuidanceOutput
 from .los import _f3, saturate3
@@ -73,9 +73,6 @@ def time_to_go_s(
         v0, v1, v2 = v0 - t0, v1 - t1, v2 - t2
     closing = v0 * n0 + v1 * n1 + v2 * n2
     return range_m / closing if closing > 0.0 else math.nan
-
-
-MIN_TURN_SPEED_M_S = 0.5  # slower than this, a target's acceleration is all speed change
 
 
 def manoeuvre_accel_m_s2(

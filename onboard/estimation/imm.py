@@ -225,6 +225,10 @@ def _ca_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     return F, Q
 
 
+# slower than this (m/s) a target has no heading to turn: its acceleration is all speed change
+MIN_TURN_SPEED_M_S = 0.5
+
+
 def turn_rate_rad_s(
     velocity_enu_m_s: np.ndarray | tuple[float, ...],
     accel_enu_m_s2: np.ndarray | tuple[float, ...],
@@ -232,11 +236,13 @@ def turn_rate_rad_s(
 ) -> float:
     """The turn rate (rad/s about +z, + left) of a target moving at ``velocity_enu_m_s`` and
     accelerating at ``accel_enu_m_s2``: omega = (v x a)_z / |v_h|^2, clipped to
-    +-``max_turn_rad_s``; 0 slower than 0.5 m/s horizontally (no heading to turn)."""
+    +-``max_turn_rad_s``; 0 slower than MIN_TURN_SPEED_M_S horizontally (no heading to turn)."""
     v0, v1 = float(velocity_enu_m_s[0]), float(velocity_enu_m_s[1])
     vh2 = v0 * v0 + v1 * v1
     omega = (
-        (v0 * float(accel_enu_m_s2[1]) - v1 * float(accel_enu_m_s2[0])) / vh2 if vh2 > 0.25 else 0.0
+        (v0 * float(accel_enu_m_s2[1]) - v1 * float(accel_enu_m_s2[0])) / vh2
+        if vh2 > MIN_TURN_SPEED_M_S**2
+        else 0.0
     )
     return min(max(omega, -max_turn_rad_s), max_turn_rad_s)
 
