@@ -415,6 +415,12 @@ class Gains:
         "APN: speed cap, this x the speed whose tightest turn is the target's turn (0=off)",
         "augmented PN",
     )
+    v_end: float = _gain(
+        6.0, "m/s", 0.0, 30.0, "APN: cap within r_end: target's speed + this", "augmented PN"
+    )
+    r_end: float = _gain(
+        20.0, "m", 0.0, 100.0, "APN: range within which the speed cap v_end holds", "augmented PN"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gain")
@@ -456,13 +462,7 @@ class GainSpec:
 
 GAIN_SPECS: tuple[GainSpec, ...] = tuple(
     GainSpec(
-        f.name,
-        f.default,
-        f.metadata["unit"],
-        f.metadata["min"],
-        f.metadata["max"],
-        f.metadata["meaning"],
-        f.metadata["group"],
+        f.name, f.default, *(f.metadata[k] for k in ("unit", "min", "max", "meaning", "group"))
     )
     for f in dataclasses.fields(Gains)
 )
