@@ -41,6 +41,7 @@ GAIN_GROUPS: tuple[str, ...] = (
     "limits",
     "baselines (PG, IBVS)",
     "augmented PN",
+    "APN limits",
     "disturbance and latency",
     "track loss",
     "search",
@@ -357,7 +358,7 @@ class Gains:
         10.0,
         80.0,
         "APN: the airframe's tilt limit (PX4 MPC_TILTMAX_AIR), caps its lateral accel",
-        "augmented PN",
+        "APN limits",
     )
     tilt_end: float = _gain(
         70.0,
@@ -365,7 +366,7 @@ class Gains:
         10.0,
         80.0,
         "APN: tilt allowed in the endgame (time to go under t_end), caps its lateral accel",
-        "augmented PN",
+        "APN limits",
     )
     t_end: float = _gain(
         1.0,
@@ -373,7 +374,7 @@ class Gains:
         0.0,
         5.0,
         "APN: the endgame's time to go, in which tilt_end replaces tilt_max",
-        "augmented PN",
+        "APN limits",
     )
     z_off: float = _gain(
         1.0,
@@ -397,7 +398,7 @@ class Gains:
         0.0,
         10.0,
         "APN: vertical acceleration kept in reserve from the thrust",
-        "augmented PN",
+        "APN limits",
     )
     t_turn: float = _gain(
         0.0,
@@ -414,6 +415,12 @@ class Gains:
         5.0,
         "APN: speed cap, this x the speed whose tightest turn is the target's turn (0=off)",
         "augmented PN",
+    )
+    v_end: float = _gain(
+        6.0, "m/s", 0.0, 30.0, "APN: cap within r_end: target's speed + this", "APN limits"
+    )
+    r_end: float = _gain(
+        20.0, "m", 0.0, 100.0, "APN: range within which the speed cap v_end holds", "APN limits"
     )
 
     def __post_init__(self) -> None:
@@ -456,13 +463,7 @@ class GainSpec:
 
 GAIN_SPECS: tuple[GainSpec, ...] = tuple(
     GainSpec(
-        f.name,
-        f.default,
-        f.metadata["unit"],
-        f.metadata["min"],
-        f.metadata["max"],
-        f.metadata["meaning"],
-        f.metadata["group"],
+        f.name, f.default, *(f.metadata[k] for k in ("unit", "min", "max", "meaning", "group"))
     )
     for f in dataclasses.fields(Gains)
 )

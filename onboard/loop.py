@@ -426,6 +426,8 @@ class InterceptionLoop:
                             motion, gains.z_off, gains.z_full
                         ),
                         target_turn_rate_rad_s=0.0 if motion is None else motion.turn_rate_rad_s,
+                        range_est_m=math.nan if est_range is None else est_range,
+                        target_speed_m_s=math.nan if motion is None else motion.speed_m_s,
                         accel_limit_m_s2=available_lateral_accel_m_s2(
                             self.vehicle.hover_thrust_normalised, gains.tilt_max, gains.a_z_margin
                         ),

@@ -190,3 +190,23 @@ def test_an_evasive_sortie_end_to_end_the_augmented_law_hits_where_png_misses():
     assert probs and min(p[0] for p in probs[-30:]) < 0.5
     png = Simulation(sc, "png", 1, "projected", keep_records=False).run()
     assert png.outcome == "MISS" and png.miss_m == pytest.approx(0.517, abs=0.1)
+
+
+def test_a_jink_from_5_m_is_hit_when_the_endgame_slows_the_approach():
+    """Agility campaign seed 1000, jink from 5 m, try 1 (realistic defaults): with the
+    endgame's speed cap (within r_end 20 m, v_end 6 m/s over the target's speed) the
+    augmented law passes the target at 8.51 m/s and hits (0.043 m); without it (v_end 0) it
+    passes at 10.71 m/s, 0.77 s sooner, and misses by 0.526 m. Tolerances: 0.05 m on the hit,
+    the outcomes and 0.5 m/s."""
+    from groundstation.bench.agility_bound import cell_jobs
+    from groundstation.sim.simulation import Simulation
+
+    def fly(overrides: dict) -> object:
+        job = cell_jobs("jink", 5.0, 20, 1000, overrides)[1]
+        return Simulation(job.scenario, job.law, job.seed, job.camera, keep_records=False).run()
+
+    capped, uncapped = fly({}), fly({"gains.v_end": 0.0})
+    assert capped.outcome == "HIT" and capped.miss_m == pytest.approx(0.043, abs=0.05)
+    assert capped.terminal_speed_m_s == pytest.approx(8.51, abs=0.5)
+    assert uncapped.outcome == "MISS" and uncapped.miss_m > 0.4
+    assert uncapped.terminal_speed_m_s == pytest.approx(10.71, abs=0.5)

@@ -16,6 +16,7 @@ from onboard.control.apn import (
     apn_law,
     apn_term,
     available_lateral_accel_m_s2,
+    endgame_speed_cap_m_s,
     manoeuvre_accel_m_s2,
     time_to_go_s,
     turn_prediction_accel_m_s2,
@@ -279,3 +280,43 @@ def test_the_law_flies_no_faster_than_the_turns_speed_cap():
 
     assert along(Gains()) > 0.0
     assert along(Gains().replace(k_turn_v=1.0)) < 0.0
+
+
+def test_the_endgame_caps_the_approach_speed_within_its_range():
+    """Within r_end (20 m) of the target the speed ramp's cap is v_end (6 m/s) over the
+    target's speed (0 when unknown); farther, with the range unknown (nan) or v_end 0 (off)
+    there is none."""
+    gains = Gains()
+    assert (gains.v_end, gains.r_end) == (6.0, 20.0)
+    assert endgame_speed_cap_m_s(19.9, 0.0, gains) == 6.0
+    assert endgame_speed_cap_m_s(5.0, 4.5, gains) == 10.5
+    assert endgame_speed_cap_m_s(5.0, math.nan, gains) == 6.0
+    assert endgame_speed_cap_m_s(0.5, 1.0, gains.replace(v_end=4.0)) == 5.0
+    for range_m, g in (
+        (20.0, gains),
+        (30.0, gains),
+        (math.nan, gains),
+        (5.0, gains.replace(v_end=0.0)),
+    ):
+        assert endgame_speed_cap_m_s(range_m, 0.0, g) == math.inf
+
+
+def test_the_law_closes_in_no_faster_than_v_end():
+    """Flying at 9 m/s toward a hovering target 8 m away the law decelerates along the LOS (the
+    speed ramp's reference is v_end, 6 m/s); toward one flying at 5 m/s (reference 11 m/s), 30 m
+    away, or with v_end 0, it accelerates."""
+    n = np.array((0.0, 1.0, 0.0))
+
+    def along(gains: Gains, range_m: float, target_speed_m_s: float = 0.0) -> float:
+        inp = GuidanceInput(
+            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 9.0, 0.0)), (0.0, 0.0), np.eye(3),
+            target_accel_enu_m_s2=(0.0, 0.0, 0.0), accel_limit_m_s2=G,
+            time_to_go_s=range_m / 9.0, range_est_m=range_m, target_speed_m_s=target_speed_m_s,
+        )  # fmt: skip
+        return float(apn_law(inp, gains).accel_desired_enu_m_s2 @ n)
+
+    assert along(Gains(), 8.0) < 0.0
+    assert along(Gains(), 8.0, 5.0) > 0.0
+    assert along(Gains(), 30.0) > 0.0
+    assert along(Gains().replace(v_end=0.0), 8.0) > 0.0
+    assert along(Gains().replace(v_end=10.0), 8.0) > 0.0

@@ -20,6 +20,10 @@ t_turn). It is off by default: flown with the IMM's estimate, which holds about 
 turn's acceleration, it hits no more turning targets than the fixed prediction (handed the
 true acceleration and turn rate it does, from 7.5 m/s^2 on; docs/agility.md).
 
+Within ``r_end`` of the target the speed ramp's reference is at most ``v_end`` over the
+target's speed (:func:`endgame_speed_cap_m_s`): a hovering target is closed on at 6 m/s
+instead of 9-11, which leaves the vehicle the time to answer a dart from 5 m.
+
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
 kept for the vertical, capped by the tilt limit, g tan(tilt_max). The FOV guard
@@ -151,6 +155,16 @@ def turn_speed_cap_m_s(
     return k * math.sqrt(accel_limit_m_s2 * a) / w
 
 
+def endgame_speed_cap_m_s(range_m: float, target_speed_m_s: float, gains: Gains) -> float:
+    """The speed ramp's cap (m/s) near the target: within ``r_end`` (m) of it, ``v_end`` more
+    than the target's speed (0 when unknown); inf when ``v_end`` is 0 (off), farther or with
+    the range unknown (nan). A hovering target is closed on at ``v_end``, which leaves the
+    vehicle the time to answer a late dart; one in flight, as fast as the law flew before."""
+    if not (gains.v_end > 0.0 and range_m < gains.r_end):
+        return math.inf
+    return gains.v_end + (target_speed_m_s if math.isfinite(target_speed_m_s) else 0.0)
+
+
 def apn_term(
     target_accel_enu_m_s2: tuple[float, float, float],
     los_enu: tuple[float, float, float],
@@ -170,7 +184,8 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     gains' a_max when it is not given), plus N/2 a_T,perp when the target's acceleration is
     known (turned at ``inp.target_turn_rate_rad_s`` over min(t_go, ``t_turn``),
     :func:`turn_prediction_accel_m_s2`), saturated to that limit, then the FOV guard; with
-    ``k_turn_v`` > 0 the speed ramp's cap is at most :func:`turn_speed_cap_m_s`."""
+    ``k_turn_v`` > 0 the speed ramp's cap is at most :func:`turn_speed_cap_m_s`, and near the
+    target :func:`endgame_speed_cap_m_s`."""
     base_lim = inp.accel_limit_m_s2 if math.isfinite(inp.accel_limit_m_s2) else gains.a_max
     lim = base_lim
     if inp.time_to_go_s < gains.t_end and math.isfinite(inp.endgame_accel_limit_m_s2):
@@ -180,7 +195,8 @@ def apn_law(inp: GuidanceInput, gains: Gains) -> GuidanceOutput:
     turn_cap = turn_speed_cap_m_s(
         inp.target_accel_enu_m_s2, inp.target_turn_rate_rad_s, base_lim, gains.k_turn_v
     )
-    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s, turn_cap)
+    end_cap = endgame_speed_cap_m_s(inp.range_est_m, inp.target_speed_m_s, gains)
+    G[GainIndex.v_max] = min(gains.v_max, inp.speed_cap_m_s, turn_cap, end_cap)
     vt = inp.target_vel_enu_m_s
     t0, t1, t2 = (math.nan,) * 3 if vt is None else _f3(vt)
     R = inp.R_WC

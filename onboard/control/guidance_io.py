@@ -44,6 +44,10 @@ class GuidanceInput:
     accel_limit_m_s2: float = math.nan
     # the rate (rad/s about +z, + left) the target's acceleration turns at (the IMM's CT model)
     target_turn_rate_rad_s: float = 0.0
+    # the DKF's range estimate (m) whatever its confidence, the IMM's target speed (m/s);
+    # nan without one
+    range_est_m: float = math.nan
+    target_speed_m_s: float = math.nan
     # the time to go (s) from the DKF's range and the closing speed (nan: unknown), and the
     # airframe's limit in the endgame (m/s^2; nan: accel_limit_m_s2): the augmented law's
     time_to_go_s: float = math.nan

@@ -99,6 +99,10 @@ class MotionEstimate:
     # the CT model's turn rate (rad/s about +z, + left; :func:`turn_rate_rad_s`)
     turn_rate_rad_s: float = 0.0
 
+    @property
+    def speed_m_s(self) -> float:
+        return math.hypot(*self.velocity_enu_m_s)
+
 
 def position_from_image(
     xn: float, yn: float, rho: float, P3: np.ndarray, R_WC: np.ndarray, camera_enu_m: np.ndarray
