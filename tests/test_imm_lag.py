@@ -32,3 +32,6 @@ def test_bad_input_is_refused(capsys):
         with pytest.raises(SystemExit):
             main(argv)
     assert "no cell" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["--set", "gains.nope=1"])
+    assert e.value.code == 2 and "unknown gain(s): nope" in capsys.readouterr().err

@@ -143,6 +143,7 @@ def cell_parser(description: str) -> argparse.ArgumentParser:
     ap.add_argument("--n", type=int, default=10, help="tries of the cell (the campaign's --n)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--imm", action="append", metavar="KEY=VALUE", help="an ImmConfig field")
+    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a scenario value")
     return ap
 
 
@@ -167,7 +168,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--last-s", type=float, default=1.5, help="truth within this time to go")
     ap.add_argument("--scale", type=float, default=1.0, help="share of the truth handed over")
     ap.add_argument("--delay-s", type=float, default=0.0, help="the truth this late (s)")
-    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a scenario value")
     args = ap.parse_args(argv)
     for name in ("last_s", "scale", "delay_s"):
         x = getattr(args, name)
