@@ -102,8 +102,9 @@ class ControlTelemetry:
     # the in-flight target size and camera-offset estimates (onboard/estimation/self_calibration.py)
     self_cal: SelfCalEstimate | None = None
     # the IMM of the target's motion (onboard/estimation/imm.py), None when it does not run:
-    # its acceleration (m/s^2 ENU) and the model probabilities (cv, ca, ct)
+    # its acceleration (m/s^2 ENU), the model probabilities (cv, ca, ct), CT's turn rate (rad/s)
     target_accel_enu_m_s2: tuple[float, float, float] | None = None
     motion_model_probs: tuple[float, float, float] | None = None
+    target_turn_rate_rad_s: float | None = None
     # the approach's speed limit near the ground (onboard/control/clearance.py), m/s; inf: none
     speed_cap_m_s: float = math.inf

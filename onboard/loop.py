@@ -494,5 +494,6 @@ class InterceptionLoop:
             self_cal=self._self_cal_est,
             target_accel_enu_m_s2=None if motion is None else motion.accel_enu_m_s2,
             motion_model_probs=None if motion is None else motion.probabilities,
+            target_turn_rate_rad_s=None if motion is None else motion.turn_rate_rad_s,
             speed_cap_m_s=self.speed_cap_m_s,
         )

@@ -108,6 +108,8 @@ DKF: tuple[MessageField, ...] = (
        "target acceleration, ENU (IMM of its motion; null when it does not run)", parts=_ENU),
     _f("model_probs", "numbers", "-", "IMM model probabilities (CV, CA, coordinated turn)",
        parts=("cv (constant velocity)", "ca (constant acceleration)", "ct (coordinated turn)")),
+    _f("target_turn_rate_rad_s", "number", "rad/s",
+       "the IMM's coordinated-turn rate, + left (null when it does not run)"),
 )  # fmt: skip
 
 

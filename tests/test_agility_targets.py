@@ -210,3 +210,37 @@ def test_a_jink_from_5_m_is_hit_when_the_endgame_slows_the_approach():
     assert capped.terminal_speed_m_s == pytest.approx(8.51, abs=0.5)
     assert uncapped.outcome == "MISS" and uncapped.miss_m > 0.4
     assert uncapped.terminal_speed_m_s == pytest.approx(10.71, abs=0.5)
+
+
+@pytest.mark.parametrize(
+    ("scenario", "truth_rad_s", "median_rad_s", "tol_rad_s"),
+    [("agile-turn", 0.75, 0.729, 0.1), ("cv-top-to-bottom", 0.0, -0.008, 0.1)],
+)
+def test_the_recording_carries_the_imms_turn_rate(
+    tmp_path, scenario, truth_rad_s, median_rad_s, tol_rad_s
+):
+    """The /dkf channel records the IMM's CT turn rate (rad/s, + left). agile-turn (seed 0,
+    APN) turns left at 3 m/s^2 at 4 m/s, 0.75 rad/s: over the last second before the
+    intercept the recorded median is 0.729 rad/s (seed 1: 0.369, the estimate's usual half);
+    the straight CV target's is -0.008. Tolerance 0.1 rad/s, and the truth within it."""
+    from groundstation.recording.reader import iter_messages
+    from groundstation.recording.writer import SortieRecorder
+    from groundstation.scenario import load_scenario
+    from groundstation.sim.simulation import Simulation
+
+    rec = SortieRecorder(tmp_path)
+    sim = Simulation(
+        load_scenario(scenario), "apn", 0, "projected", keep_records=False, observers=[rec]
+    )
+    result = sim.run()
+    assert result.outcome == "HIT" and rec.error is None
+    t_hit = result.intercept_time_s
+    rates = [
+        m["target_turn_rate_rad_s"]
+        for _, t, m in iter_messages(rec.path, ["/dkf"])
+        if t_hit - 1.0 < t <= t_hit and m["target_turn_rate_rad_s"] is not None
+    ]
+    assert len(rates) >= 8
+    median = float(np.median(rates))
+    assert median == pytest.approx(median_rad_s, abs=tol_rad_s)
+    assert median == pytest.approx(truth_rad_s, abs=tol_rad_s)

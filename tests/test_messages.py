@@ -32,10 +32,12 @@ def test_schemas_and_encoders_follow_the_one_definition():
     cal = SelfCalEstimate(0.25, 0.02, -0.03, 0.002, 40, 60)
     dkf = json.loads(
         enc.dkf(
-            1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04, cal, (0.5, -1, 0), (0.2, 0.3, 0.5)
+            1.0, (1, 2, 3, 4), (5, 6, 7, 8), True, False, 0.04, cal, (0.5, -1, 0), (0.2, 0.3, 0.5),
+            -0.75,
         )
-    )
+    )  # fmt: skip
     assert dkf["target_diameter_m"] == 0.25 and dkf["camera_offset_s"] == -0.03
+    assert dkf["target_turn_rate_rad_s"] == -0.75
     for msg, fields, schema in (
         (control, messages.CONTROL, "peregrine.Control"),
         (dkf, messages.DKF, "peregrine.Dkf"),

@@ -205,12 +205,13 @@ def test_campaign_frames_without_the_dkf_state_fly_the_same():
         # the rest of the frame, the arrays in it compared above
         a = dataclasses.replace(a, dkf_state_px=None, dkf_cov_diag=None, telemetry=None)
         assert dataclasses.replace(b, telemetry=None) == a
-        # the IMM's target acceleration and model probabilities are estimated for recordings
-        # only (PNG does not fly them): campaign traces leave them out too
+        # the IMM's target acceleration, model probabilities and turn rate are estimated for
+        # recordings only (PNG does not fly them): campaign traces leave them out too
         gone = dict(
             command=None,
             accel_desired_enu_m_s2=None,
             target_accel_enu_m_s2=None,
             motion_model_probs=None,
+            target_turn_rate_rad_s=None,
         )
         assert dataclasses.replace(ta, **gone) == dataclasses.replace(tb, **gone)

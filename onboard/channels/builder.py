@@ -318,6 +318,7 @@ class ChannelBuilder:
                         tel.self_cal,
                         tel.target_accel_enu_m_s2,
                         tel.motion_model_probs,
+                        tel.target_turn_rate_rad_s,
                     ),
                 )
             )

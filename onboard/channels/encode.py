@@ -29,7 +29,8 @@ _CONTROL = (
 _DKF = (
     '{"t_s":%.6f,"state":%s,"cov_diag":%s,"acquired":%s,"lost":%s,"time_since_detection_s":%s,'
     '"target_diameter_m":%s,"target_diameter_std_m":%s,"camera_offset_s":%s,'
-    '"camera_offset_std_s":%s,"target_accel_m_s2":%s,"model_probs":%s}'
+    '"camera_offset_std_s":%s,"target_accel_m_s2":%s,"model_probs":%s,'
+    '"target_turn_rate_rad_s":%s}'
 )
 
 
@@ -83,11 +84,20 @@ def control(
 
 
 def dkf(
-    t_s, state, cov, acquired: bool, lost: bool, since, self_cal=None, accel=None, probs=None
+    t_s,
+    state,
+    cov,
+    acquired: bool,
+    lost: bool,
+    since,
+    self_cal=None,
+    accel=None,
+    probs=None,
+    turn_rate=None,
 ) -> bytes:
     """peregrine.Dkf (``state`` and ``cov`` 4-tuples or None, ``self_cal`` a
     :class:`~onboard.estimation.self_calibration.SelfCalEstimate` or None, ``accel`` and
-    ``probs`` the IMM's 3-tuples or None)."""
+    ``probs`` the IMM's 3-tuples or None, ``turn_rate`` its CT turn rate, rad/s, or None)."""
     c = self_cal
     return (
         _DKF
@@ -104,6 +114,7 @@ def dkf(
             js(None if c is None else c.camera_offset_std_s),
             _js3(accel),
             _js3(probs),
+            js(turn_rate),
         )
     ).encode()
 
