@@ -213,25 +213,24 @@ def test_a_jink_from_5_m_is_hit_when_the_endgame_slows_the_approach():
 
 
 @pytest.mark.parametrize(
-    ("scenario", "truth_rad_s", "median_rad_s", "tol_rad_s"),
-    [("agile-turn", 0.75, 0.729, 0.1), ("cv-top-to-bottom", 0.0, -0.008, 0.1)],
+    ("motion", "truth_rad_s", "median_rad_s", "tol_rad_s"),
+    [("turn", 0.75, 0.729, 0.1), ("cv", 0.0, -0.034, 0.1)],
 )
 def test_the_recording_carries_the_imms_turn_rate(
-    tmp_path, scenario, truth_rad_s, median_rad_s, tol_rad_s
+    tmp_path, motion, truth_rad_s, median_rad_s, tol_rad_s
 ):
     """The /dkf channel records the IMM's CT turn rate (rad/s, + left). agile-turn (seed 0,
     APN) turns left at 3 m/s^2 at 4 m/s, 0.75 rad/s: over the last second before the
     intercept the recorded median is 0.729 rad/s (seed 1: 0.369, the estimate's usual half);
-    the straight CV target's is -0.008. Tolerance 0.1 rad/s, and the truth within it."""
+    the same target flown straight gives -0.034. Tolerance 0.1 rad/s, and the truth within it."""
     from groundstation.recording.reader import iter_messages
     from groundstation.recording.writer import SortieRecorder
-    from groundstation.scenario import load_scenario
+    from groundstation.scenario import load_scenario, with_overrides
     from groundstation.sim.simulation import Simulation
 
     rec = SortieRecorder(tmp_path)
-    sim = Simulation(
-        load_scenario(scenario), "apn", 0, "projected", keep_records=False, observers=[rec]
-    )
+    scenario = with_overrides(load_scenario("agile-turn"), {"target.motion": motion})
+    sim = Simulation(scenario, "apn", 0, "projected", keep_records=False, observers=[rec])
     result = sim.run()
     assert result.outcome == "HIT" and rec.error is None
     t_hit = result.intercept_time_s

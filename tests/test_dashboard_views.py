@@ -328,7 +328,7 @@ def test_3d_fit_frames_both_trajectories_with_labels_and_panels_clear(station, b
                 if laid_out and not np.allclose(cam.position, (-11.0, 1.0, 12.0)):
                     time.sleep(0.3)  # the fit's camera update reaches the viewer and back
                     break
-            assert time.monotonic() < deadline, "the view was never fitted"
+            assert time.monotonic() < deadline, ("the view was never fitted", len(ours), w_px, h_px)
             time.sleep(0.1)
         x, y, z = _project(np.concatenate([vehicle, target]), cam)
         assert (z > 0).all() and (np.abs(x) <= 1).all() and (np.abs(y) <= 1).all()

@@ -38,6 +38,7 @@ COMPARE_TARGET_RGB = (0, 110, 110)
 VIEW_PRESETS = ("fit engagement", "follow vehicle", "chase", "top")
 FIT_FILL = 0.8  # "fit engagement": the farthest point this far from the view's centre (of 1)
 FIT_DIRECTION = (-0.6, -0.2, 0.3)  # the fit's eye from the engagement: west-south-west, above
+START_EYE_M = (-11.0, 1.0, 12.0)  # the camera a new viewer starts with, before it is framed
 
 
 def fit_camera(
@@ -93,7 +94,7 @@ class SceneView:
             server.scene.add_label(f"/ground/scale/e{k}", f"E {x} m", position=(x, -15.0, 0.0))
         server.scene.add_label("/ground/scale/cell", "grid: 5 m cells", position=(30.0, -15.0, 0))
         # the engagement happens 0-35 m north of the origin, 0-20 m up
-        server.initial_camera.position = (-11.0, 1.0, 12.0)
+        server.initial_camera.position = START_EYE_M
         server.initial_camera.look_at = (0.0, 14.0, 5.0)
         # the control panel small: at a laptop's 1280 x 800 the view is about 550 px wide and
         # viser shows it as a sheet at the bottom, which web/scene3d.js moves to the top-right
@@ -125,8 +126,11 @@ class SceneView:
         def _(camera) -> None:
             # The first report gives the view's size: frame it then. A later change of size
             # (the page laid out again, a resized window) frames it again; orbiting does not.
+            # A report still at the start's camera frames it again too: a busy browser can
+            # report its start camera after the framing was sent, over the framing.
             aspect = float(camera.aspect)
-            if fitted_aspect and abs(aspect - fitted_aspect[0]) <= 0.03 * fitted_aspect[0]:
+            resized = not fitted_aspect or abs(aspect - fitted_aspect[0]) > 0.03 * fitted_aspect[0]
+            if not resized and not np.allclose(camera.position, START_EYE_M):
                 return
             fitted_aspect[:] = [aspect]
             self._apply_static_view(client, dd.value)
@@ -135,6 +139,12 @@ class SceneView:
         def _(_event) -> None:
             self._shown = None  # a moving preset is placed by the next update, paused or not
             self._apply_static_view(client, dd.value)
+
+        try:  # a busy server may take the viewer's first report before the hook above
+            fitted_aspect[:] = [float(client.camera.aspect)]
+        except AssertionError:  # no report yet: the hook frames the view
+            return
+        self._apply_static_view(client, dd.value)
 
     def _apply_static_view(self, client: Any, preset: str) -> None:
         if preset not in ("fit engagement", "top"):
