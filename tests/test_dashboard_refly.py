@@ -206,7 +206,7 @@ def test_reload_restores_the_sortie_so_far_and_the_controls_in_force(station, pa
     rng = page.evaluate("window.peregrine.plots[3].data[1]")
     assert rng[0] == pytest.approx(station.session.series()["columns"]["range_m"][0])
     # the controls follow the first status the page draws (on its next animation frame)
-    page.wait_for_function("document.querySelector('#speed').value === '1'", timeout=5000)
+    page.wait_for_function("document.querySelector('#speed').value === '1'", timeout=15000)
     assert page.input_value("#law") == "pg"  # what flies, not the page's default
     assert page.input_value("#seed") == "3"
     station.session.reset()
