@@ -10,8 +10,8 @@ an estimate that holds that share of the truth) or late (``--delay-s``, one that
 the truth's turn rate (which the law flies with the gain ``t_turn`` > 0: ``--set
 gains.t_turn=1.5``). The IMM's velocity (time to go) and everything else the loop sees stay
 as they are. ``--imm KEY=VALUE`` changes a field of the IMM's
-:class:`~onboard.estimation.imm.ImmConfig` and ``--set SECTION.KEY=VALUE`` a scenario value
-(``gains.t_turn=1.5``), for both. Prints HIT count and mean miss of each.
+:class:`~onboard.estimation.imm.ImmConfig` and ``--set SECTION.KEY=VALUE`` a scenario value,
+for both. Prints HIT count and mean miss of each.
 
 A measuring tool beside the product: it reads the simulator's truth, which the loop never does.
 """
@@ -147,9 +147,9 @@ def cell_parser(description: str) -> argparse.ArgumentParser:
     return ap
 
 
-def cell_of(ap: argparse.ArgumentParser, args: argparse.Namespace, sets=None) -> tuple:
-    """The IMM configuration and the jobs :func:`cell_parser`'s options name (``sets``:
-    ``--set SECTION.KEY=VALUE`` items); a bad one is ``ap``'s usage error."""
+def cell_of(ap: argparse.ArgumentParser, args: argparse.Namespace) -> tuple:
+    """The IMM configuration and the jobs :func:`cell_parser`'s options name (with their
+    ``--set`` scenario values); a bad one is ``ap``'s usage error."""
     from ..scenario import parse_overrides
 
     if args.n < 1:
@@ -157,7 +157,7 @@ def cell_of(ap: argparse.ArgumentParser, args: argparse.Namespace, sets=None) ->
     if not (math.isfinite(args.value) and args.value >= 0.0):
         ap.error("--value must be a finite number >= 0")
     try:
-        overrides = parse_overrides(sets)
+        overrides = parse_overrides(args.set)
         return imm_config(args.imm), cell_jobs(args.kind, args.value, args.n, args.seed, overrides)
     except ValueError as e:
         ap.error(str(e))
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         x = getattr(args, name)
         if not (math.isfinite(x) and x >= 0.0):
             ap.error(f"--{name.replace('_', '-')} must be a finite number >= 0")
-    imm, jobs = cell_of(ap, args, args.set)
+    imm, jobs = cell_of(ap, args)
     print(f"agility {args.kind} {args.value:g}, APN, seed {args.seed}, {len(jobs)} sorties")
     runs = (
         ("IMM (as flown)", None),

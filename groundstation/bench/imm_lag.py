@@ -99,7 +99,7 @@ def fly_recorded(job, imm=None) -> tuple[np.ndarray, list[tuple[float, float, fl
 def main(argv: list[str] | None = None) -> int:
     ap = cell_parser(__doc__.splitlines()[0])
     args = ap.parse_args(argv)
-    imm, jobs = cell_of(ap, args, args.set)
+    imm, jobs = cell_of(ap, args)
     print(f"agility {args.kind} {args.value:g}, APN, seed {args.seed}, {len(jobs)} sorties")
     runs, fed = [], []
     for job in jobs:
