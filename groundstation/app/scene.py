@@ -140,12 +140,6 @@ class SceneView:
             self._shown = None  # a moving preset is placed by the next update, paused or not
             self._apply_static_view(client, dd.value)
 
-        try:  # a busy server may take the viewer's first report before the hook above
-            fitted_aspect[:] = [float(client.camera.aspect)]
-        except AssertionError:  # no report yet: the hook frames the view
-            return
-        self._apply_static_view(client, dd.value)
-
     def _apply_static_view(self, client: Any, preset: str) -> None:
         if preset not in ("fit engagement", "top"):
             return
