@@ -417,7 +417,7 @@ class Gains:
         "augmented PN",
     )
     v_end: float = _gain(
-        6.0, "m/s", 0.0, 30.0, "APN: cap within r_end: target's speed + this", "APN limits"
+        4.0, "m/s", 0.0, 30.0, "APN: cap within r_end: target's speed + this", "APN limits"
     )
     r_end: float = _gain(
         20.0, "m", 0.0, 100.0, "APN: range within which the speed cap v_end holds", "APN limits"

@@ -283,15 +283,15 @@ def test_the_law_flies_no_faster_than_the_turns_speed_cap():
 
 
 def test_the_endgame_caps_the_approach_speed_within_its_range():
-    """Within r_end (20 m) of the target the speed ramp's cap is v_end (6 m/s) over the
+    """Within r_end (20 m) of the target the speed ramp's cap is v_end (4 m/s) over the
     target's speed (0 when unknown); farther, with the range unknown (nan) or v_end 0 (off)
     there is none."""
     gains = Gains()
-    assert (gains.v_end, gains.r_end) == (6.0, 20.0)
-    assert endgame_speed_cap_m_s(19.9, 0.0, gains) == 6.0
-    assert endgame_speed_cap_m_s(5.0, 4.5, gains) == 10.5
-    assert endgame_speed_cap_m_s(5.0, math.nan, gains) == 6.0
-    assert endgame_speed_cap_m_s(0.5, 1.0, gains.replace(v_end=4.0)) == 5.0
+    assert (gains.v_end, gains.r_end) == (4.0, 20.0)
+    assert endgame_speed_cap_m_s(19.9, 0.0, gains) == 4.0
+    assert endgame_speed_cap_m_s(5.0, 4.5, gains) == 8.5
+    assert endgame_speed_cap_m_s(5.0, math.nan, gains) == 4.0
+    assert endgame_speed_cap_m_s(0.5, 1.0, gains.replace(v_end=2.0)) == 3.0
     for range_m, g in (
         (20.0, gains),
         (30.0, gains),
@@ -302,16 +302,16 @@ def test_the_endgame_caps_the_approach_speed_within_its_range():
 
 
 def test_the_law_closes_in_no_faster_than_v_end():
-    """Flying at 9 m/s toward a hovering target 8 m away the law decelerates along the LOS (the
-    speed ramp's reference is v_end, 6 m/s); toward one flying at 5 m/s (reference 11 m/s), 30 m
+    """Flying at 7 m/s toward a hovering target 8 m away the law decelerates along the LOS (the
+    speed ramp's reference is v_end, 4 m/s); toward one flying at 5 m/s (reference 9 m/s), 30 m
     away, or with v_end 0, it accelerates."""
     n = np.array((0.0, 1.0, 0.0))
 
     def along(gains: Gains, range_m: float, target_speed_m_s: float = 0.0) -> float:
         inp = GuidanceInput(
-            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 9.0, 0.0)), (0.0, 0.0), np.eye(3),
+            0.01, n, 0.0, 0.0, 0.0, 0.0, np.array((0.0, 7.0, 0.0)), (0.0, 0.0), np.eye(3),
             target_accel_enu_m_s2=(0.0, 0.0, 0.0), accel_limit_m_s2=G,
-            time_to_go_s=range_m / 9.0, range_est_m=range_m, target_speed_m_s=target_speed_m_s,
+            time_to_go_s=range_m / 7.0, range_est_m=range_m, target_speed_m_s=target_speed_m_s,
         )  # fmt: skip
         return float(apn_law(inp, gains).accel_desired_enu_m_s2 @ n)
 

@@ -21,8 +21,8 @@ turn's acceleration, it hits no more turning targets than the fixed prediction (
 true acceleration and turn rate it does, from 7.5 m/s^2 on; docs/agility.md).
 
 Within ``r_end`` of the target the speed ramp's reference is at most ``v_end`` over the
-target's speed (:func:`endgame_speed_cap_m_s`): a hovering target is closed on at 6 m/s
-instead of 9-11, which leaves the vehicle the time to answer a dart from 5 m.
+target's speed (:func:`endgame_speed_cap_m_s`): a hovering target is closed on at 4 m/s
+instead of 9-11, which leaves the vehicle the time to answer a dart from 3-5 m.
 
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
