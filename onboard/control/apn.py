@@ -21,8 +21,8 @@ turn's acceleration, it hits no more turning targets than the fixed prediction (
 true acceleration and turn rate it does, from 7.5 m/s^2 on; docs/agility.md).
 
 Within ``r_end`` of the target the speed ramp's reference is at most ``v_end`` over the
-target's speed (:func:`endgame_speed_cap_m_s`): a hovering target is closed on at 4 m/s
-instead of 9-11, which leaves the vehicle the time to answer a dart from 3-5 m.
+target's speed (:func:`endgame_speed_cap_m_s`): a hovering target is closed on at ``v_end``
+instead of 9-11 m/s, which leaves the vehicle the time to answer a dart from 3-5 m.
 
 The command limit is the lateral acceleration the airframe can hold level: thrust-to-weight
 TW = 1 / hover thrust (PRG_HOVER_THR) gives sqrt((TW g)^2 - (g + a_z)^2) with ``a_z_margin``
@@ -159,7 +159,7 @@ def endgame_speed_cap_m_s(range_m: float, target_speed_m_s: float, gains: Gains)
     """The speed ramp's cap (m/s) near the target: within ``r_end`` (m) of it, ``v_end`` more
     than the target's speed (0 when unknown); inf when ``v_end`` is 0 (off), farther or with
     the range unknown (nan). A hovering target is closed on at ``v_end``, which leaves the
-    vehicle the time to answer a late dart; one in flight, as fast as the law flew before."""
+    vehicle the time to answer a late dart; one in flight, ``v_end`` faster than it flies."""
     if not (gains.v_end > 0.0 and range_m < gains.r_end):
         return math.inf
     return gains.v_end + (target_speed_m_s if math.isfinite(target_speed_m_s) else 0.0)
