@@ -212,16 +212,19 @@ def test_a_jink_from_3_m_is_hit_when_the_endgame_slows_the_approach():
 
 
 @pytest.mark.parametrize(
-    ("motion", "truth_rad_s", "median_rad_s", "tol_rad_s"),
-    [("turn", 0.75, 0.729, 0.1), ("cv", 0.0, -0.034, 0.1)],
+    ("motion", "truth_rad_s", "median_rad_s", "tol_rad_s", "cv_median"),
+    [("turn", 0.75, 0.729, 0.1, 0.253), ("cv", 0.0, -0.034, 0.1, 0.818)],
 )
 def test_the_recording_carries_the_imms_turn_rate(
-    tmp_path, motion, truth_rad_s, median_rad_s, tol_rad_s
+    tmp_path, motion, truth_rad_s, median_rad_s, tol_rad_s, cv_median
 ):
     """The /dkf channel records the IMM's CT turn rate (rad/s, + left). agile-turn (seed 0,
     APN) turns left at 3 m/s^2 at 4 m/s, 0.75 rad/s: over the last second before the
     intercept the recorded median is 0.729 rad/s (seed 1: 0.369, the estimate's usual half);
-    the same target flown straight gives -0.034. Tolerance 0.1 rad/s, and the truth within it."""
+    the same target flown straight gives -0.034. Tolerance 0.1 rad/s, and the truth within it.
+    The dashboard's review timeline offers the turn rate and the model probabilities: CV's
+    median over the last 1.5 s is 0.253 for the turn, 0.818 straight (tolerance 0.15)."""
+    from groundstation.app.replay import ReplayPlayer
     from groundstation.recording.reader import iter_messages
     from groundstation.recording.writer import SortieRecorder
     from groundstation.scenario import load_scenario, with_overrides
@@ -242,3 +245,11 @@ def test_the_recording_carries_the_imms_turn_rate(
     median = float(np.median(rates))
     assert median == pytest.approx(median_rad_s, abs=tol_rad_s)
     assert median == pytest.approx(truth_rad_s, abs=tol_rad_s)
+    series = ReplayPlayer(rec.path).series()
+    fields, t_s = series["fields"], np.array(series["t_s"])
+    assert series["units"]["dkf.target_turn_rate_rad_s"] == "rad/s"
+    for name in ("dkf.target_turn_rate_rad_s", *(f"dkf.model_probs.{k}" for k in range(3))):
+        assert len(fields[name]) == len(t_s), name
+    last = (t_s > t_hit - 1.5) & (t_s <= t_hit)
+    cv = [x for x, keep in zip(fields["dkf.model_probs.0"], last, strict=True) if keep]
+    assert float(np.median([x for x in cv if x is not None])) == pytest.approx(cv_median, abs=0.15)
